@@ -1,0 +1,477 @@
+"""The campaign: SPAT and length-bar readouts, read from and written to a folder of CSV files.
+
+The folder holds ``spat.csv`` + ``locations.csv`` (R-Test SPAT) and/or ``lengthbar.csv`` +
+``bar.csv`` (length bar), comma separated with a header row, in mm and degrees (the columns are in
+``_FILES`` below). Readers check every cell and raise one :class:`CampaignFormatError` listing every
+problem of every file with its line and column. Inside the package everything is SI (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, TypeGuard
+
+import numpy as np
+
+from aacmm_pin.errors import CampaignFormatError, Problem
+
+MAX_ANGLE_DEG = 720.0
+"""Largest encoder readout accepted in a file, in degrees (two turns either way)."""
+_Q_COLUMN = re.compile(r"q([1-9][0-9]*)_deg")
+_XYZ = {"spat": ("dx_mm", "dy_mm", "dz_mm"), "loc": ("x_mm", "y_mm", "z_mm")}
+_OPTIONAL = ("t_s", "temp_c")
+# File -> (required columns besides q, has q1_deg..qn_deg, optional columns), in file order.
+_FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
+    "spat.csv": (("location", *_XYZ["spat"]), True, _OPTIONAL),
+    "locations.csv": (("location", *_XYZ["loc"]), False, ()),
+    "lengthbar.csv": (("placement", "socket"), True, _OPTIONAL),
+    "bar.csv": (("from", "to", "length_mm"), False, ()),
+}
+# Column -> kind of cell; q columns are "angle", any other column "number".
+_KINDS = {"location": "id", "placement": "id", "socket": "text", "from": "text", "to": "text",
+          "length_mm": "length"}
+# Log field -> (dtype, shape after the row axis); None: any length.
+_ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
+    "location": (np.int64, ()), "placement": (np.int64, ()), "socket": (str, ()),
+    "q": (float, (None,)), "displacement": (float, (3,)), "t": (float, ()), "temp": (float, ()),
+    "lines": (np.int64, ())}
+
+
+class _Log:
+    """Base of the logs: each field is stored as a read-only array with one row per readout."""
+
+    def __post_init__(self) -> None:
+        n_rows = None
+        for name, value in list(vars(self).items()):
+            if value is None and name in ("t", "temp", "lines"):
+                continue
+            dtype, trailing = _ARRAYS[name]
+            arr = np.array(value, dtype=dtype)
+            n_rows = len(arr) if n_rows is None and arr.ndim else n_rows
+            shape = (n_rows, *trailing)
+            if arr.ndim != len(shape) or any(s not in (None, a) for s, a in zip(shape, arr.shape)):
+                want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+                raise ValueError(f"{type(self).__name__}.{name}: shape {want} expected, got "
+                                 f"{arr.shape}")
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+
+@dataclass(frozen=True, eq=False)
+class SpatLog(_Log):
+    """Readouts of a SPAT (single point articulation test) with the R-Test, one row per sample."""
+
+    location: np.ndarray
+    """R-Test location (nest) of each sample, shape (N,), integers >= 1."""
+    q: np.ndarray
+    """Encoder readouts, shape (N, n), in rad."""
+    displacement: np.ndarray
+    """Sphere displacement measured by the R-Test, shape (N, 3), in m (zero without R-Test)."""
+    t: np.ndarray | None = None
+    """Time of each sample, shape (N,), in s, or None."""
+    temp: np.ndarray | None = None
+    """Arm temperature at each sample, shape (N,), in deg C, or None."""
+    lines: np.ndarray | None = None
+    """1-based line of each sample in spat.csv, shape (N,), or None when built in code."""
+
+
+@dataclass(frozen=True, eq=False)
+class LengthBarLog(_Log):
+    """Readouts with the stylus in the sockets of a length bar, one row per readout."""
+
+    placement: np.ndarray
+    """Bar placement of each readout, shape (M,), integers >= 1."""
+    socket: np.ndarray
+    """Socket label of each readout (e.g. "A"), shape (M,), str."""
+    q: np.ndarray
+    """Encoder readouts, shape (M, n), in rad."""
+    t: np.ndarray | None = None
+    """Time of each readout, shape (M,), in s, or None."""
+    temp: np.ndarray | None = None
+    """Arm temperature at each readout, shape (M,), in deg C, or None."""
+    lines: np.ndarray | None = None
+    """1-based line of each readout in lengthbar.csv, shape (M,), or None when built in code."""
+
+
+@dataclass(frozen=True, eq=False)
+class Campaign:
+    """A measurement campaign: SPAT and/or length-bar readouts with their references.
+
+    Values hold read-only arrays; ``==`` is identity (compare the arrays with numpy).
+    """
+
+    spat: SpatLog | None
+    """SPAT samples, or None."""
+    locations: dict[int, np.ndarray]
+    """Zero position of each R-Test location, location -> shape (3,), in m."""
+    lengthbar: LengthBarLog | None
+    """Length-bar readouts, or None."""
+    bar: dict[tuple[str, str], float]
+    """Calibrated socket distances, (from, to) -> length in m."""
+    source: Path | None = None
+    """Folder the campaign was read from, or None."""
+
+    def __post_init__(self) -> None:
+        axes = {log.q.shape[1] for log in (self.spat, self.lengthbar) if log is not None}
+        if len(axes) != 1:
+            raise ValueError(f"spat, lengthbar: give one or both, with one number of axes; got "
+                             f"{'none' if not axes else sorted(axes)}")
+        locations = {int(k): np.array(v, dtype=float) for k, v in self.locations.items()}
+        if bad := [k for k, v in locations.items() if v.shape != (3,)]:
+            raise ValueError(f"locations: shape (3,) expected for locations {bad}")
+        if sorted(locations) != list(self.location_ids):
+            raise ValueError(f"locations: one zero position per SPAT location expected, for "
+                             f"{list(self.location_ids)}; got {sorted(locations)}")
+        if bool(self.bar) != (self.lengthbar is not None):
+            raise ValueError("bar: socket distances come with length-bar readouts, and only then")
+        for v in locations.values():
+            v.setflags(write=False)
+        object.__setattr__(self, "locations", locations)
+        object.__setattr__(self, "bar", {(str(a), str(b)): float(v)
+                                         for (a, b), v in self.bar.items()})
+        object.__setattr__(self, "source", None if self.source is None else Path(self.source))
+
+    @property
+    def n_axes(self) -> int:
+        """Number of arm axes n (columns of the readouts)."""
+        return int(next(log for log in (self.spat, self.lengthbar) if log is not None).q.shape[1])
+
+    @property
+    def location_ids(self) -> tuple[int, ...]:
+        """Sorted ids of the R-Test locations present in the SPAT (empty without SPAT)."""
+        return () if self.spat is None else tuple(int(v) for v in np.unique(self.spat.location))
+
+    def select(self, locations: Iterable[int]) -> Campaign:
+        """Return the campaign with only the SPAT samples and zero positions of ``locations``.
+
+        Used for leave-one-out: pass all location ids but one.
+
+        Raises:
+            ValueError: if ``locations`` is empty or names a location absent from the SPAT.
+        """
+        wanted = sorted({int(v) for v in locations})
+        unknown = sorted(set(wanted) - set(self.location_ids))
+        if self.spat is None or not wanted or unknown:
+            raise ValueError(f"locations: choose one or more of {list(self.location_ids)}, "
+                             f"got {unknown or 'none'}")
+        keep = np.isin(self.spat.location, wanted)
+        rows = {k: v[keep] for k, v in vars(self.spat).items() if v is not None}
+        return replace(self, spat=replace(self.spat, **rows),
+                       locations={k: self.locations[k] for k in wanted})
+
+    def with_spat(self, *, q: np.ndarray | None = None, displacement: np.ndarray | None = None,
+                  t: np.ndarray | None = None, temp: np.ndarray | None = None) -> Campaign:
+        """Return the campaign with these SPAT fields replaced (shapes and units as in SpatLog).
+
+        Raises:
+            ValueError: if the campaign has no SPAT or a shape does not fit.
+        """
+        if self.spat is None:
+            raise ValueError("with_spat: the campaign has no SPAT")
+        changes = {"q": q, "displacement": displacement, "t": t, "temp": temp}
+        spat = replace(self.spat, **{k: v for k, v in changes.items() if v is not None})
+        return replace(self, spat=spat)
+
+
+@dataclass
+class _Table:
+    """The checked cells of one CSV file, by column."""
+
+    path: Path
+    """The file."""
+    n_axes: int
+    """Number n of q1_deg..qn_deg columns; 0 if there are none or they have gaps."""
+    lines: list[int]
+    """1-based file line of each row kept (rows with the header's number of cells)."""
+    cols: dict[str, list[Any]]
+    """Parsed cells of each known column, in file units; None where a cell is bad."""
+
+
+def _parse(text: str, kind: str) -> tuple[Any, str | None]:
+    """Return (value, None) for a good cell, or (None, reason)."""
+    if not text or kind == "text":
+        return (text, None) if text else (None, "empty cell")
+    try:
+        value = int(text) if kind == "id" else float(text)
+    except ValueError:
+        return None, f"'{text}' is not {'an integer' if kind == 'id' else 'a number'}"
+    checks = ((kind == "id" and value < 1, "is not an integer >= 1"),
+              (kind == "id" and value >= 2**63, "is too large for an id"),
+              (not math.isfinite(value), "is not a finite number"),
+              (kind == "angle" and abs(value) > MAX_ANGLE_DEG,
+               f"deg is outside +-{MAX_ANGLE_DEG:g} deg"),
+              (kind == "length" and value <= 0, "mm is not a positive bar length"))
+    reason = next((f"{text} {why}" for bad, why in checks if bad), None)
+    return (None if reason else value), reason
+
+
+def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
+                problems: list[Problem], *, others_allowed: bool = False) -> _Table | None:
+    """Read and check one CSV file, adding its problems; return None if it has no usable header."""
+
+    def add(line: int | None, column: str | None, reason: str) -> None:
+        problems.append(Problem(path, line, column, reason))
+
+    try:
+        reader = csv.reader(io.StringIO(path.read_text(encoding="utf-8-sig")))
+        rows = [(reader.line_num, [c.strip() for c in row]) for row in reader]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        add(None, None, "file not found" if isinstance(exc, FileNotFoundError) else f"{exc}")
+        return None
+    while rows and not any(rows[-1][1]):
+        rows.pop()  # blank trailing lines
+    if not rows or not any(rows[0][1]):
+        add(1 if rows else None, None, "blank first line instead of a header row" if rows
+            else "empty file: no header row")
+        return None
+    top, header = rows[0]
+    expected = ", ".join([*required, *(["q1_deg..qn_deg"] if has_q else []), *optional])
+    index: dict[str, int] = {}
+    for k, name in enumerate(header):
+        known = name in required or name in optional or bool(has_q and _Q_COLUMN.fullmatch(name))
+        if not name:
+            add(top, str(k + 1), "empty column name")
+        elif name in index:
+            add(top, name, f"duplicated column (columns {index[name] + 1} and {k + 1})")
+        elif known:
+            index[name] = k
+        elif not others_allowed:
+            add(top, name, f"unknown column; expected: {expected}")
+    q_found = [int(m[1]) for name in index if (m := _Q_COLUMN.fullmatch(name))] if has_q else []
+    q_names = _q_names(max(q_found, default=0))
+    wanted = [*required, *(q_names or ["q1_deg"] if has_q else [])]
+    for name in (missing := [name for name in wanted if name not in index]):
+        gap = "; q columns run from q1_deg to qn_deg without gaps" if name[0] == "q" else ""
+        add(top, name, f"missing column{gap}")
+    if len(rows) == 1:
+        add(None, None, "header only: no data rows")
+    n_axes = 0 if any(name[0] == "q" for name in missing) else len(q_names)  # 0: unknown
+    table = _Table(path, n_axes, [], {name: [] for name in index})
+    for line, cells in rows[1:]:
+        if not any(cells):
+            add(line, None, "blank line among the data rows")
+        elif len(cells) != len(header):
+            add(line, None, f"{len(cells)} cells, but the header has {len(header)} columns")
+        else:
+            table.lines.append(line)
+            for name, k in index.items():
+                kind = "angle" if name in q_names else _KINDS.get(name, "number")
+                value, reason = _parse(cells[k], kind)
+                table.cols[name].append(value)
+                if reason:
+                    add(line, name, reason)
+    return table
+
+
+def _q_names(n: int) -> list[str]:
+    """Return the names of the encoder columns, q1_deg..qn_deg."""
+    return [f"q{i}_deg" for i in range(1, n + 1)]
+
+
+def _matrix(table: _Table, names: Iterable[str], scale: float) -> np.ndarray:
+    """Return the named columns as a float array, shape (rows, len(names)), times ``scale``."""
+    return np.array([table.cols[name] for name in names], dtype=float).T * scale
+
+
+def _log_fields(table: _Table) -> dict[str, Any]:
+    """Return the q (rad), t (s), temp (deg C) and lines fields of a log read from a table."""
+    extra = {field: np.array(table.cols[name], dtype=float) if name in table.cols else None
+             for field, name in (("t", "t_s"), ("temp", "temp_c"))}
+    return {"q": _matrix(table, _q_names(table.n_axes), math.pi / 180.0), **extra,
+            "lines": np.array(table.lines, dtype=np.int64)}
+
+
+def _usable(table: _Table | None, *columns: str) -> TypeGuard[_Table]:
+    """Tell whether a table has data rows and these columns (else its problems are reported)."""
+    return table is not None and bool(table.lines) and set(columns) <= table.cols.keys()
+
+
+def _check_locations(spat: _Table, locs: _Table, min_samples: int, out: list[Problem]) -> None:
+    """Check duplicated ids, locations without zero position and locations with too few samples."""
+    zero_line: dict[int, int] = {}
+    for line, v in zip(locs.lines, locs.cols["location"]):
+        if v is not None and v in zero_line:
+            out.append(Problem(locs.path, line, "location",
+                               f"location {v} is duplicated (also on line {zero_line[v]})"))
+        zero_line.setdefault(v, line)
+    first_line = {v: line for line, v in reversed(list(zip(spat.lines, spat.cols["location"])))}
+    counts, least = Counter(spat.cols["location"]), max(min_samples, 1)
+    for v in sorted((set(first_line) | set(zero_line)) - {None}):
+        path, line = (spat.path, first_line[v]) if v in first_line else (locs.path, zero_line[v])
+        if v not in zero_line:
+            out.append(Problem(path, line, "location",
+                               f"location {v} has no zero position in locations.csv"))
+        elif counts[v] < least:
+            out.append(Problem(path, line, "location", f"location {v} has {counts[v]} samples "
+                                                       f"in spat.csv, fewer than {least}"))
+
+
+def _check_bar(log: _Table, bar: _Table, out: list[Problem]) -> None:
+    """Check that every measured socket is in bar.csv and every bar.csv pair is measured once."""
+    first_line = {s: line for line, s in reversed(list(zip(log.lines, log.cols["socket"])))}
+    together: dict[int, set[str]] = {}
+    for placement, s in zip(log.cols["placement"], log.cols["socket"]):
+        together.setdefault(placement, set()).add(s)
+    pair_line: dict[frozenset[str], int] = {}
+
+    def say(line: int, column: str | None, reason: str) -> None:
+        out.append(Problem(bar.path, line, column, reason))
+
+    for line, a, b in zip(bar.lines, bar.cols["from"], bar.cols["to"]):
+        if a is None or b is None:
+            continue  # an empty cell, reported already
+        pair = frozenset((a, b))
+        if a == b or pair in pair_line:
+            say(line, "to", f"a bar from socket '{a}' to itself" if a == b
+                else f"pair {a},{b} is also on line {pair_line[pair]}")
+        pair_line.setdefault(pair, line)
+        for column, s in (("from", a), ("to", b)):
+            if s not in first_line:
+                say(line, column, f"socket '{s}' is never measured in lengthbar.csv")
+        if {a, b} <= first_line.keys() and not any(pair <= both for both in together.values()):
+            say(line, None, f"sockets '{a}' and '{b}' are never measured in one placement")
+    named = {s for pair in pair_line for s in pair}
+    for s, line in first_line.items():
+        if s is not None and s not in named:
+            out.append(Problem(log.path, line, "socket", f"socket '{s}' is not named in bar.csv"))
+
+
+def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> Campaign:
+    """Read and validate a campaign folder.
+
+    Args:
+        folder: folder holding spat.csv + locations.csv and/or lengthbar.csv + bar.csv.
+        min_samples_per_location: fewest SPAT samples accepted at one R-Test location.
+
+    Returns:
+        The campaign in SI units (m, rad, s), with ``source`` set to the folder.
+
+    Raises:
+        CampaignFormatError: listing every problem of all files, each with file, line and column.
+    """
+    folder = Path(folder)
+    paths = {name: folder / name for name in _FILES}
+    present = {name for name, path in paths.items() if path.is_file()}
+    if not present & {"spat.csv", "lengthbar.csv"}:
+        why = ("does not exist" if not folder.exists() else "is not a folder"
+               if not folder.is_dir() else "holds neither spat.csv nor lengthbar.csv")
+        raise CampaignFormatError([Problem(folder, None, None, f"the campaign folder {why}")])
+    problems: list[Problem] = []
+    for pair in (["spat.csv", "locations.csv"], ["lengthbar.csv", "bar.csv"]):
+        if len(found := [name for name in pair if name in present]) == 1:
+            problems.append(Problem(paths[(set(pair) - set(found)).pop()], None, None,
+                                    f"file not found; {found[0]} needs it (they come in a pair)"))
+    tables = {name: _read_table(paths[name], *_FILES[name], problems)
+              for name in _FILES if name in present}
+    spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
+    log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
+    if _usable(spat, "location") and _usable(locs, "location"):
+        _check_locations(spat, locs, min_samples_per_location, problems)
+    if _usable(log, "placement", "socket") and _usable(bar, "from", "to"):
+        _check_bar(log, bar, problems)
+    if spat and log and spat.n_axes and log.n_axes and spat.n_axes != log.n_axes:
+        problems.append(Problem(log.path, 1, None, f"{log.n_axes} axes (q1_deg..q{log.n_axes}_deg)"
+                                                   f", but spat.csv has {spat.n_axes}"))
+    if problems:
+        order: dict[Path | str, int] = {path: k for k, path in enumerate(paths.values())}
+        raise CampaignFormatError(sorted(problems, key=lambda p: (order[p.path], p.line or 0)))
+    return Campaign(
+        spat=None if not (spat and locs) else SpatLog(
+            location=np.array(spat.cols["location"], dtype=np.int64),
+            displacement=_matrix(spat, _XYZ["spat"], 1e-3), **_log_fields(spat)),
+        locations={} if not locs else dict(zip(locs.cols["location"],
+                                                _matrix(locs, _XYZ["loc"], 1e-3))),
+        lengthbar=None if not (log and bar) else LengthBarLog(
+            placement=np.array(log.cols["placement"], dtype=np.int64),
+            socket=np.array(log.cols["socket"], dtype=str), **_log_fields(log)),
+        bar={} if not bar else {(a, b): v * 1e-3 for a, b, v in zip(
+            bar.cols["from"], bar.cols["to"], bar.cols["length_mm"])},
+        source=folder)
+
+
+def read_readouts(path: str | Path) -> np.ndarray:
+    """Read encoder readouts from a CSV file with columns q1_deg..qn_deg, e.g. a lengthbar.csv.
+
+    Other columns are ignored; the q columns and cells are checked as in :func:`read_campaign`.
+
+    Returns:
+        Encoder readouts, shape (N, n), in rad.
+
+    Raises:
+        CampaignFormatError: listing every problem in the q columns, with line and column.
+    """
+    problems: list[Problem] = []
+    table = _read_table(Path(path), (), True, (), problems, others_allowed=True)
+    if problems or table is None:
+        raise CampaignFormatError(problems)
+    return _matrix(table, _q_names(table.n_axes), math.pi / 180.0)
+
+
+def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
+    """Write named columns of cells (floats with 9 decimals) under a header row."""
+    cells = [[f"{v:.9f}" if isinstance(v, float) else str(v) for v in c] for c in columns.values()]
+    with path.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(columns)
+        writer.writerows(zip(*cells))
+
+
+def _file_columns(log: SpatLog | LengthBarLog, before: dict, after: dict) -> dict[str, Any]:
+    """Return a log's file columns: ``before``, q1_deg..qn_deg, ``after``, t_s and temp_c."""
+    q_deg = dict(zip(_q_names(log.q.shape[1]), np.degrees(log.q).T.tolist()))
+    extra = (("t_s", log.t), ("temp_c", log.temp))
+    return {**before, **q_deg, **after, **{k: v.tolist() for k, v in extra if v is not None}}
+
+
+def _mm(names: tuple[str, ...], xyz: Any) -> dict[str, list[float]]:
+    """Return points, shape (N, 3) in m, as named columns in mm."""
+    return dict(zip(names, (np.asarray(xyz, dtype=float).reshape(-1, 3) * 1e3).T.tolist()))
+
+
+def write_campaign(campaign: Campaign, folder: str | Path) -> None:
+    """Write ``campaign`` into ``folder`` (created if needed): the files of the parts present.
+
+    Lengths are written in mm and angles in degrees, with 9 decimals; t_s and temp_c when present.
+
+    Raises:
+        FileExistsError: if the folder holds a campaign file for a part that ``campaign`` lacks
+            (it would be read back with the new files; remove it or choose another folder).
+    """
+    folder = Path(folder)
+    parts = {"spat.csv": campaign.spat, "locations.csv": campaign.spat,
+             "lengthbar.csv": campaign.lengthbar, "bar.csv": campaign.lengthbar}
+    if stale := [name for name, part in parts.items() if part is None and (folder / name).exists()]:
+        raise FileExistsError(f"{folder} already holds {', '.join(stale)}, which this campaign "
+                              "has no data for; remove it or write to another folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    if (spat := campaign.spat) is not None:
+        _write_csv(folder / "spat.csv", _file_columns(spat, {"location": spat.location.tolist()},
+                                                      _mm(_XYZ["spat"], spat.displacement)))
+        ids = sorted(campaign.locations)
+        _write_csv(folder / "locations.csv", {"location": ids, **_mm(
+            _XYZ["loc"], [campaign.locations[k] for k in ids])})
+    if (log := campaign.lengthbar) is not None:
+        before = {"placement": log.placement.tolist(), "socket": log.socket.tolist()}
+        _write_csv(folder / "lengthbar.csv", _file_columns(log, before, {}))
+        _write_csv(folder / "bar.csv", {"from": [a for a, _ in campaign.bar],
+                                        "to": [b for _, b in campaign.bar],
+                                        "length_mm": [v * 1e3 for v in campaign.bar.values()]})
+
+
+def write_points(path: str | Path, points: np.ndarray) -> None:
+    """Write points, shape (N, 3) in m, to a CSV file with columns x_mm,y_mm,z_mm (9 decimals).
+
+    Raises:
+        ValueError: if ``points`` does not have shape (N, 3).
+    """
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points: shape (N, 3) expected, got {points.shape}")
+    _write_csv(Path(path), _mm(_XYZ["loc"], points))

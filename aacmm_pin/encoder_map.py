@@ -1,0 +1,142 @@
+r"""Encoder error look-up tables: the angular position measurement error of one rotary axis.
+
+Paper Section 2.2: the error :math:`\Delta\theta_{n,map}(i_n)` is tabulated at nominal readouts
+:math:`\theta^*_{n,map}(i_n) = -180^\circ, -180^\circ + s, \ldots, 180^\circ - s` (step *s*, default
+5 deg, periodic) and linearly interpolated; the model uses :math:`\theta^*_n + \Delta\theta_n(\theta^*_n)`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+TWO_PI = 2.0 * np.pi
+DEFAULT_STEP_DEG = 5.0
+
+
+def node_count(step_deg: float) -> int:
+    """Return the number of nodes of a periodic table with this step (360 / step, an integer).
+
+    Raises:
+        ValueError: if ``step_deg`` does not divide 360 deg.
+    """
+    n = 360.0 / step_deg
+    if step_deg <= 0 or abs(n - round(n)) > 1e-9:
+        raise ValueError(f"step_deg must divide 360 deg, got {step_deg}")
+    return int(round(n))
+
+
+def node_angles(step_deg: float = DEFAULT_STEP_DEG) -> np.ndarray:
+    """Return the nominal readouts of the nodes, shape (360/step,), in rad, from -pi upwards."""
+    return np.radians(-180.0 + step_deg * np.arange(node_count(step_deg)))
+
+
+@dataclass(frozen=True, eq=False)
+class EncoderMap:
+    """Look-up table of one axis' angular position measurement error.
+
+    Equality compares the step and the values exactly (arrays compared element-wise).
+    """
+
+    values: np.ndarray
+    """Error at the nodes, shape (360/step,), in rad; node k sits at readout -180 deg + k*step."""
+    step_deg: float = DEFAULT_STEP_DEG
+    """Node spacing in degrees; must divide 360."""
+    nodes: np.ndarray = field(init=False, repr=False)
+    """Nominal readouts of the nodes, shape (360/step,), in rad (derived)."""
+
+    def __post_init__(self) -> None:
+        values = np.asarray(self.values, dtype=float).reshape(-1).copy()
+        n = node_count(self.step_deg)
+        if values.shape != (n,):
+            raise ValueError(
+                f"values: a map with step {self.step_deg} deg needs {n} nodes, got {values.size}"
+            )
+        if not np.all(np.isfinite(values)):
+            raise ValueError("values: encoder map values must be finite")
+        values.setflags(write=False)
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "nodes", node_angles(self.step_deg))
+
+    @classmethod
+    def zero(cls, step_deg: float = DEFAULT_STEP_DEG) -> EncoderMap:
+        """Return a map with zero error everywhere."""
+        return cls(np.zeros(node_count(step_deg)), step_deg)
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of nodes."""
+        return int(self.values.size)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, EncoderMap):
+            return NotImplemented
+        return self.step_deg == other.step_deg and bool(np.array_equal(self.values, other.values))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def neighbours(self, readout: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return the two nodes bracketing each readout and the weight of the upper one.
+
+        Args:
+            readout: encoder readouts, any shape, in rad (any turn: the table is periodic).
+
+        Returns:
+            ``(lower, upper, frac)``: node indices (int arrays, same shape as ``readout``) and the
+            interpolation fraction in [0, 1), so that the error is
+            ``(1 - frac) * values[lower] + frac * values[upper]``.
+        """
+        u = np.mod(np.asarray(readout, dtype=float) + np.pi, TWO_PI) / np.radians(self.step_deg)
+        lower = np.floor(u)
+        frac = u - lower
+        lower = lower.astype(np.int64) % self.n_nodes  # mod guards u == n after rounding
+        return lower, (lower + 1) % self.n_nodes, frac
+
+    def __call__(self, readout: np.ndarray) -> np.ndarray:
+        """Return the interpolated error at the readouts, same shape, in rad."""
+        lower, upper, frac = self.neighbours(readout)
+        return (1.0 - frac) * self.values[lower] + frac * self.values[upper]
+
+    def slope(self, readout: np.ndarray) -> np.ndarray:
+        """Return d(error)/d(readout) (dimensionless), the slope of the segment holding each readout."""
+        lower, upper, _ = self.neighbours(readout)
+        return (self.values[upper] - self.values[lower]) / np.radians(self.step_deg)
+
+    def weights(self, readout: np.ndarray) -> sp.csr_matrix:
+        """Return the interpolation weights W, shape (N, n_nodes), so that ``W @ values`` = error.
+
+        W is also d(error at readout i)/d(node value k): the Jacobian with respect to the nodes.
+
+        Args:
+            readout: encoder readouts, shape (N,), in rad.
+        """
+        readout = np.asarray(readout, dtype=float).reshape(-1)
+        lower, upper, frac = self.neighbours(readout)
+        rows = np.repeat(np.arange(readout.size), 2)
+        cols = np.column_stack([lower, upper]).reshape(-1)
+        data = np.column_stack([1.0 - frac, frac]).reshape(-1)
+        return sp.csr_matrix((data, (rows, cols)), shape=(readout.size, self.n_nodes))
+
+    def correct(self, readout: np.ndarray) -> np.ndarray:
+        """Return the angle the model uses, readout + error(readout), same shape, in rad."""
+        readout = np.asarray(readout, dtype=float)
+        return readout + self(readout)
+
+
+def correct_readouts(q: np.ndarray, maps: dict[int, EncoderMap]) -> np.ndarray:
+    """Wrap joint configurations: readouts in, corrected configuration out.
+
+    Args:
+        q: encoder readouts, shape (N, n_axes) or (n_axes,), in rad.
+        maps: axis number (1-based) -> map; axes without a map have zero error.
+
+    Returns:
+        The corrected angles, same shape as ``q``, in rad.
+    """
+    q = np.array(q, dtype=float)
+    out = q.copy()
+    for axis, emap in maps.items():
+        out[..., axis - 1] = emap.correct(q[..., axis - 1])
+    return out

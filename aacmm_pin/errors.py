@@ -1,0 +1,68 @@
+"""The exceptions of aacmm_pin: one base class, subclasses that carry their context."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+class AacmmError(Exception):
+    """Base class of every error that aacmm_pin raises on purpose."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One problem found in an input file."""
+
+    path: Path | str
+    """File in which the problem is."""
+    line: int | None
+    """1-based line number, or None where the problem concerns the whole file."""
+    column: str | None
+    """Column name (or 1-based column number as text), or None."""
+    reason: str
+    """What is wrong, in plain words."""
+
+    def __str__(self) -> str:
+        """Format as ``path:line: column 'x': reason``."""
+        where = str(self.path)
+        if self.line is not None:
+            where += f":{self.line}"
+        if self.column is not None:
+            where += f": column '{self.column}'"
+        return f"{where}: {self.reason}"
+
+
+class FileFormatError(AacmmError):
+    """An input file (campaign CSV, parameters JSON, readouts) is malformed.
+
+    All problems found are collected and reported together, each with file, line and column.
+    """
+
+    def __init__(self, problems: list[Problem]):
+        self.problems = list(problems)
+        n = len(self.problems)
+        head = f"{n} problem{'s' if n != 1 else ''} in input files:"
+        super().__init__("\n".join([head, *(f"  {p}" for p in self.problems)]))
+
+
+class CampaignFormatError(FileFormatError):
+    """A campaign folder (spat.csv, locations.csv, lengthbar.csv, bar.csv) is malformed."""
+
+
+class ArmModelError(AacmmError):
+    """A URDF does not follow aacmm_pin's arm conventions (axes, error frames, tool)."""
+
+    def __init__(self, path: Path | str, reason: str):
+        self.path = path
+        self.reason = reason
+        super().__init__(f"{path}: {reason}")
+
+
+class FrameNotFound(AacmmError):
+    """A frame, joint or parameter name is not in the arm."""
+
+    def __init__(self, name: str, choices: list[str]):
+        self.name = name
+        self.choices = list(choices)
+        super().__init__(f"'{name}' is not in the arm; choose from: {', '.join(self.choices)}")

@@ -1,0 +1,214 @@
+"""Parameters of a calibrated arm and their file, ``parameters.json``.
+
+``parameters.json`` fully defines a calibrated arm together with the URDF it names::
+
+    {"arm": "<urdf path or embedded name>", "units": "SI",
+     "dh": {"dx21": 0.0, ...},                 # every error frame of the arm, m or rad
+     "tool": [x, y, z],                        # tool vector in the last axis' frame, m
+     "base_to_mt": {"rotation_abc": [alpha0, beta0, gamma0], "translation": [x, y, z]},
+     "encoder_maps": {"step_deg": 5.0, "axes": {"1": [72 values, rad], ...}}}
+
+Missing maps mean zero error. The r-CS -> MT-CS transform is
+``p_mt = D_b(beta0) D_a(alpha0) D_c(gamma0) p_r + translation`` (paper Eq. 4). Keys this file does
+not know (e.g. ``effects`` in a simulator's truth) are kept in ``extra`` and written back.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from aacmm_pin.arm import Arm
+from aacmm_pin.encoder_map import DEFAULT_STEP_DEG, EncoderMap
+from aacmm_pin.errors import FileFormatError, Problem
+
+
+def rotation_abc(abc: np.ndarray) -> np.ndarray:
+    """Return D_b(beta0) D_a(alpha0) D_c(gamma0) (Eq. 4) as a 3x3 matrix; abc in rad."""
+    a, b, c = np.asarray(abc, dtype=float)
+    return pin.rpy.rotate("y", b) @ pin.rpy.rotate("x", a) @ pin.rpy.rotate("z", c)
+
+
+@dataclass(frozen=True, eq=False)
+class Parameters:
+    """Every value that turns the nominal arm into a calibrated one (SI units)."""
+
+    arm: str
+    """The arm's URDF path or embedded name, as written in the file."""
+    dh: dict[str, float]
+    """Error frame name -> value (m or rad), one entry per error frame of the arm."""
+    tool: np.ndarray
+    """Tool vector (stylus centre in the last axis' frame), shape (3,), in m, absolute."""
+    rotation_abc: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """X0 = (alpha0, beta0, gamma0): r-CS -> MT-CS rotation angles (Eq. 4), shape (3,), in rad."""
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """r-CS origin in the MT-CS, shape (3,), in m."""
+    encoder_maps: dict[int, EncoderMap] = field(default_factory=dict)
+    """Axis number (1-based) -> encoder error map; axes not listed have zero error."""
+    step_deg: float = DEFAULT_STEP_DEG
+    """Node step of the maps, in degrees."""
+    extra: dict[str, Any] = field(default_factory=dict)
+    """Top-level keys of the file that this class does not interpret, kept as read."""
+
+    def __post_init__(self) -> None:
+        for name in ("tool", "rotation_abc", "translation"):
+            value = np.array(getattr(self, name), dtype=float).reshape(-1)
+            if value.shape != (3,):
+                raise ValueError(f"{name}: needs 3 values, got {value.size}")
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "dh", {k: float(v) for k, v in self.dh.items()})
+        for axis, emap in self.encoder_maps.items():
+            if emap.step_deg != self.step_deg:
+                raise ValueError(f"encoder_maps: axis {axis} has step {emap.step_deg} deg, "
+                                 f"the parameters {self.step_deg} deg")
+
+    @classmethod
+    def nominal(cls, arm: Arm, step_deg: float = DEFAULT_STEP_DEG) -> Parameters:
+        """Return the values the arm's URDF holds, with no maps and identity X0."""
+        return cls(arm=arm.name, dh=arm.nominal_errors, tool=arm.nominal_tool, step_deg=step_deg)
+
+    def replace(self, **changes: Any) -> Parameters:
+        """Return a copy with some fields changed."""
+        return replace(self, **changes)
+
+    def rotation(self) -> np.ndarray:
+        """Return the r-CS -> MT-CS rotation matrix, shape (3, 3)."""
+        return rotation_abc(self.rotation_abc)
+
+    def map(self, axis: int) -> EncoderMap:
+        """Return the map of an axis (1-based), a zero map where none is set."""
+        return self.encoder_maps.get(axis) or EncoderMap.zero(self.step_deg)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the ``parameters.json`` content (plain JSON types)."""
+        return {
+            "arm": self.arm,
+            "units": "SI",
+            "dh": dict(self.dh),
+            "tool": self.tool.tolist(),
+            "base_to_mt": {"rotation_abc": self.rotation_abc.tolist(),
+                           "translation": self.translation.tolist()},
+            "encoder_maps": {"step_deg": self.step_deg,
+                             "axes": {str(k): self.encoder_maps[k].values.tolist()
+                                      for k in sorted(self.encoder_maps)}},
+            **self.extra,
+        }
+
+
+_KNOWN = ("arm", "units", "dh", "tool", "base_to_mt", "encoder_maps")
+
+
+def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parameters:
+    """Build parameters from ``parameters.json`` content, checking every field.
+
+    Raises:
+        FileFormatError: listing every problem, each with the JSON path of the bad field.
+    """
+    problems: list[Problem] = []
+
+    def bad(key: str, reason: str) -> None:
+        problems.append(Problem(path, None, key, reason))
+
+    def vector(value: Any, key: str, n: int) -> np.ndarray:
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            bad(key, f"needs {n} numbers, got {value!r}")
+            return np.zeros(n)
+        if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+            bad(key, f"needs {n} finite numbers, got {value!r}")
+            return np.zeros(n)
+        return arr
+
+    if not isinstance(data, dict):
+        raise FileFormatError([Problem(path, None, None, "the top level must be a JSON object")])
+    for key in ("arm", "dh", "tool"):
+        if key not in data:
+            bad(key, "missing")
+    if data.get("units", "SI") != "SI":
+        bad("units", f"must be 'SI', got {data.get('units')!r}")
+    dh: dict[str, float] = {}
+    if isinstance(data.get("dh"), dict):
+        for name, value in data["dh"].items():
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value):
+                dh[name] = float(value)
+            else:
+                bad(f"dh.{name}", f"must be a finite number, got {value!r}")
+    elif "dh" in data:
+        bad("dh", "must be an object of name: value")
+    base = data.get("base_to_mt", {})
+    if not isinstance(base, dict):
+        bad("base_to_mt", "must be an object")
+        base = {}
+    rot = vector(base.get("rotation_abc", [0, 0, 0]), "base_to_mt.rotation_abc", 3)
+    trans = vector(base.get("translation", [0, 0, 0]), "base_to_mt.translation", 3)
+    tool = vector(data.get("tool", [0, 0, 0]), "tool", 3)
+    maps_data = data.get("encoder_maps") or {}
+    step = maps_data.get("step_deg", DEFAULT_STEP_DEG) if isinstance(maps_data, dict) else None
+    maps: dict[int, EncoderMap] = {}
+    if not isinstance(step, (int, float)) or 360.0 / step != round(360.0 / step):
+        bad("encoder_maps.step_deg", f"must divide 360, got {step!r}")
+    else:
+        for key, values in (maps_data.get("axes") or {}).items():
+            try:
+                maps[int(key)] = EncoderMap(np.asarray(values, dtype=float), float(step))
+            except (TypeError, ValueError) as exc:
+                bad(f"encoder_maps.axes.{key}", str(exc))
+    if problems:
+        raise FileFormatError(problems)
+    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, rotation_abc=rot,
+                      translation=trans, encoder_maps=maps,
+                      step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
+                      extra={k: v for k, v in data.items() if k not in _KNOWN})
+
+
+def read_parameters(path: str | Path) -> Parameters:
+    """Read ``parameters.json`` (or a calibration folder holding one).
+
+    A relative ``arm`` path is taken relative to the file's folder.
+
+    Raises:
+        FileFormatError: for unreadable JSON (with line and column) or bad fields.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "parameters.json"
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileFormatError([Problem(path, None, None, "no such file")]) from None
+    except json.JSONDecodeError as exc:
+        raise FileFormatError([Problem(path, exc.lineno, f"char {exc.colno}", exc.msg)]) from None
+    params = parameters_from_dict(data, path)
+    arm_path = path.parent / params.arm
+    if params.arm.endswith(".urdf") and not Path(params.arm).is_absolute() and arm_path.is_file():
+        params = params.replace(arm=str(arm_path))
+    return params
+
+
+def write_parameters(params: Parameters, path: str | Path) -> None:
+    """Write ``parameters.json`` (indented, full float precision)."""
+    Path(path).write_text(json.dumps(params.to_dict(), indent=2) + "\n")
+
+
+def check_against_arm(params: Parameters, arm: Arm) -> None:
+    """Check that the parameters name exactly the arm's error frames and axes.
+
+    Raises:
+        FileFormatError: naming the unknown or missing parameters.
+    """
+    problems = [Problem(params.arm, None, f"dh.{n}", "not an error frame of the arm "
+                        f"(error frames: {', '.join(arm.error_names)})")
+                for n in params.dh if n not in arm.error_names]
+    problems += [Problem(params.arm, None, f"dh.{n}", "missing") for n in arm.error_names
+                 if n not in params.dh]
+    problems += [Problem(params.arm, None, f"encoder_maps.axes.{k}",
+                         f"the arm has axes 1..{arm.n_axes}")
+                 for k in params.encoder_maps if not 1 <= k <= arm.n_axes]
+    if problems:
+        raise FileFormatError(problems)

@@ -1,0 +1,322 @@
+"""Virtual arm and campaign simulator with switchable effects and a saved truth.
+
+The virtual arm is the arm's URDF with random DH errors, tool error, encoder error maps (a few
+harmonics per axis, stored as node tables so that linear interpolation reproduces them exactly) and
+optional further effects that the paper's model lacks:
+
+* ``dh``: DH errors (~0.1 mm, ~0.02 deg) and tool vector error;
+* ``encoder``: angular position measurement errors, a few harmonics of a few to 20 arcsec per axis;
+* ``rtest``: the sphere moving in its seat during the SPAT (up to ``rtest_max`` m, measured by
+  the R-Test);
+* ``compliance``: gravity-induced joint deflection, k_n x gravity torque of axis n (torques from the
+  URDF inertias by Pinocchio's generalized gravity);
+* ``thermal``: uniform thermal expansion of every length with the ``temp_c`` column;
+* ``backlash``: a direction-dependent angular error of an axis (direction of the motion since the
+  previous sample).
+
+Postures are found by damped Newton IK on the *true* model within the joint limits. Same seed, same
+files. The truth is returned apart and never read by identification.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from aacmm_pin.arm import Arm
+from aacmm_pin.campaign import Campaign, LengthBarLog, SpatLog
+from aacmm_pin.encoder_map import EncoderMap, node_angles
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
+from aacmm_pin.parameters import Parameters
+
+EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
+DEFAULT_EFFECTS = ("dh", "encoder", "rtest")
+ARCSEC = np.pi / 180 / 3600
+BAR_LENGTHS = {("A", "B"): 0.361775, ("A", "C"): 0.711211}
+"""The paper's bar: calibrated socket distances A-B and A-C, in m."""
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """What to simulate. Lengths in m, angles in rad."""
+
+    seed: int = 0
+    """Seed of every random draw: same seed, same campaign."""
+    effects: tuple[str, ...] = DEFAULT_EFFECTS
+    """Effects switched on, from :data:`EFFECTS`."""
+    samples_per_location: int = 200
+    """SPAT samples per R-Test location."""
+    location_xy: tuple[tuple[float, float], ...] = (
+        (-0.13, -0.13), (0.13, -0.13), (0.13, 0.13), (-0.13, 0.13))
+    """R-Test nest positions in the MT-CS (corners of a 260 mm square), m."""
+    mt_translation: tuple[float, float, float] = (-0.58, 0.0, 0.0)
+    """r-CS origin in the MT-CS, m (puts the nests 0.45-0.72 m from A1)."""
+    rotation_sigma: float = np.radians(0.3)
+    """Std of each of alpha0, beta0, gamma0 (a few tenths of a degree)."""
+    samples_per_socket: int = 40
+    """Length-bar postures per socket."""
+    bar_placements: int = 7
+    """Length-bar placements around the arm."""
+    dh_sigma_length: float = 1e-4
+    """Std of the DH length errors and of the tool vector error."""
+    dh_sigma_angle: float = np.radians(0.02)
+    """Std of the DH angle errors."""
+    encoder_max: float = 20 * ARCSEC
+    """Largest harmonic amplitude of the encoder errors."""
+    encoder_axes: tuple[int, ...] | None = None
+    """Axes with encoder errors (None: all)."""
+    step_deg: float = 5.0
+    """Node step of the maps."""
+    rtest_max: float = 15e-6
+    """Largest sphere displacement in its seat."""
+    sigma_rtest: float = 2e-6
+    """R-Test reading noise (per coordinate)."""
+    sigma_location: float = 3e-6
+    """Error of the measured R-Test zero positions (per coordinate)."""
+    compliance: dict[int, float] = field(default_factory=lambda: {2: 4e-6, 4: 6e-6})
+    """Axis -> joint compliance in rad/(N m) (used with ``compliance``)."""
+    thermal_alpha: float = 11e-6
+    """Thermal expansion coefficient, 1/K (used with ``thermal``)."""
+    temperature: tuple[float, float] = (20.0, 24.0)
+    """Arm temperature range over the campaign, deg C; 20 deg C is the reference."""
+    backlash: dict[int, float] = field(default_factory=lambda: {2: 6 * ARCSEC})
+    """Axis -> half backlash in rad (used with ``backlash``)."""
+
+    def __post_init__(self) -> None:
+        unknown = [e for e in self.effects if e not in EFFECTS]
+        if unknown:
+            raise ValueError(f"effects: unknown {unknown}; choose from {', '.join(EFFECTS)}")
+
+
+class TrueArm:
+    """The virtual arm: nominal model + truth parameters + extra effects (forward only)."""
+
+    def __init__(self, arm: Arm, truth: Parameters, config: SimulationConfig):
+        self.arm, self.truth, self.config = arm, truth, config
+        self._model = arm.runtime_model(truth.dh, truth.tool)
+        self._data = self._model.createData()
+
+    def angle_offsets(self, q_readout: np.ndarray, t_order: np.ndarray | None = None) -> np.ndarray:
+        """Return the joint angle errors of the effects beyond the maps, shape (N, n_axes), rad."""
+        cfg, out = self.config, np.zeros_like(q_readout)
+        if "compliance" in cfg.effects:
+            for i, q in enumerate(q_readout):
+                tau = pin.computeGeneralizedGravity(self._model, self._data, q)
+                for axis, k in cfg.compliance.items():
+                    out[i, axis - 1] += k * tau[axis - 1]
+        if "backlash" in cfg.effects:
+            direction = np.sign(np.diff(q_readout, axis=0, prepend=q_readout[:1]))
+            for axis, half in cfg.backlash.items():
+                out[:, axis - 1] += half * direction[:, axis - 1]
+        return out
+
+    def _position_jacobian(self, q_readout: np.ndarray, temp: np.ndarray | None
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """Return true r-CS positions (N, 3) and d(position)/d(readouts) (N, 3, n_axes)."""
+        jac = stylus_jacobians(self.arm, self.truth, q_readout + self.angle_offsets(q_readout),
+                               frame="r")
+        pos = jac.position
+        if "thermal" in self.config.effects and temp is not None:
+            pos = pos * (1.0 + self.config.thermal_alpha * (temp - 20.0))[:, None]
+        return pos, jac.readouts
+
+    def positions(self, q_readout: np.ndarray, temp: np.ndarray | None, frame: str = "r"
+                  ) -> np.ndarray:
+        """Return the true stylus centres, shape (N, 3), m, in the r-CS or the MT-CS."""
+        offsets = self.angle_offsets(q_readout)
+        p_r = stylus_positions(self.arm, self.truth, q_readout + offsets, frame="r")
+        if "thermal" in self.config.effects and temp is not None:
+            p_r = p_r * (1.0 + self.config.thermal_alpha * (temp - 20.0))[:, None]
+        if frame == "r":
+            return p_r
+        return p_r @ self.truth.rotation().T + self.truth.translation
+
+    def solve_ik(self, targets: np.ndarray, rng: np.random.Generator, temp: np.ndarray | None,
+                 iterations: int = 25) -> np.ndarray:
+        """Return readouts (N, n_axes) putting the true stylus on each target (N, 3) in the r-CS.
+
+        Random starts within the joint limits, damped Newton steps projected on the limits,
+        restarts for the samples that do not reach the target to 1e-12 m.
+        """
+        lim = self.arm.joint_limits
+        q = np.empty((targets.shape[0], self.arm.n_axes))
+        todo = np.arange(targets.shape[0])
+        for _attempt in range(100):
+            qs = rng.uniform(lim[:, 0], lim[:, 1], size=(todo.size, self.arm.n_axes))
+            active = np.arange(todo.size)
+            for _ in range(iterations):
+                sel = todo[active]
+                pos, jac = self._position_jacobian(qs[active], None if temp is None else temp[sel])
+                err = targets[sel] - pos
+                moving = np.linalg.norm(err, axis=1) > 1e-12
+                active, err, jac = active[moving], err[moving], jac[moving]
+                if active.size == 0:
+                    break
+                jjt = jac @ jac.transpose(0, 2, 1) + 1e-8 * np.eye(3)
+                step = (jac.transpose(0, 2, 1) @ np.linalg.solve(jjt, err[:, :, None]))[:, :, 0]
+                scale = np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))
+                qs[active] = np.clip(qs[active] + scale[:, None] * step, lim[:, 0], lim[:, 1])
+            ok = np.ones(todo.size, dtype=bool)
+            ok[active] = False
+            q[todo[ok]] = qs[ok]
+            todo = todo[~ok]
+            if todo.size == 0:
+                return q
+        raise AacmmError(f"IK found no posture within the joint limits for {todo.size} targets, "
+                         f"e.g. {targets[todo[0]].round(4).tolist()} m")
+
+
+def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -> Parameters:
+    """Draw the virtual arm's parameters (DH, tool, X0, maps) for the effects switched on."""
+    dh = arm.nominal_errors
+    tool = arm.nominal_tool.copy()
+    if "dh" in config.effects:
+        for frame in arm.error_frames:
+            sigma = config.dh_sigma_angle if frame.is_angle else config.dh_sigma_length
+            dh[frame.name] += rng.normal(0.0, sigma)
+        tool = tool + rng.normal(0.0, config.dh_sigma_length, 3)
+    maps: dict[int, EncoderMap] = {}
+    if "encoder" in config.effects:
+        nodes = node_angles(config.step_deg)
+        for axis in config.encoder_axes or range(1, arm.n_axes + 1):
+            values = np.zeros_like(nodes)
+            for harmonic in (1, 2, 3, 4, 8):
+                amp = rng.uniform(0.2, 1.0) * config.encoder_max / (1 if harmonic == 1 else 2)
+                values += amp * np.sin(harmonic * nodes + rng.uniform(0, 2 * np.pi))
+            maps[axis] = EncoderMap(values, config.step_deg)
+    return Parameters(arm=arm.name, dh=dh, tool=tool,
+                      rotation_abc=rng.normal(0.0, config.rotation_sigma, 3),
+                      translation=np.asarray(config.mt_translation, dtype=float),
+                      encoder_maps=maps, step_deg=config.step_deg)
+
+
+def _bar_sockets(rng: np.random.Generator, n: int) -> list[dict[str, np.ndarray]]:
+    """Return n bar placements (socket -> r-CS position) spread around the arm."""
+    out = []
+    for k in range(n):
+        azimuth = -2.4 + 4.8 * (k + rng.uniform(0.2, 0.8)) / n
+        a = np.array([0.35 * np.cos(azimuth), 0.35 * np.sin(azimuth), rng.uniform(-0.1, 0.3)])
+        u = np.array([np.cos(azimuth + rng.uniform(-0.6, 0.6)),
+                      np.sin(azimuth + rng.uniform(-0.6, 0.6)), rng.uniform(-0.8, 0.8)])
+        u /= np.linalg.norm(u)
+        sockets = {"A": a}
+        for (_, to), length in BAR_LENGTHS.items():
+            sockets[to] = a + length * u
+        out.append(sockets)
+    return out
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """A simulated campaign and its truth."""
+
+    campaign: Campaign
+    """What a user would record (noisy, in the documented format once written)."""
+    truth: Parameters
+    """The virtual arm; ``truth.extra['effects']`` lists the effects and their values."""
+    sphere_mt: np.ndarray
+    """True sphere centre of every SPAT sample in the MT-CS, shape (N, 3), m."""
+    sockets_r: dict[int, dict[str, np.ndarray]]
+    """True socket positions in the r-CS: placement -> socket -> (3,), m."""
+
+
+def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simulation:
+    """Simulate a SPAT + length-bar campaign on a virtual version of ``arm``."""
+    config = config or SimulationConfig()
+    rng = np.random.default_rng(config.seed)
+    truth = random_truth(arm, config, rng)
+    true_arm = TrueArm(arm, truth, config)
+    rot = truth.rotation()
+    thermal = "thermal" in config.effects
+
+    def temps(n: int) -> np.ndarray | None:
+        return np.sort(rng.uniform(*config.temperature, n)) if thermal else None
+
+    locations_true = {m + 1: np.array([x, y, rng.uniform(0.0, 0.01)])
+                      for m, (x, y) in enumerate(config.location_xy)}
+    loc_col, q_all, disp_all, sphere_all = [], [], [], []
+    temp_all: list[np.ndarray] = []
+    for m, p0 in locations_true.items():
+        n = config.samples_per_location
+        disp = np.zeros((n, 3))
+        if "rtest" in config.effects:  # sphere pushed in its seat, mostly sideways
+            direction = rng.normal(size=(n, 3)) * [1.0, 1.0, 0.3]
+            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+            disp = config.rtest_max * rng.uniform(0, 1, (n, 1)) ** 0.5 * direction
+        temp = temps(n)
+        target_r = (p0 + disp - truth.translation) @ rot
+        q = true_arm.solve_ik(target_r, rng, temp)
+        q = np.radians(np.round(np.degrees(q), 9))  # as written to file: truth follows the file
+        sphere = true_arm.positions(q, temp, frame="mt")
+        loc_col.append(np.full(n, m))
+        q_all.append(q)
+        sphere_all.append(sphere)
+        disp_all.append(sphere - p0 + rng.normal(0.0, config.sigma_rtest, (n, 3)))
+        if temp is not None:
+            temp_all.append(temp)
+    n_spat = sum(len(c) for c in loc_col)
+    spat = SpatLog(location=np.concatenate(loc_col), q=np.concatenate(q_all),
+                   displacement=np.concatenate(disp_all),
+                   t=np.arange(n_spat) * 0.1 if ("backlash" in config.effects or thermal) else None,
+                   temp=np.concatenate(temp_all) if thermal else None, lines=None)
+    measured_locations = {m: p + rng.normal(0.0, config.sigma_location, 3)
+                          for m, p in locations_true.items()}
+    sockets = {k + 1: s for k, s in enumerate(_bar_sockets(rng, config.bar_placements))}
+    placement, socket, q_bar = [], [], []
+    t_bar: list[np.ndarray] = []
+    for k, by_socket in sockets.items():
+        for name, pos in by_socket.items():
+            n = config.samples_per_socket
+            temp = temps(n)
+            q_bar.append(true_arm.solve_ik(np.tile(pos, (n, 1)), rng, temp))
+            placement.append(np.full(n, k))
+            socket += [name] * n
+            if temp is not None:
+                t_bar.append(temp)
+    lengthbar = LengthBarLog(placement=np.concatenate(placement), socket=np.array(socket),
+                             q=np.radians(np.round(np.degrees(np.concatenate(q_bar)), 9)),
+                             t=None, temp=np.concatenate(t_bar) if thermal else None, lines=None)
+    effects: dict[str, Any] = {"seed": config.seed, "switched_on": list(config.effects)}
+    if "encoder" in config.effects:
+        effects["encoder"] = "node tables above"
+    if "rtest" in config.effects:
+        effects["rtest_max_um"] = config.rtest_max * 1e6
+    effects["sigma_rtest_um"] = config.sigma_rtest * 1e6
+    effects["sigma_location_um"] = config.sigma_location * 1e6
+    effects["locations_true_mm"] = {str(m): (p * 1e3).tolist() for m, p in locations_true.items()}
+    if "compliance" in config.effects:
+        effects["compliance_rad_per_nm"] = {str(a): k for a, k in config.compliance.items()}
+    if "thermal" in config.effects:
+        effects["thermal_alpha_per_k"] = config.thermal_alpha
+        effects["thermal_reference_c"] = 20.0
+    if "backlash" in config.effects:
+        effects["backlash_half_rad"] = {str(a): b for a, b in config.backlash.items()}
+    truth = truth.replace(extra={"effects": effects})
+    campaign = Campaign(spat=spat, locations=measured_locations, lengthbar=lengthbar,
+                        bar=dict(BAR_LENGTHS), source=None)
+    return Simulation(campaign, truth, np.concatenate(sphere_all), sockets)
+
+
+def write_simulation(sim: Simulation, folder: str | Path) -> None:
+    """Write the campaign files, ``truth.json`` and the true points (``truth_*.csv``, mm)."""
+    from aacmm_pin.campaign import write_campaign
+    from aacmm_pin.parameters import write_parameters
+
+    folder = Path(folder)
+    write_campaign(sim.campaign, folder)
+    write_parameters(sim.truth, folder / "truth.json")
+    assert sim.campaign.spat is not None
+    rows = ["location,x_mm,y_mm,z_mm"] + [
+        f"{m},{x:.9f},{y:.9f},{z:.9f}"
+        for m, (x, y, z) in zip(sim.campaign.spat.location, sim.sphere_mt * 1e3)]
+    (folder / "truth_spheres.csv").write_text("\n".join(rows) + "\n")
+    rows = ["placement,socket,x_mm,y_mm,z_mm"] + [
+        f"{k},{s},{x:.9f},{y:.9f},{z:.9f}"
+        for k, by_socket in sim.sockets_r.items() for s, (x, y, z) in
+        ((s, p * 1e3) for s, p in by_socket.items())]
+    (folder / "truth_sockets.csv").write_text("\n".join(rows) + "\n")

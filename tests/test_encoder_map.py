@@ -1,0 +1,68 @@
+"""Encoder error maps: node table, periodic linear interpolation, weights and slopes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles, node_count
+from tests.helpers import map_error
+
+
+@pytest.fixture
+def emap():
+    return EncoderMap(np.random.default_rng(3).normal(0, 1e-4, 72))
+
+
+def test_nodes_from_minus_180_by_step():
+    """Nodes sit at -180, -175, ..., 175 deg by default; a 10 deg step gives 36."""
+    np.testing.assert_allclose(np.degrees(node_angles()), np.arange(-180, 180, 5.0))
+    assert node_count(10.0) == 36
+    with pytest.raises(ValueError, match="divide 360"):
+        node_count(7.0)
+
+
+def test_value_at_nodes_is_table_value(emap):
+    """Interpolating exactly at a node returns that node's value, in any turn."""
+    for turn in (-2, 0, 1, 3):
+        np.testing.assert_allclose(emap(emap.nodes + 2 * np.pi * turn), emap.values, atol=1e-15)
+
+
+def test_matches_independent_interpolation(emap):
+    """The map equals the test's own transcription of periodic linear interpolation."""
+    readouts = np.random.default_rng(4).uniform(-13, 13, 500)
+    ref = [map_error(emap.values, r) for r in readouts]
+    np.testing.assert_allclose(emap(readouts), ref, atol=1e-15)
+
+
+def test_weights_reproduce_values_and_are_linear_in_nodes(emap):
+    """W @ values equals the map, rows sum to one, at most two nonzeros per row."""
+    readouts = np.random.default_rng(5).uniform(-np.pi, np.pi, 300)
+    w = emap.weights(readouts)
+    np.testing.assert_allclose(w @ emap.values, emap(readouts), atol=1e-15)
+    np.testing.assert_allclose(np.asarray(w.sum(axis=1)).ravel(), 1.0)
+    assert max(np.diff(w.indptr)) <= 2
+
+
+def test_slope_matches_finite_difference_inside_segments(emap):
+    """slope() is the derivative of the map between nodes."""
+    readouts = np.radians(np.arange(-177.5, 180, 5.0))  # mid-segments, away from the kinks
+    h = 1e-7
+    fd = (emap(readouts + h) - emap(readouts - h)) / (2 * h)
+    np.testing.assert_allclose(emap.slope(readouts), fd, rtol=1e-6, atol=1e-12)
+
+
+def test_wraps_configurations(emap):
+    """correct_readouts adds each axis' error; axes without a map are unchanged."""
+    q = np.random.default_rng(6).uniform(-3, 3, (10, 7))
+    out = correct_readouts(q, {2: emap})
+    np.testing.assert_allclose(out[:, 1], q[:, 1] + emap(q[:, 1]))
+    np.testing.assert_array_equal(np.delete(out, 1, axis=1), np.delete(q, 1, axis=1))
+
+
+def test_rejects_wrong_node_count_and_nan():
+    """A table of the wrong length or with NaN is refused with the argument named."""
+    with pytest.raises(ValueError, match="72 nodes"):
+        EncoderMap(np.zeros(71))
+    with pytest.raises(ValueError, match="finite"):
+        EncoderMap(np.full(72, np.nan))

@@ -1,0 +1,85 @@
+"""parameters.json: round trip, the shared truth file, and clear errors for bad files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from aacmm_pin.arm import load_arm
+from aacmm_pin.encoder_map import EncoderMap
+from aacmm_pin.errors import FileFormatError
+from aacmm_pin.parameters import (
+    Parameters,
+    check_against_arm,
+    read_parameters,
+    rotation_abc,
+    write_parameters,
+)
+from tests.helpers import SAMPLE, d_a, d_b, d_c
+
+
+def test_round_trip(tmp_path):
+    """Writing then reading gives the same values to the last bit, extra keys kept."""
+    rng = np.random.default_rng(0)
+    arm = load_arm()
+    params = Parameters.nominal(arm).replace(
+        dh={n: rng.normal() * 1e-4 for n in arm.error_names}, tool=rng.normal(size=3),
+        rotation_abc=rng.normal(size=3), translation=rng.normal(size=3),
+        encoder_maps={3: EncoderMap(rng.normal(size=72))}, extra={"effects": {"x": 1}})
+    write_parameters(params, tmp_path / "parameters.json")
+    again = read_parameters(tmp_path)  # a folder holding parameters.json works too
+    assert again.dh == params.dh and again.extra == params.extra
+    np.testing.assert_array_equal(again.tool, params.tool)
+    np.testing.assert_array_equal(again.rotation_abc, params.rotation_abc)
+    assert again.encoder_maps == params.encoder_maps
+
+
+def test_rotation_is_eq4_order():
+    """The r-CS -> MT-CS rotation is D_b(beta0) D_a(alpha0) D_c(gamma0)."""
+    abc = np.array([0.1, -0.2, 0.3])
+    np.testing.assert_allclose(rotation_abc(abc), (d_b(-0.2) @ d_a(0.1) @ d_c(0.3))[:3, :3],
+                               atol=1e-15)
+
+
+@pytest.mark.skipif(not SAMPLE.is_dir(), reason="shared sample campaign not beside the project")
+def test_reads_independent_truth_file():
+    """The sample campaign's truth.json (written by independent code) reads and fits the arm."""
+    params = read_parameters(SAMPLE / "truth.json")
+    check_against_arm(params, load_arm(params.arm))
+    assert sorted(params.encoder_maps) == list(range(1, 8)) and "effects" in params.extra
+
+
+def test_json_syntax_error_has_line_and_column(tmp_path):
+    """Broken JSON is reported with its line and column."""
+    path = tmp_path / "parameters.json"
+    path.write_text('{\n  "arm": "aacmm7",\n  "dh": {,}\n}\n')
+    with pytest.raises(FileFormatError, match=r"parameters.json:3: column 'char 10'"):
+        read_parameters(path)
+
+
+def test_bad_fields_are_all_listed(tmp_path):
+    """Every bad field is named in one error: a NaN, a short tool, a map of the wrong size."""
+    path = tmp_path / "parameters.json"
+    path.write_text(json.dumps({"arm": "aacmm7", "dh": {"dx21": "x"}, "tool": [0, 0],
+                                "encoder_maps": {"axes": {"2": [0.0] * 70}}}))
+    with pytest.raises(FileFormatError) as info:
+        read_parameters(path)
+    text = str(info.value)
+    assert "3 problems" in text
+    for key in ("dh.dx21", "'tool'", "encoder_maps.axes.2"):
+        assert key in text
+
+
+def test_parameters_that_do_not_fit_the_arm(tmp_path):
+    """Missing and unknown DH names and out-of-range axes are named against the arm."""
+    arm = load_arm()
+    dh = dict(arm.nominal_errors)
+    dh.pop("a76")
+    dh["zz99"] = 0.0
+    params = Parameters(arm="aacmm7", dh=dh, tool=np.zeros(3),
+                        encoder_maps={9: EncoderMap.zero()})
+    with pytest.raises(FileFormatError) as info:
+        check_against_arm(params, arm)
+    assert {"dh.zz99", "dh.a76", "encoder_maps.axes.9"} <= {p.column for p in info.value.problems}
