@@ -44,6 +44,60 @@ def _predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify(args: argparse.Namespace) -> int:
+    from aacmm_pin.arm import load_arm
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.export import write_calibration
+    from aacmm_pin.identify import identify
+
+    arm = load_arm(args.arm)
+    cal = identify(read_campaign(args.campaign), arm, model=args.model,
+                   use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
+                   sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
+                   progress=sys.stderr.isatty())
+    write_calibration(cal, arm, args.out)
+    _print_calibration(cal, args.out)
+    return 0 if cal.success else 1
+
+
+def _print_calibration(cal: object, out: Path) -> None:
+    from aacmm_pin.identify import Calibration
+
+    assert isinstance(cal, Calibration)
+    state = "converged" if cal.success else "DID NOT CONVERGE"
+    by_loc = ", ".join(f"{m}: {v * 1e6:.2f}" for m, v in cal.fit_rms_by_location().items())
+    rtest = "with" if cal.use_rtest else "without"
+    print(f"{cal.model} model ({rtest} R-Test): {state}, "
+          f"{cal.n_determined} parameters determined, fit RMS {cal.fit_rms * 1e6:.2f} um "
+          f"(by location {by_loc}), "
+          f"{cal.runtime_s:.1f} s -> {out}")
+    for line in cal.unidentifiable:
+        print(f"  not identifiable: {line}")
+
+
+def _validate(args: argparse.Namespace) -> int:
+    import json
+
+    from aacmm_pin.arm import load_arm
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.parameters import read_parameters
+    from aacmm_pin.validate import validate
+
+    params = read_parameters(args.caldir)
+    result = validate(load_arm(params.arm), params, read_campaign(args.campaign))
+    print(result.table())
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from aacmm_pin.demo import run_demo
+
+    run_demo(args.out, seed=args.seed)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``aacmm-pin``."""
     from aacmm_pin.simulate import DEFAULT_EFFECTS, EFFECTS
@@ -71,6 +125,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("points.csv"), help="output CSV")
     p.add_argument("--arm", default=None, help="override the URDF named in the parameters")
     p.set_defaults(handler=_predict)
+
+    p = sub.add_parser("identify", help="identify DH errors (and encoder maps) from SPATs")
+    p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("--model", choices=("dh", "proposed"), default="proposed",
+                   help="dh: DH errors only; proposed: DH errors and encoder maps (default)")
+    p.add_argument("--no-rtest", action="store_true",
+                   help="conventional SPAT: each location's mean displacement for every sample")
+    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
+    p.add_argument("--out", type=Path, default=Path("calibration"), help="calibration folder")
+    p.add_argument("--loss", default="linear",
+                   help="scipy loss: linear (default), soft_l1, huber, cauchy, arctan")
+    p.add_argument("--sigma-um", type=float, default=None,
+                   help="R-Test noise per coordinate in um (default: from the residuals)")
+    p.add_argument("--step-deg", type=float, default=5.0, help="map node step (default 5)")
+    p.set_defaults(handler=_identify)
+
+    p = sub.add_parser("validate", help="length-bar errors of a calibration (paper Fig. 9)")
+    p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")
+    p.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
+    p.add_argument("--json", type=Path, default=None, help="also write the errors as JSON")
+    p.set_defaults(handler=_validate)
+
+    p = sub.add_parser("demo", help="the main job: simulate, identify the paper's 3 models, "
+                                    "validate, figures")
+    p.add_argument("--out", type=Path, default=Path("aacmm-pin-demo"), help="output folder")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated campaign")
+    p.set_defaults(handler=_demo)
     return parser
 
 

@@ -196,13 +196,18 @@ def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -
 
 
 def _bar_sockets(rng: np.random.Generator, n: int) -> list[dict[str, np.ndarray]]:
-    """Return n bar placements (socket -> r-CS position) spread around the arm."""
+    """Return n bar placements (socket -> r-CS position) on the table around the arm.
+
+    As in the paper's Figs. 7-8: the bar lies on the worktable (socket A 0.3-0.45 m from A1, at
+    0-50 mm above the base, the bar within +-6 deg of horizontal), at azimuths spread around the arm.
+    """
     out = []
     for k in range(n):
         azimuth = -2.4 + 4.8 * (k + rng.uniform(0.2, 0.8)) / n
-        a = np.array([0.35 * np.cos(azimuth), 0.35 * np.sin(azimuth), rng.uniform(-0.1, 0.3)])
-        u = np.array([np.cos(azimuth + rng.uniform(-0.6, 0.6)),
-                      np.sin(azimuth + rng.uniform(-0.6, 0.6)), rng.uniform(-0.8, 0.8)])
+        radius = rng.uniform(0.3, 0.45)
+        a = np.array([radius * np.cos(azimuth), radius * np.sin(azimuth), rng.uniform(0.0, 0.05)])
+        heading = azimuth + rng.uniform(-0.8, 0.8)
+        u = np.array([np.cos(heading), np.sin(heading), rng.uniform(-0.1, 0.1)])
         u /= np.linalg.norm(u)
         sockets = {"A": a}
         for (_, to), length in BAR_LENGTHS.items():

@@ -1,0 +1,56 @@
+"""A calibration folder (CALDIR): parameters, calibrated URDF, maps CSV and report.
+
+``CALDIR/parameters.json`` names ``calibrated.urdf`` beside it, so the folder is self-contained;
+``calibrated.urdf`` holds the identified DH values in its error frames and the identified tool vector
+(it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json`` maps first).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from aacmm_pin.arm import Arm
+from aacmm_pin.identify import Calibration
+from aacmm_pin.parameters import write_parameters
+
+ARCSEC_PER_RAD = 180 / np.pi * 3600
+
+
+def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray] | None = None
+                   ) -> None:
+    """Write ``axis,node_deg,error_arcsec,identifiable,std_arcsec`` for every estimated map.
+
+    Args:
+        cal: the calibration.
+        path: CSV to write.
+        std: axis -> node standard uncertainty (rad) to write instead of the linearised one
+            (e.g. from Monte Carlo).
+    """
+    rows = ["axis,node_deg,error_arcsec,identifiable,std_arcsec"]
+    for axis, ok in sorted(cal.node_identifiable.items()):
+        emap = cal.parameters.map(axis)
+        node_std = std[axis] if std is not None else cal.node_std(axis)
+        for node, value, good, s in zip(np.degrees(emap.nodes), emap.values, ok, node_std):
+            s_text = f"{s * ARCSEC_PER_RAD:.4f}" if good and np.isfinite(s) else ""
+            rows.append(f"{axis},{node:g},{value * ARCSEC_PER_RAD:.4f},{int(good)},{s_text}")
+    Path(path).write_text("\n".join(rows) + "\n")
+
+
+def write_calibration(cal: Calibration, arm: Arm, folder: str | Path) -> Path:
+    """Write a calibration folder and return its path.
+
+    Files: ``parameters.json``, ``calibrated.urdf``, ``encoder_maps.csv``, ``report.json``.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    params = cal.parameters
+    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, params.tool))
+    write_parameters(params.replace(arm="calibrated.urdf"), folder / "parameters.json")
+    write_maps_csv(cal, folder / "encoder_maps.csv")
+    report = cal.report()
+    report["arm"] = arm.name
+    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    return folder

@@ -1,0 +1,224 @@
+"""What SPAT data can and cannot determine, found from the Jacobian, and the rules that handle it.
+
+Three kinds of direction are not seen by SPATs; each is detected from the Jacobian and handled by a
+stated rule, and every one is listed in the report:
+
+1. **Unvisited map nodes** (no readout of any posture falls next to them): their Jacobian columns
+   are zero. Rule: held at zero.
+2. **Gauge directions**: a constant added to a map is indistinguishable from other parameters
+   (the axis offset ``dth``, ``gamma0`` for A1, the tool vector for A7, a DH combination for A2).
+   Detected per axis by regressing the map's constant column on the other columns of the Jacobian;
+   where it lies in their span (relative residual < 1e-6), the rule is: the map has zero mean over
+   its free nodes (a hard constraint) and the constant is carried by the other parameters.
+3. **Undetermined directions** (e.g. the A7 map when the stylus sits on the A7 axis, or an axis
+   offset that map shapes can imitate): with every column scaled by a plausible size of its
+   parameter (:data:`PLAUSIBLE`), the singular value of a direction is how far a change of that
+   size moves the data (m, norm over all samples). Rule: a direction whose singular value is below
+   ``2 sigma`` (sigma: the R-Test noise) is *not determined*; its component is held at the start
+   value by a constraint row (truncated SVD). A parameter or node is *identifiable* when more than
+   half of its scaled unit vector lies in the determined subspace.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from aacmm_pin.unknowns import Unknowns
+
+ARCSEC = np.pi / 180 / 3600
+PLAUSIBLE = {"angle": 3.5e-4, "length": 1e-4, "node": 1e-4, "base_angle": 1e-2,
+             "base_length": 1e-2}
+"""Plausible sizes (rad or m) that scale the Jacobian's columns: DH angles (0.02 deg), DH lengths
+and tool (0.1 mm), map nodes (~20 arcsec), X0 angles and the r-CS -> MT-CS translation."""
+GAUGE_TOL = 1e-6
+GAUGE_WEIGHT = 1e3
+"""Weight of a gauge or hold row, m per unit: 1e-9 of violation costs as much as 1 um of data."""
+DETERMINED_K = 2.0
+"""A direction is determined when a plausible change along it moves the data by >= K sigma."""
+
+
+def plausible_sizes(unknowns: Unknowns) -> np.ndarray:
+    """Return the plausible size of every entry of the full layout (rad or m)."""
+    arm = unknowns.arm
+    out = [PLAUSIBLE["base_angle"]] * 3 + [PLAUSIBLE["base_length"]] * 3
+    out += [PLAUSIBLE["angle"] if f.is_angle else PLAUSIBLE["length"] for f in arm.error_frames]
+    out += [PLAUSIBLE["length"]] * 3
+    n_nodes = unknowns.free.size - len(out)
+    return np.array(out + [PLAUSIBLE["node"]] * n_nodes)
+
+
+def unvisited_nodes(unknowns: Unknowns, q: np.ndarray) -> np.ndarray:
+    """Return a full-layout mask of the map nodes that no readout touches."""
+    mask = np.zeros(unknowns.free.size, dtype=bool)
+    for axis in unknowns.map_axes:
+        weights = unknowns.start.map(axis).weights(q[:, axis - 1])
+        touched = np.asarray(abs(weights).sum(axis=0)).ravel() > 0
+        mask[unknowns.map_slice(axis)] = ~touched
+    return mask
+
+
+def gauge_axes(unknowns: Unknowns, jac: sp.csr_matrix) -> list[int]:
+    """Return the map axes whose constant lies in the span of the non-map columns.
+
+    Args:
+        unknowns: the layout (its free mask must match ``jac``'s columns).
+        jac: data Jacobian w.r.t. the free entries, shape (3N, n_free).
+    """
+    full_cols = np.flatnonzero(unknowns.free)
+    dense = jac[:, np.flatnonzero(full_cols < unknowns.n_dense)].toarray()
+    out = []
+    for axis in unknowns.map_axes:
+        sl = unknowns.map_slice(axis)
+        cols = np.flatnonzero((full_cols >= sl.start) & (full_cols < sl.stop))
+        if cols.size == 0:
+            continue
+        constant = np.asarray(jac[:, cols].sum(axis=1)).ravel()
+        norm = np.linalg.norm(constant)
+        beta = np.linalg.lstsq(dense, constant, rcond=None)[0] if norm > 0 else 0.0
+        if norm == 0.0 or np.linalg.norm(constant - dense @ beta) / norm < GAUGE_TOL:
+            out.append(axis)
+    return out
+
+
+def gauge_rows(unknowns: Unknowns, axes: list[int]) -> sp.csr_matrix:
+    """Return one row per gauge axis: the mean of its free nodes x GAUGE_WEIGHT, (n_axes, n_free)."""
+    full_cols = np.flatnonzero(unknowns.free)
+    rows = []
+    for axis in axes:
+        sl = unknowns.map_slice(axis)
+        sel = (full_cols >= sl.start) & (full_cols < sl.stop)
+        rows.append(GAUGE_WEIGHT * sel / max(sel.sum(), 1))
+    return sp.csr_matrix(np.array(rows).reshape(len(rows), full_cols.size))
+
+
+@dataclass(frozen=True)
+class Observability:
+    """The determined and undetermined directions of an identification (free entries only)."""
+
+    hold: np.ndarray
+    """Undetermined directions as rows in the scaled free space, shape (n_hold, n_free)."""
+    singular: np.ndarray
+    """Singular value of each held direction, m."""
+    identifiable: np.ndarray
+    """Per free entry: more than half of it lies in the determined subspace, shape (n_free,)."""
+    scale: np.ndarray
+    """Plausible size of each free entry (the column scaling), shape (n_free,)."""
+
+    def hold_rows(self) -> sp.csr_matrix:
+        """Return constraint rows holding the undetermined components: ``rows @ (x - x0) = 0``."""
+        return sp.csr_matrix(GAUGE_WEIGHT * self.hold / self.scale[None, :])
+
+
+def observability(unknowns: Unknowns, jac: sp.csr_matrix, extra: sp.csr_matrix, sigma: float
+                  ) -> Observability:
+    """Find the directions the data does not determine (truncated SVD of the scaled Jacobian).
+
+    Args:
+        unknowns: the layout (free mask matching the columns).
+        jac: data Jacobian w.r.t. the free entries, shape (3N, n_free), m per unit.
+        extra: other rows that determine directions (gauge rows), shape (k, n_free).
+        sigma: noise per coordinate, m.
+    """
+    scale = plausible_sizes(unknowns)[unknowns.free]
+    info = (jac.T @ jac + extra.T @ extra).toarray() * np.outer(scale, scale)
+    eigval, eigvec = np.linalg.eigh(info)
+    singular = np.sqrt(np.clip(eigval, 0.0, None))
+    held = singular < DETERMINED_K * sigma
+    determined = eigvec[:, ~held]
+    identifiable = np.sum(determined ** 2, axis=1) > 0.5
+    return Observability(eigvec[:, held].T, singular[held], identifiable, scale)
+
+
+def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> list[str]:
+    """Return plain-language lines on what is not identifiable and how it was handled."""
+    names = np.array(unknowns.full_names)
+    free_names = names[unknowns.free]
+    lines = []
+    for axis in unknowns.map_axes:
+        sl = unknowns.map_slice(axis)
+        nodes = np.degrees(unknowns.start.map(axis).nodes)
+        held = unvisited[sl]
+        if held.any():
+            lines.append(f"A{axis} map: {held.sum()} of {held.size} nodes ({_ranges(nodes[held])} "
+                         "deg) not identifiable: no posture visits them; held at zero")
+        weak = np.array([n in set(free_names[~obs.identifiable]) for n in names[sl]])
+        if weak.any():
+            lines.append(f"A{axis} map: {weak.sum()} of {weak.size} nodes ({_ranges(nodes[weak])} "
+                         "deg) not identifiable: a plausible error there moves the stylus by less "
+                         "than the noise in these postures; held near zero")
+    for name in free_names[~obs.identifiable]:
+        if not name.startswith("map"):
+            lines.append(f"{name}: not identifiable from these SPATs (other parameters can imitate "
+                         "it in these postures); held near its start value")
+    groups: dict[str, int] = {}
+    for row in obs.hold:
+        key = ", ".join(_main_groups(free_names, row))
+        groups[key] = groups.get(key, 0) + 1
+    for key, count in groups.items():
+        lines.append(f"{count} undetermined direction{'s' if count > 1 else ''} mixing {key}: "
+                     "held at the start values (truncated SVD)")
+    return lines
+
+
+def _main_groups(names: np.ndarray, row: np.ndarray, share: float = 0.1) -> list[str]:
+    """Return the parameter groups (a DH name or 'A<n> map') holding > share of a direction."""
+    weight: dict[str, float] = {}
+    for name, v in zip(names, row):
+        group = f"A{name[3:name.index('[')]} map" if name.startswith("map") else str(name)
+        weight[group] = weight.get(group, 0.0) + float(v) ** 2
+    return sorted((g for g, w in weight.items() if w > share), key=lambda g: -weight[g])
+
+
+def _ranges(values: np.ndarray) -> str:
+    """Format sorted node angles as compact ranges, e.g. '-180..-105, 110..175'."""
+    values = np.sort(values)
+    step = np.min(np.diff(values)) if values.size > 1 else 0.0
+    parts, start = [], values[0]
+    for prev, cur in zip(values[:-1], values[1:]):
+        if cur - prev > step + 1e-9:
+            parts.append((start, prev))
+            start = cur
+    parts.append((start, values[-1]))
+    return ", ".join(f"{a:g}" if a == b else f"{a:g}..{b:g}" for a, b in parts)
+
+
+def equivalent_vector(unknowns: Unknowns, jac_full: sp.csr_matrix, constraints: sp.csr_matrix,
+                      other: np.ndarray) -> tuple[np.ndarray, float]:
+    """Return the parameters equivalent to ``other`` under an identification's rules.
+
+    Among all vectors that keep the held entries at their start values and satisfy the
+    identification's constraint rows (gauge and held directions, relative to the start), find the
+    one whose predictions on the campaign's postures are closest (linearised) to those of ``other``.
+    This is what an identification can return at best if ``other`` is the truth: compare an
+    estimate with it, not with ``other`` itself.
+
+    Args:
+        unknowns: the final layout (free mask, start values).
+        jac_full: data Jacobian w.r.t. every entry of the full layout, shape (3N, n_full).
+        constraints: rows over the free entries, shape (k, n_free), that the estimate satisfies
+            as ``rows @ (x_free - x0_free) = 0`` (gauges and held directions).
+        other: a full-layout vector (e.g. the truth), shape (n_full,).
+
+    Returns:
+        ``(vector, rms)``: the equivalent full-layout vector and the RMS change of the predictions
+        it implies (m): near zero where the difference lies in unseen directions only.
+    """
+    start = unknowns.full_vector(unknowns.start)
+    held = ~unknowns.free
+    delta_held = np.where(held, start - other, 0.0)
+    rhs = -(jac_full @ delta_held)
+    free_idx = np.flatnonzero(unknowns.free)
+    a = jac_full[:, free_idx].toarray()
+    rows = constraints.toarray()
+    weight = 1e3 * np.abs(a).max() / max(np.abs(rows).max(), 1e-300)
+    lhs = np.vstack([a, weight * rows])
+    b = np.concatenate([rhs, weight * (rows @ (start[free_idx] - other[free_idx]))])
+    colscale = np.maximum(np.linalg.norm(lhs, axis=0), 1e-300)
+    delta_free = np.linalg.lstsq(lhs / colscale, b, rcond=None)[0] / colscale
+    out = other + delta_held
+    out[free_idx] += delta_free
+    change = a @ delta_free - rhs
+    return out, float(np.sqrt(np.mean(change ** 2)))

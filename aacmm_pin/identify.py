@@ -1,0 +1,395 @@
+r"""Identification of the arm from SPATs with the R-Test (paper Section 3.2, Eq. 3-6).
+
+Unknowns: X0 (r-CS -> MT-CS rotation), the DH errors, the tool vector, and for the ``proposed``
+model the encoder maps of the axes the data can see. Measured sphere position: R-Test zero position
+plus R-Test displacement (Eq. 3); with ``use_rtest=False``, the location's mean displacement for
+every sample (the conventional SPAT). Instead of differencing against a reference sample (Eq. 4, 6)
+the translation between the frames is an unknown too: it removes the reference sample's noise from
+every residual.
+
+SciPy's ``least_squares`` minimises the residuals with the analytic, sparse Jacobian of
+:class:`aacmm_pin.unknowns.Unknowns`; see :mod:`aacmm_pin.identifiability` for the rules on what the
+data cannot determine.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import OptimizeResult, least_squares
+from tqdm.auto import tqdm
+
+from aacmm_pin import identifiability as ident
+from aacmm_pin.arm import Arm, load_arm
+from aacmm_pin.campaign import Campaign
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.kinematics import stylus_positions
+from aacmm_pin.parameters import Parameters
+from aacmm_pin.unknowns import Unknowns
+
+MODELS = ("dh", "proposed")
+DENSE_LIMIT = 4e6
+"""Above this (unknowns x samples) the solver works on the sparse Jacobian (LSMR)."""
+DEFAULT_SIGMA = 2e-6
+"""Assumed R-Test noise (m) for the first, prior-regularised fit."""
+
+
+class IdentificationError(AacmmError):
+    """The campaign cannot be identified (too few locations, no motion, non-finite values)."""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Result of :func:`identify`: the calibrated parameters and how well they are known."""
+
+    parameters: Parameters
+    """Identified parameters (held entries at their start values)."""
+    model: str
+    """``"dh"`` or ``"proposed"``."""
+    use_rtest: bool
+    """Whether each sample's R-Test displacement was used (else each location's mean)."""
+    names: list[str]
+    """Names of the estimated entries, in the order of ``x`` and ``covariance``."""
+    x: np.ndarray
+    """Estimated values, shape (n,), SI."""
+    covariance: np.ndarray
+    """Linearised covariance of ``x``, shape (n, n), SI (sigma from ``sigma``)."""
+    sigma: float
+    """Noise standard deviation per coordinate used for the covariance, m."""
+    fun: np.ndarray
+    """Residuals predicted - measured, shape (N, 3), m."""
+    location: np.ndarray
+    """R-Test location of each residual row, shape (N,)."""
+    success: bool
+    """Whether the solver converged."""
+    status: int
+    """Solver status (scipy's meaning)."""
+    message: str
+    """Solver message, or why the identification failed."""
+    nfev: int
+    """Number of residual evaluations."""
+    unidentifiable: list[str]
+    """Plain-language list of what the data does not determine and how it was handled."""
+    node_identifiable: dict[int, np.ndarray]
+    """Axis -> mask of identified map nodes, shape (n_nodes,)."""
+    runtime_s: float
+    """Wall-clock time of the identification, s."""
+    raw: OptimizeResult | None = field(default=None, repr=False)
+    """The final raw scipy result."""
+    unknowns: Unknowns | None = field(default=None, repr=False)
+    """The final layout (free entries, start values)."""
+    constraints: sp.csr_matrix | None = field(default=None, repr=False)
+    """Rows C over the free arm entries held as ``C @ (x - x_start) = 0`` (gauges, held directions)."""
+    identifiable: np.ndarray | None = field(default=None, repr=False)
+    """Per free arm entry (``unknowns.names``): whether the data determines it."""
+    q: np.ndarray | None = field(default=None, repr=False)
+    """The SPAT readouts used, shape (N, n_axes), rad."""
+
+    def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
+        """Return ``other`` (e.g. the truth) moved into this calibration's gauge and held values.
+
+        See :func:`aacmm_pin.identifiability.equivalent_vector`. Returns the parameters and the RMS
+        change of the predictions on the campaign's postures (m).
+        """
+        assert self.unknowns is not None and self.q is not None
+        full = Unknowns(self.unknowns.arm, self.unknowns.start, self.unknowns.map_axes,
+                        np.ones_like(self.unknowns.free))
+        _, jac = full.jacobian(full.full_vector(self.parameters), self.q)
+        assert self.constraints is not None
+        vec, rms = ident.equivalent_vector(self.unknowns, jac, self.constraints,
+                                           full.full_vector(other))
+        return full.parameters(vec), rms
+
+    @property
+    def std(self) -> dict[str, float]:
+        """Standard uncertainty (k=1) of every estimated entry, SI."""
+        return dict(zip(self.names, np.sqrt(np.clip(np.diag(self.covariance), 0, None))))
+
+    def node_std(self, axis: int) -> np.ndarray:
+        """Standard uncertainty of each node of a map (rad), NaN where not identified."""
+        out = np.full(self.parameters.map(axis).n_nodes, np.nan)
+        std = self.std
+        for k, node in enumerate(np.degrees(self.parameters.map(axis).nodes)):
+            out[k] = std.get(f"map{axis}[{node:g}]", np.nan)
+        return out
+
+    @property
+    def n_determined(self) -> int:
+        """Number of arm parameter directions the data determines (unknowns less held rows)."""
+        n_arm = len(self.unknowns.names) if self.unknowns is not None else len(self.x)
+        n_held = 0 if self.constraints is None else self.constraints.shape[0]
+        return int(n_arm - n_held)
+
+    @property
+    def fit_rms(self) -> float:
+        """RMS of the residual coordinates, m."""
+        return float(np.sqrt(np.mean(self.fun ** 2)))
+
+    def fit_rms_by_location(self) -> dict[int, float]:
+        """RMS of the residual coordinates per R-Test location, m."""
+        return {int(m): float(np.sqrt(np.mean(self.fun[self.location == m] ** 2)))
+                for m in np.unique(self.location)}
+
+    def report(self) -> dict[str, Any]:
+        """Return the ``report.json`` content."""
+        return {
+            "model": self.model, "use_rtest": self.use_rtest, "n_samples": int(len(self.fun)),
+            "n_parameters": self.n_determined, "n_unknowns": int(len(self.x)),
+            "fit_rms_um": self.fit_rms * 1e6,
+            "fit_rms_um_by_location": {str(k): v * 1e6 for k, v in
+                                       self.fit_rms_by_location().items()},
+            "sigma_um": self.sigma * 1e6, "runtime_s": self.runtime_s, "success": self.success,
+            "status": self.status, "message": self.message, "nfev": self.nfev,
+            "unidentifiable": list(self.unidentifiable),
+            "std": {n: float(s) for n, s in self.std.items()},
+        }
+
+
+def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray:
+    """Return the measured sphere centres in the MT-CS (Eq. 3), shape (N, 3), m."""
+    spat = campaign.spat
+    assert spat is not None
+    disp = spat.displacement.copy()
+    if not use_rtest:
+        for m in np.unique(spat.location):
+            sel = spat.location == m
+            disp[sel] = disp[sel].mean(axis=0)
+    return np.array([campaign.locations[int(m)] for m in spat.location]) + disp
+
+
+def _check(campaign: Campaign, arm: Arm) -> None:
+    """Raise IdentificationError for campaigns that cannot be identified."""
+    spat = campaign.spat
+    if spat is None or len(spat.location) == 0:
+        raise IdentificationError("the campaign has no SPAT samples (spat.csv)")
+    if spat.q.shape[1] != arm.n_axes:
+        raise IdentificationError(f"the campaign has {spat.q.shape[1]} axes, the arm "
+                                  f"{arm.n_axes} ({arm.source})")
+    bad = [name for name, arr in (("readouts", spat.q), ("displacements", spat.displacement),
+                                  ("locations", np.array(list(campaign.locations.values()))))
+           if not np.all(np.isfinite(arr))]
+    if bad:
+        raise IdentificationError(f"non-finite values (NaN or inf) in the {', '.join(bad)}")
+    ids = np.unique(spat.location)
+    if ids.size < 2:
+        raise IdentificationError(
+            f"the campaign has one R-Test location ({ids[0]}): SPATs at a single point cannot fix "
+            "the arm's scale or its orientation in the MT-CS; measure at 2 or more locations "
+            "(the paper uses 4)")
+    for m in ids:
+        q = spat.q[spat.location == m]
+        if np.ptp(q, axis=0).max() < 1e-6:
+            raise IdentificationError(
+                f"all {len(q)} postures at location {m} are identical: a SPAT needs the arm moved "
+                "through many postures with the stylus in the nest")
+
+
+def _initial_frame(arm: Arm, start: Parameters, campaign: Campaign) -> Parameters:
+    """Return start parameters with X0 and translation from a Kabsch fit of the location centres."""
+    spat = campaign.spat
+    assert spat is not None
+    ids = np.unique(spat.location)
+    pred = stylus_positions(arm, start, spat.q, frame="r")
+    p_r = np.array([pred[spat.location == m].mean(axis=0) for m in ids])
+    p_mt = np.array([campaign.locations[int(m)] for m in ids])
+    a, b = p_r - p_r.mean(axis=0), p_mt - p_mt.mean(axis=0)
+    if ids.size < 3 or np.linalg.matrix_rank(a, tol=1e-3) < 2:
+        return start.replace(translation=p_mt.mean(axis=0) - p_r.mean(axis=0))
+    u, _, vt = np.linalg.svd(b.T @ a)
+    rot = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt  # maps r-CS to MT-CS
+    # rot = Ry(beta) Rx(alpha) Rz(gamma): row 1 is (ca sg, ca cg, -sa)
+    alpha = np.arctan2(-rot[1, 2], np.hypot(rot[1, 0], rot[1, 1]))
+    gamma = np.arctan2(rot[1, 0], rot[1, 1])
+    beta = np.arctan2(rot[0, 2], rot[2, 2])
+    return start.replace(rotation_abc=[alpha, beta, gamma],
+                         translation=p_mt.mean(axis=0) - rot @ p_r.mean(axis=0))
+
+
+class _Problem:
+    """Residuals (data, constraint and prior rows) and their Jacobian for least_squares.
+
+    The vector is ``[arm unknowns, nest offsets]``: every R-Test location's zero position has an
+    unknown error (3 per location) with the stated prior ``sigma_location``, so the location
+    uncertainty enters the estimate and its covariance (generalised least squares). Constraint rows
+    hold gauges and undetermined directions at the start values: ``C @ (x - x0) = 0``.
+    """
+
+    def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
+                 location: np.ndarray, constraints: sp.csr_matrix, sigma: float,
+                 sigma_location: float, progress: Any = None):
+        self.u, self.q, self.measured, self.progress = unknowns, q, measured, progress
+        ids, index = np.unique(location, return_inverse=True)
+        n = len(q)
+        self.n_arm = int(unknowns.free.sum())
+        self.n_loc = 3 * ids.size
+        # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
+        rows = np.arange(3 * n)
+        cols = (3 * np.repeat(index, 3) + np.tile(np.arange(3), n))
+        self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
+        self.constraints = sp.hstack([constraints, sp.csr_matrix((constraints.shape[0], self.n_loc))],
+                                     format="csr")
+        self.x0 = np.concatenate([unknowns.vector(unknowns.start), np.zeros(self.n_loc)])
+        self.prior = np.full(self.n_loc, sigma / sigma_location)
+        self.prior_idx = np.arange(self.n_arm, self.n_arm + self.n_loc)
+
+    def fun(self, x: np.ndarray) -> np.ndarray:
+        pred = self.u.positions(x[:self.n_arm], self.q).reshape(-1)
+        data = pred - self.measured.reshape(-1) + self.nest @ x[self.n_arm:]
+        if self.progress is not None:
+            self.progress.update(1)
+        return np.concatenate([data, self.constraints @ (x - self.x0),
+                               self.prior * (x[self.prior_idx] - self.x0[self.prior_idx])])
+
+    def jac(self, x: np.ndarray) -> sp.csr_matrix:
+        _, jac = self.u.jacobian(x[:self.n_arm], self.q)
+        prior = sp.csr_matrix((self.prior, (np.arange(self.prior.size), self.prior_idx)),
+                              shape=(self.prior.size, self.x0.size))
+        return sp.csr_matrix(sp.vstack([sp.hstack([jac, self.nest]), self.constraints, prior]))
+
+    def covariance(self, x: np.ndarray, sigma: float, scale: np.ndarray) -> np.ndarray:
+        """Return the linearised covariance of x for data noise ``sigma`` (m).
+
+        Computed in the null space of the constraint rows (exactly held there), with the arm
+        entries scaled by ``scale`` (plausible sizes) for conditioning:
+        ``x - x0 = S N y``, ``cov(y) = (B^T B)^-1``, ``B`` the data (/sigma) and nest-prior
+        (/sigma_location) rows times ``S N``.
+        """
+        _, jac = self.u.jacobian(x[:self.n_arm], self.q)
+        full_scale = np.concatenate([scale, np.full(self.n_loc, 1.0)])
+        cons = self.constraints.toarray() * full_scale[None, :]
+        if cons.shape[0]:
+            _, sv, vt = np.linalg.svd(cons, full_matrices=True)
+            rank = int(np.sum(sv > sv.max() * 1e-10))
+            basis = vt[rank:].T
+        else:
+            basis = np.eye(full_scale.size)
+        data = sp.hstack([jac, self.nest], format="csr") / sigma
+        prior = np.zeros((self.n_loc, full_scale.size))
+        prior[np.arange(self.n_loc), self.prior_idx] = self.prior / sigma
+        b = np.vstack([data @ (full_scale[:, None] * basis), prior @ (full_scale[:, None] * basis)])
+        cov_y = np.linalg.pinv(b.T @ b, rcond=1e-14, hermitian=True)
+        t = full_scale[:, None] * basis
+        return t @ cov_y @ t.T
+
+    def solve(self, x0: np.ndarray, loss: str, f_scale: float, max_nfev: int) -> OptimizeResult:
+        dense = x0.size * self.q.shape[0] < DENSE_LIMIT
+
+        def jac(x: np.ndarray) -> Any:
+            out = self.jac(x)
+            return out.toarray() if dense else out
+
+        return least_squares(self.fun, x0, jac=jac, method="trf",
+                             tr_solver="exact" if dense else "lsmr", x_scale="jac", loss=loss,
+                             f_scale=f_scale, max_nfev=max_nfev, ftol=1e-12, xtol=1e-12,
+                             gtol=1e-12)
+
+
+def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed",
+             use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = 5.0,
+             map_axes: tuple[int, ...] | None = None, loss: str = "linear",
+             f_scale: float | None = None, sigma: float | None = None,
+             sigma_location: float = 3e-6, max_nfev: int = 30,
+             progress: bool = False) -> Calibration:
+    """Identify the arm's parameters from the SPATs of a campaign.
+
+    Args:
+        campaign: campaign with SPAT samples and R-Test zero positions.
+        arm: the arm (default: the embedded default arm).
+        model: ``"dh"`` (X0, DH errors, tool) or ``"proposed"`` (also the encoder maps).
+        use_rtest: use each sample's R-Test displacement (True) or each location's mean (False).
+        start: start values (default: the URDF's nominal values; X0 and translation from a fit of
+            the location centres).
+        step_deg: map node step, deg.
+        map_axes: axes whose maps are estimated (default: all, for ``proposed``).
+        loss: scipy loss, e.g. ``"linear"``, ``"soft_l1"``, ``"huber"`` (robust to outliers).
+        f_scale: residual scale of a robust loss, m (default 3 x sigma).
+        sigma: R-Test noise per coordinate, m; None estimates it from the residuals.
+        sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
+            (paper Section 5: 3 um); each nest's offset is estimated with this prior.
+        max_nfev: most residual evaluations per fit.
+        progress: show a progress bar.
+
+    Returns:
+        The calibration; ``success`` is False (with a message) when the solver did not converge.
+
+    Raises:
+        IdentificationError: for campaigns that cannot be identified.
+        ValueError: for an unknown ``model``.
+    """
+    if model not in MODELS:
+        raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
+    tic = time.perf_counter()
+    arm = arm or load_arm()
+    _check(campaign, arm)
+    spat = campaign.spat
+    assert spat is not None
+    q, measured = spat.q, measured_positions(campaign, use_rtest)
+    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), campaign)
+    axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
+    unknowns = Unknowns.full(arm, start, axes if model == "proposed" else ())
+    unvisited = ident.unvisited_nodes(unknowns, q)
+    unknowns = unknowns.with_fixed(unvisited)
+    x_arm = unknowns.vector(start)
+    _, jac = unknowns.jacobian(x_arm, q)
+    gauges = ident.gauge_axes(unknowns, jac)
+    gauge = ident.gauge_rows(unknowns, gauges)
+    sigma_class = sigma or DEFAULT_SIGMA
+    n = len(q)
+    scale = f_scale or 3 * sigma_class
+    x_loc = np.zeros(3 * np.unique(spat.location).size)
+    nfev, results = 0, []
+    with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
+              disable=not progress, leave=False) as bar:
+        held = -1
+        for _round in range(3):  # observability at the start, then at the solution
+            obs = ident.observability(unknowns, jac, gauge, sigma_class)
+            if obs.hold.shape[0] == held:
+                break
+            held = obs.hold.shape[0]
+            constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
+            problem = _Problem(unknowns, q, measured, spat.location, constraints, sigma_class,
+                               sigma_location, bar)
+            res = problem.solve(np.concatenate([x_arm, x_loc]), loss, scale, max_nfev)
+            results.append(res)
+            nfev += res.nfev
+            x_arm, x_loc = res.x[:problem.n_arm], res.x[problem.n_arm:]
+            _, jac = unknowns.jacobian(x_arm, q)
+
+    data_res = res.fun[:3 * n]
+    sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
+    covariance = problem.covariance(res.x, sig, obs.scale)
+    names = unknowns.names + [f"location{m}_d{c}" for m in np.unique(spat.location) for c in "xyz"]
+    params = unknowns.parameters(x_arm)
+    lines = ident.describe(unknowns, unvisited, obs)
+    if gauges:
+        lines.append("map constants: " + ", ".join(f"A{a}" for a in gauges) + " maps have zero "
+                     "mean over their free nodes; a constant encoder error is indistinguishable "
+                     "from the axis offset (dth), gamma0 (A1), the tool (A7) or DH errors, which "
+                     "carry it")
+    identifiable = np.zeros_like(unvisited)
+    identifiable[np.flatnonzero(unknowns.free)] = obs.identifiable
+    final_u = unknowns
+    node_ok = {a: identifiable[final_u.map_slice(a)].copy() for a in final_u.map_axes}
+    success = all(r.success for r in results)
+    message = res.message if success else f"did not converge: {res.message}"
+    return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
+                       x=res.x, covariance=covariance, sigma=sig,
+                       fun=data_res.reshape(n, 3), location=spat.location.copy(), success=success,
+                       status=int(res.status), message=str(message),
+                       nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,
+                       runtime_s=time.perf_counter() - tic, raw=res, unknowns=final_u,
+                       constraints=constraints, identifiable=obs.identifiable, q=q)
+
+
+def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> float:
+    """Return the given noise, or the residual-based estimate sqrt(SSR / (m - p))."""
+    if given is not None:
+        return float(given)
+    dof = max(data_residuals.size - n_params, 1)
+    return float(np.sqrt(np.sum(data_residuals ** 2) / dof))
+
+

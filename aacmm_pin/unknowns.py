@@ -1,0 +1,123 @@
+"""The unknowns of an identification: layout of the parameter vector, residuals and Jacobian.
+
+Vector layout (paper Eq. 5-6, with the reference-sample differencing replaced by an unknown
+translation): ``[alpha0, beta0, gamma0, mt_x, mt_y, mt_z, <error frames>, tool_x, tool_y, tool_z,
+<free nodes of map 1>, <free nodes of map 2>, ...]``. Any entry can be held fixed at its start value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from aacmm_pin.arm import Arm
+from aacmm_pin.encoder_map import EncoderMap, node_angles
+from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
+from aacmm_pin.parameters import Parameters
+
+BASE_NAMES = ("alpha0", "beta0", "gamma0", "mt_x", "mt_y", "mt_z")
+TOOL_NAMES = ("tool_x", "tool_y", "tool_z")
+
+
+def node_name(axis: int, node_deg: float) -> str:
+    """Return the name of a map node, e.g. ``map3[-175]`` (node angle in degrees)."""
+    return f"map{axis}[{node_deg:g}]"
+
+
+@dataclass(frozen=True)
+class Unknowns:
+    """Which parameters are estimated, and where each sits in the vector."""
+
+    arm: Arm
+    """The arm."""
+    start: Parameters
+    """Values at the start (and of every fixed entry)."""
+    map_axes: tuple[int, ...]
+    """Axes whose maps are estimated (empty for the DH-only model)."""
+    free: np.ndarray
+    """Mask over the full layout: True where the entry is estimated, shape (n_full,)."""
+
+    @classmethod
+    def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...]) -> Unknowns:
+        """Return the layout with every parameter and every node of ``map_axes`` free."""
+        n = 6 + len(arm.error_names) + 3 + sum(start.map(a).n_nodes for a in map_axes)
+        return cls(arm, start, tuple(map_axes), np.ones(n, dtype=bool))
+
+    # ------------------------------------------------------------ names and slices
+    @property
+    def n_dense(self) -> int:
+        """Number of non-map entries in the full layout (X0, translation, DH, tool)."""
+        return 6 + len(self.arm.error_names) + 3
+
+    def map_slice(self, axis: int) -> slice:
+        """Slice of one map's nodes in the full layout."""
+        start = self.n_dense
+        for a in self.map_axes:
+            n = self.start.map(a).n_nodes
+            if a == axis:
+                return slice(start, start + n)
+            start += n
+        raise KeyError(axis)
+
+    @property
+    def full_names(self) -> list[str]:
+        """Names of every entry of the full layout."""
+        names = [*BASE_NAMES, *self.arm.error_names, *TOOL_NAMES]
+        for a in self.map_axes:
+            names += [node_name(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
+        return names
+
+    @property
+    def names(self) -> list[str]:
+        """Names of the free entries, in vector order."""
+        return [n for n, f in zip(self.full_names, self.free) if f]
+
+    def with_fixed(self, fixed: np.ndarray) -> Unknowns:
+        """Return a layout in which the entries of the full-layout mask ``fixed`` are held."""
+        return Unknowns(self.arm, self.start, self.map_axes, self.free & ~fixed)
+
+    # ------------------------------------------------------------ vector <-> parameters
+    def full_vector(self, params: Parameters) -> np.ndarray:
+        """Return every entry of the full layout for these parameters."""
+        parts = [params.rotation_abc, params.translation,
+                 np.array([params.dh[n] for n in self.arm.error_names]), params.tool]
+        parts += [params.map(a).values for a in self.map_axes]
+        return np.concatenate(parts)
+
+    def vector(self, params: Parameters) -> np.ndarray:
+        """Return the free entries for these parameters, shape (n_free,)."""
+        return self.full_vector(params)[self.free]
+
+    def parameters(self, x: np.ndarray) -> Parameters:
+        """Return the parameters with the free entries set from ``x`` (others at start)."""
+        full = self.full_vector(self.start)
+        full[self.free] = x
+        n_err = len(self.arm.error_names)
+        maps = dict(self.start.encoder_maps)
+        for a in self.map_axes:
+            maps[a] = EncoderMap(full[self.map_slice(a)], self.start.step_deg)
+        return self.start.replace(
+            rotation_abc=full[0:3], translation=full[3:6],
+            dh=dict(zip(self.arm.error_names, full[6:6 + n_err])),
+            tool=full[6 + n_err:9 + n_err], encoder_maps=maps)
+
+    # ------------------------------------------------------------ model
+    def positions(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Return predicted MT-CS stylus centres for readouts q (N, n_axes), shape (N, 3), m."""
+        return stylus_positions(self.arm, self.parameters(x), q, frame="mt")
+
+    def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
+        """Return predicted positions (N, 3) and d(positions)/d(free entries), sparse (3N, n_free).
+
+        Rows are sample-major (row 3 i + k is coordinate k of sample i).
+        """
+        params = self.parameters(x)
+        jac = stylus_jacobians(self.arm, params, q, frame="mt")
+        n = q.shape[0]
+        dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool], axis=2)
+        blocks = [sp.csr_matrix(dense.reshape(3 * n, -1))]
+        blocks += [jac.nodes(params, a) for a in self.map_axes]
+        full = sp.hstack(blocks, format="csc")
+        return jac.position, sp.csr_matrix(full[:, np.flatnonzero(self.free)])

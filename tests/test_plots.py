@@ -1,0 +1,209 @@
+"""Tests of aacmm_pin.plots: the PNG figures of the R-Test profile, encoder maps and length errors."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import aacmm_pin.plots
+from aacmm_pin.campaign import Campaign, SpatLog, read_campaign
+from aacmm_pin.plots import (
+    _encoder_map_figure,
+    _rtest_displacement_figure,
+    plot_encoder_maps,
+    plot_length_errors,
+    plot_rtest_displacement,
+)
+from tests.helpers import SAMPLE
+
+N_NODES = 72  # 5 deg step
+
+
+def _spat_campaign() -> Campaign:
+    """Two R-Test locations; location 2 wanders farther (largest |XY| 20 um at its sample 31)."""
+    rng = np.random.default_rng(0)
+    n = 40
+    d = rng.normal(0.0, 2e-6, (2 * n, 3))
+    d[n + 30, :2] = [12e-6, -16e-6]
+    return Campaign(spat=SpatLog(location=np.repeat([1, 2], n), q=rng.normal(size=(2 * n, 7)),
+                                 displacement=d),
+                    locations={1: np.zeros(3), 2: np.ones(3)}, lengthbar=None, bar={})
+
+
+def _maps(axes: list[int]) -> dict[int, np.ndarray]:
+    """Smooth maps of about 10 arcsec amplitude, in rad."""
+    x = np.linspace(-np.pi, np.pi, N_NODES, endpoint=False)
+    return {a: 5e-5 * np.sin(a * x + 0.3) for a in axes}
+
+
+def _results() -> dict[str, dict]:
+    """Validation JSON of three models, two socket pairs, four placements."""
+    rng = np.random.default_rng(1)
+    out = {}
+    for label, scale in (("DH only, R-Test", 6.0), ("proposed, no R-Test", 3.0),
+                         ("proposed, R-Test", 1.5)):
+        e = rng.normal(0.0, scale, (4, 2))
+        out[label] = {"placements": [{"placement": k + 1, "AB_um": e[k, 0], "AC_um": e[k, 1]}
+                                     for k in range(4)],
+                      "rms_um": float(np.sqrt(np.mean(e ** 2))), "max_abs_um": float(abs(e).max())}
+    return out
+
+
+def _assert_png(path: Path) -> None:
+    """Check that ``path`` is a decodable PNG of a sensible size, not blank."""
+    from matplotlib.image import imread
+
+    assert path.is_file() and path.suffix == ".png"
+    img = imread(path)
+    h, w = img.shape[:2]
+    assert 400 <= w <= 3000 and 300 <= h <= 3000, (w, h)
+    ink = np.any(img[..., :3] < 0.95, axis=-1).mean()  # non-white pixels
+    assert ink > 0.03, ink
+
+
+def test_rtest_figure_is_a_png(tmp_path):
+    """The R-Test figure is written as a non-blank PNG and the path is returned."""
+    out = plot_rtest_displacement(_spat_campaign(), tmp_path / "fig5.png", location=1)
+    assert out == tmp_path / "fig5.png"
+    _assert_png(out)
+
+
+def test_rtest_figure_of_the_sample_campaign(tmp_path):
+    """The shared sample campaign (4 locations x 200 samples) plots with the default location."""
+    if not SAMPLE.is_dir():
+        pytest.skip("shared sample campaign not present")
+    _assert_png(plot_rtest_displacement(read_campaign(SAMPLE), str(tmp_path / "sub" / "f.png")))
+
+
+def test_rtest_default_location_is_the_largest_displacement():
+    """location=None draws the location with the largest XY displacement, and annotates it in um."""
+    fig = _rtest_displacement_figure(_spat_campaign())
+    assert fig.get_suptitle().endswith("location #2")
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts == ["max |XY| 20.0 µm\n(sample 31)"]
+
+
+def test_rtest_panels_show_um_and_samples():
+    """The XY panel is dx/dy in um with equal aspect; the other panel is dz vs sample; a colorbar."""
+    fig = _rtest_displacement_figure(_spat_campaign(), location=1)
+    ax_xy, ax_z, bar = fig.axes
+    assert (ax_xy.get_xlabel(), ax_xy.get_ylabel()) == ("dx (µm)", "dy (µm)")
+    assert ax_xy.get_aspect() == 1.0
+    assert (ax_z.get_xlabel(), ax_z.get_ylabel()) == ("sample", "dz (µm)")
+    assert bar.get_ylabel() == "sample"
+
+
+def test_rtest_unknown_location_names_the_argument(tmp_path):
+    """An unknown location raises ValueError naming `location` and listing the valid ones."""
+    with pytest.raises(ValueError, match=r"location: choose one of \[1, 2\]"):
+        plot_rtest_displacement(_spat_campaign(), tmp_path / "x.png", location=7)
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_rtest_without_spat_names_the_argument(tmp_path):
+    """A campaign without SPAT raises ValueError naming `campaign`."""
+    from aacmm_pin.campaign import LengthBarLog
+
+    log = LengthBarLog(placement=[1, 1], socket=["A", "B"], q=np.zeros((2, 7)))
+    campaign = Campaign(spat=None, locations={}, lengthbar=log, bar={("A", "B"): 0.3})
+    with pytest.raises(ValueError, match="campaign"):
+        plot_rtest_displacement(campaign, tmp_path / "x.png")
+
+
+def test_encoder_map_figure_is_a_png(tmp_path):
+    """The map figure with std, identifiability and truth is written as a non-blank PNG."""
+    maps = _maps([1, 2, 3])
+    flags = {a: np.ones(N_NODES, dtype=bool) for a in maps}
+    flags[2][10:14] = False
+    std = {a: np.full(N_NODES, 3e-6) for a in maps}
+    out = plot_encoder_maps(maps, tmp_path / "fig6.png", identifiable=flags, std=std, truth=maps)
+    _assert_png(out)
+
+
+@pytest.mark.parametrize("axes", [[1], [2, 5], [1, 2, 3], [1, 2, 3, 4, 5, 6, 7]])
+def test_encoder_map_figure_has_one_panel_per_axis(axes):
+    """The map figure has exactly one panel per requested axis, titled A{n}-axis, in order."""
+    fig = _encoder_map_figure(_maps(list(range(1, 8))), axes=axes)
+    assert [ax.get_title(loc="left") for ax in fig.axes] == [f"A{a}-axis" for a in axes]
+
+
+def test_encoder_map_default_axes_are_the_sorted_keys():
+    """Without `axes`, the panels are the keys of `maps`, sorted."""
+    fig = _encoder_map_figure(_maps([3, 1, 2]))
+    assert [ax.get_title(loc="left") for ax in fig.axes] == ["A1-axis", "A2-axis", "A3-axis"]
+
+
+def test_encoder_map_note_counts_unidentifiable_nodes():
+    """A panel with non-identifiable nodes says 'n of N nodes not identifiable'; others say nothing."""
+    flags = {1: np.ones(N_NODES, dtype=bool), 2: np.ones(N_NODES, dtype=bool)}
+    flags[2][[0, 5, 40]] = False
+    fig = _encoder_map_figure(_maps([1, 2]), identifiable=flags)
+    notes = [ax.get_title(loc="right") for ax in fig.axes]
+    assert notes == ["", f"3 of {N_NODES} nodes not identifiable"]
+
+
+def test_encoder_map_data_in_display_units():
+    """Node angles are drawn in deg from -180 and errors in arcsec (rad * 180/pi * 3600)."""
+    maps = {1: np.full(N_NODES, 1e-5)}
+    fig = _encoder_map_figure(maps)
+    (dots,) = [ln for ln in fig.axes[0].lines if ln.get_marker() == "o" and len(ln.get_xdata())]
+    assert np.allclose(dots.get_xdata(), np.arange(-180.0, 180.0, 5.0))
+    assert np.allclose(dots.get_ydata(), 1e-5 * 180 / np.pi * 3600)
+    assert "(arcsec)" in fig.get_supylabel()
+
+
+@pytest.mark.parametrize(("kwargs", "name"), [
+    ({"maps": {1: np.zeros(N_NODES - 1)}}, "maps"),
+    ({"maps": {1: np.zeros(N_NODES)}, "step_deg": 10.0}, "maps"),
+    ({"maps": {1: np.zeros(N_NODES)}, "std": {1: np.zeros(3)}}, "std"),
+    ({"maps": {1: np.zeros(N_NODES)}, "truth": {1: np.zeros(3)}}, "truth"),
+    ({"maps": {1: np.zeros(N_NODES)}, "identifiable": {1: np.ones(3, dtype=bool)}}, "identifiable"),
+    ({"maps": {1: np.zeros(N_NODES)}, "step_deg": 7.0}, "step_deg"),
+    ({"maps": {1: np.zeros(N_NODES)}, "axes": [2]}, "axes"),
+    ({"maps": {1: np.zeros(N_NODES)}, "axes": []}, "axes"),
+    ({"maps": {}}, "maps"),
+])
+def test_encoder_map_bad_input_names_the_argument(tmp_path, kwargs, name):
+    """Wrong map lengths for the step, bad steps and unknown axes raise ValueError naming the argument."""
+    with pytest.raises(ValueError, match=rf"^{name}:"):
+        plot_encoder_maps(path=tmp_path / "x.png", **kwargs)
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_length_error_figure_is_a_png(tmp_path):
+    """The length-error figure of three models and two pairs is written as a non-blank PNG."""
+    _assert_png(plot_length_errors(_results(), tmp_path / "fig9.png"))
+
+
+def test_length_error_figure_tolerates_missing_values(tmp_path):
+    """A null error, a missing placement and a missing rms_um still give a figure."""
+    results = _results()
+    model = results["proposed, R-Test"]
+    model["placements"][0]["AC_um"] = None
+    del model["placements"][2]
+    del model["rms_um"]
+    _assert_png(plot_length_errors(results, tmp_path / "fig9.png"))
+
+
+@pytest.mark.parametrize("results", [
+    {},
+    {"proposed": {"rms_um": 1.0}},
+    {"proposed": {"placements": [{"AB_um": 1.0}]}},
+    {"proposed": {"placements": [{"placement": 1}]}},
+])
+def test_length_error_bad_results_name_the_argument(tmp_path, results):
+    """Empty results, a model without placements and rows without pair keys raise ValueError."""
+    with pytest.raises(ValueError, match=r"^results:"):
+        plot_length_errors(results, tmp_path / "x.png")
+
+
+def test_plots_module_does_not_import_matplotlib():
+    """aacmm_pin.plots imports matplotlib only inside functions (or under TYPE_CHECKING)."""
+    tree = ast.parse(Path(aacmm_pin.plots.__file__).read_text(encoding="utf-8"))
+    top = [node for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))]
+    names = [a.name for n in top if isinstance(n, ast.Import) for a in n.names]
+    names += [n.module or "" for n in top if isinstance(n, ast.ImportFrom)]
+    assert names and not [n for n in names if n.split(".")[0] == "matplotlib"]
