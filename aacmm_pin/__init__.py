@@ -19,13 +19,18 @@ from aacmm_pin.errors import (
     FrameNotFound,
     Problem,
 )
+from aacmm_pin.export import write_calibration
+from aacmm_pin.identify import Calibration, IdentificationError, identify, measured_positions
 from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
 from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+from aacmm_pin.validate import ValidationResult, validate
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Calibration", "IdentificationError", "ValidationResult", "identify", "measured_positions",
+    "validate", "write_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",

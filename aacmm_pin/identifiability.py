@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from aacmm_pin.unknowns import Unknowns
+from aacmm_pin.unknowns import BlockJacobian, Unknowns
 
 ARCSEC = np.pi / 180 / 3600
 PLAUSIBLE = {"angle": 3.5e-4, "length": 1e-4, "node": 1e-4, "base_angle": 1e-2,
@@ -60,7 +60,7 @@ def unvisited_nodes(unknowns: Unknowns, q: np.ndarray) -> np.ndarray:
     return mask
 
 
-def gauge_axes(unknowns: Unknowns, jac: sp.csr_matrix) -> list[int]:
+def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
     """Return the map axes whose constant lies in the span of the non-map columns.
 
     Args:
@@ -68,14 +68,14 @@ def gauge_axes(unknowns: Unknowns, jac: sp.csr_matrix) -> list[int]:
         jac: data Jacobian w.r.t. the free entries, shape (3N, n_free).
     """
     full_cols = np.flatnonzero(unknowns.free)
-    dense = jac[:, np.flatnonzero(full_cols < unknowns.n_dense)].toarray()
+    dense = jac.dense
     out = []
     for axis in unknowns.map_axes:
         sl = unknowns.map_slice(axis)
         cols = np.flatnonzero((full_cols >= sl.start) & (full_cols < sl.stop))
         if cols.size == 0:
             continue
-        constant = np.asarray(jac[:, cols].sum(axis=1)).ravel()
+        constant = jac.columns_sum(cols)
         norm = np.linalg.norm(constant)
         beta = np.linalg.lstsq(dense, constant, rcond=None)[0] if norm > 0 else 0.0
         if norm == 0.0 or np.linalg.norm(constant - dense @ beta) / norm < GAUGE_TOL:
@@ -112,7 +112,7 @@ class Observability:
         return sp.csr_matrix(GAUGE_WEIGHT * self.hold / self.scale[None, :])
 
 
-def observability(unknowns: Unknowns, jac: sp.csr_matrix, extra: sp.csr_matrix, sigma: float
+def observability(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, sigma: float
                   ) -> Observability:
     """Find the directions the data does not determine (truncated SVD of the scaled Jacobian).
 
@@ -123,7 +123,7 @@ def observability(unknowns: Unknowns, jac: sp.csr_matrix, extra: sp.csr_matrix, 
         sigma: noise per coordinate, m.
     """
     scale = plausible_sizes(unknowns)[unknowns.free]
-    info = (jac.T @ jac + extra.T @ extra).toarray() * np.outer(scale, scale)
+    info = (jac.normal() + (extra.T @ extra).toarray()) * np.outer(scale, scale)
     eigval, eigvec = np.linalg.eigh(info)
     singular = np.sqrt(np.clip(eigval, 0.0, None))
     held = singular < DETERMINED_K * sigma

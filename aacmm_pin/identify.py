@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import OptimizeResult, least_squares
+from scipy.sparse.linalg import LinearOperator
 from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
@@ -32,8 +33,8 @@ from aacmm_pin.parameters import Parameters
 from aacmm_pin.unknowns import Unknowns
 
 MODELS = ("dh", "proposed")
-DENSE_LIMIT = 4e6
-"""Above this (unknowns x samples) the solver works on the sparse Jacobian (LSMR)."""
+DENSE_LIMIT = 2e7
+"""Above this many Jacobian entries (residuals x unknowns) the solver uses LSMR on an operator."""
 DEFAULT_SIGMA = 2e-6
 """Assumed R-Test noise (m) for the first, prior-regularised fit."""
 
@@ -100,7 +101,7 @@ class Calibration:
                         np.ones_like(self.unknowns.free))
         _, jac = full.jacobian(full.full_vector(self.parameters), self.q)
         assert self.constraints is not None
-        vec, rms = ident.equivalent_vector(self.unknowns, jac, self.constraints,
+        vec, rms = ident.equivalent_vector(self.unknowns, jac.sparse(), self.constraints,
                                            full.full_vector(other))
         return full.parameters(vec), rms
 
@@ -210,80 +211,104 @@ def _initial_frame(arm: Arm, start: Parameters, campaign: Campaign) -> Parameter
 
 
 class _Problem:
-    """Residuals (data, constraint and prior rows) and their Jacobian for least_squares.
+    """The least-squares problem in reduced, preconditioned coordinates.
 
-    The vector is ``[arm unknowns, nest offsets]``: every R-Test location's zero position has an
+    The full vector is ``[arm unknowns, nest offsets]``: every R-Test location's zero position has an
     unknown error (3 per location) with the stated prior ``sigma_location``, so the location
-    uncertainty enters the estimate and its covariance (generalised least squares). Constraint rows
-    hold gauges and undetermined directions at the start values: ``C @ (x - x0) = 0``.
+    uncertainty enters the estimate and its covariance (generalised least squares).
+
+    Constraints ``C (x_arm - x_start) = 0`` (gauges, held directions) are met exactly by moving only
+    in their null space: ``x = x_ref + P z`` with ``P = T R^-1``, T a basis of the null space
+    (scaled by the plausible sizes) and R the Cholesky factor of T^T J^T J T at the reference. The
+    columns of J P are then nearly orthonormal, which makes the dense and the iterative (LSMR) trust
+    region solvers converge in a few steps at any campaign size.
     """
 
     def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
-                 location: np.ndarray, constraints: sp.csr_matrix, sigma: float,
-                 sigma_location: float, progress: Any = None):
+                 location: np.ndarray, constraints: sp.csr_matrix, scale: np.ndarray,
+                 x_ref: np.ndarray, x_lin: np.ndarray, sigma: float, sigma_location: float,
+                 progress: Any = None):
         self.u, self.q, self.measured, self.progress = unknowns, q, measured, progress
         ids, index = np.unique(location, return_inverse=True)
         n = len(q)
         self.n_arm = int(unknowns.free.sum())
         self.n_loc = 3 * ids.size
-        # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
         rows = np.arange(3 * n)
-        cols = (3 * np.repeat(index, 3) + np.tile(np.arange(3), n))
+        cols = 3 * np.repeat(index, 3) + np.tile(np.arange(3), n)
+        # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
         self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
-        self.constraints = sp.hstack([constraints, sp.csr_matrix((constraints.shape[0], self.n_loc))],
-                                     format="csr")
-        self.x0 = np.concatenate([unknowns.vector(unknowns.start), np.zeros(self.n_loc)])
-        self.prior = np.full(self.n_loc, sigma / sigma_location)
-        self.prior_idx = np.arange(self.n_arm, self.n_arm + self.n_loc)
+        self.prior = sigma / sigma_location
+        self.x_ref = x_ref
+        cons = constraints.toarray() * scale[None, :]
+        basis = np.eye(self.n_arm)
+        if cons.shape[0]:
+            _, sv, vt = np.linalg.svd(cons, full_matrices=True)
+            basis = vt[int(np.sum(sv > sv.max() * 1e-10)):].T
+        t = np.zeros((self.n_arm + self.n_loc, basis.shape[1] + self.n_loc))
+        t[:self.n_arm, :basis.shape[1]] = scale[:, None] * basis
+        t[self.n_arm:, basis.shape[1]:] = np.eye(self.n_loc) * sigma_location
+        info = t.T @ self.normal_matrix(x_lin) @ t  # any nearby point preconditions well
+        self.t = t
+        self.p = t @ np.linalg.inv(np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info)
+                                                      * np.eye(len(info))).T)
 
-    def fun(self, x: np.ndarray) -> np.ndarray:
+    def normal_matrix(self, x: np.ndarray) -> np.ndarray:
+        """Return J^T J of the data and prior rows at x, shape (P, P)."""
+        _, jac = self.u.jacobian(x[:self.n_arm], self.q)
+        na = self.n_arm
+        info = np.empty((na + self.n_loc, na + self.n_loc))
+        info[:na, :na] = jac.normal()
+        cross = np.column_stack([jac.rmatmul(self.nest[:, j].toarray().ravel())
+                                 for j in range(self.n_loc)])
+        info[:na, na:] = cross
+        info[na:, :na] = cross.T
+        info[na:, na:] = (self.nest.T @ self.nest).toarray() + self.prior ** 2 * np.eye(self.n_loc)
+        return info
+
+    def x(self, z: np.ndarray) -> np.ndarray:
+        """Return the full vector for reduced coordinates z."""
+        return self.x_ref + self.p @ z
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        x = self.x(z)
         pred = self.u.positions(x[:self.n_arm], self.q).reshape(-1)
         data = pred - self.measured.reshape(-1) + self.nest @ x[self.n_arm:]
         if self.progress is not None:
             self.progress.update(1)
-        return np.concatenate([data, self.constraints @ (x - self.x0),
-                               self.prior * (x[self.prior_idx] - self.x0[self.prior_idx])])
+        return np.concatenate([data, self.prior * x[self.n_arm:]])
 
-    def jac(self, x: np.ndarray) -> sp.csr_matrix:
+    def jac(self, z: np.ndarray, dense: bool) -> Any:
+        x = self.x(z)
         _, jac = self.u.jacobian(x[:self.n_arm], self.q)
-        prior = sp.csr_matrix((self.prior, (np.arange(self.prior.size), self.prior_idx)),
-                              shape=(self.prior.size, self.x0.size))
-        return sp.csr_matrix(sp.vstack([sp.hstack([jac, self.nest]), self.constraints, prior]))
+        na, nest, prior = self.n_arm, self.nest, self.prior
+        p_arm, p_loc = self.p[:na], self.p[na:]
+        if dense:
+            return np.vstack([jac.matmul(p_arm) + nest @ p_loc, prior * p_loc])
+        n_data = nest.shape[0]
 
-    def covariance(self, x: np.ndarray, sigma: float, scale: np.ndarray) -> np.ndarray:
-        """Return the linearised covariance of x for data noise ``sigma`` (m).
+        def matvec(v: np.ndarray) -> np.ndarray:
+            return np.concatenate([jac.matmul(p_arm @ v) + nest @ (p_loc @ v), prior * (p_loc @ v)])
 
-        Computed in the null space of the constraint rows (exactly held there), with the arm
-        entries scaled by ``scale`` (plausible sizes) for conditioning:
-        ``x - x0 = S N y``, ``cov(y) = (B^T B)^-1``, ``B`` the data (/sigma) and nest-prior
-        (/sigma_location) rows times ``S N``.
-        """
-        _, jac = self.u.jacobian(x[:self.n_arm], self.q)
-        full_scale = np.concatenate([scale, np.full(self.n_loc, 1.0)])
-        cons = self.constraints.toarray() * full_scale[None, :]
-        if cons.shape[0]:
-            _, sv, vt = np.linalg.svd(cons, full_matrices=True)
-            rank = int(np.sum(sv > sv.max() * 1e-10))
-            basis = vt[rank:].T
-        else:
-            basis = np.eye(full_scale.size)
-        data = sp.hstack([jac, self.nest], format="csr") / sigma
-        prior = np.zeros((self.n_loc, full_scale.size))
-        prior[np.arange(self.n_loc), self.prior_idx] = self.prior / sigma
-        b = np.vstack([data @ (full_scale[:, None] * basis), prior @ (full_scale[:, None] * basis)])
-        cov_y = np.linalg.pinv(b.T @ b, rcond=1e-14, hermitian=True)
-        t = full_scale[:, None] * basis
-        return t @ cov_y @ t.T
+        def rmatvec(u: np.ndarray) -> np.ndarray:
+            data, rest = u[:n_data], u[n_data:]
+            return p_arm.T @ jac.rmatmul(data) + p_loc.T @ (nest.T @ data + prior * rest)
 
-    def solve(self, x0: np.ndarray, loss: str, f_scale: float, max_nfev: int) -> OptimizeResult:
-        dense = x0.size * self.q.shape[0] < DENSE_LIMIT
+        return LinearOperator(shape=(n_data + self.n_loc, self.p.shape[1]), dtype=float,
+                              matvec=matvec, rmatvec=rmatvec)
 
-        def jac(x: np.ndarray) -> Any:
-            out = self.jac(x)
-            return out.toarray() if dense else out
+    def covariance(self, x: np.ndarray, sigma: float) -> np.ndarray:
+        """Return the linearised covariance of the full vector at x for data noise sigma (m)."""
+        info = self.t.T @ self.normal_matrix(x) @ self.t / sigma ** 2
+        # the nest prior rows were weighted for the solve's sigma; rescale them to this sigma
+        cov_y = np.linalg.pinv(info, rcond=1e-14, hermitian=True)
+        return self.t @ cov_y @ self.t.T
 
-        return least_squares(self.fun, x0, jac=jac, method="trf",
-                             tr_solver="exact" if dense else "lsmr", x_scale="jac", loss=loss,
+    def solve(self, z0: np.ndarray, loss: str, f_scale: float, max_nfev: int,
+              jac: str = "analytic") -> OptimizeResult:
+        dense = jac != "analytic" or z0.size * self.q.shape[0] * 3 < DENSE_LIMIT
+        jac_fun: Any = (lambda z: self.jac(z, dense)) if jac == "analytic" else jac
+        return least_squares(self.fun, z0, jac=jac_fun, method="trf",
+                             tr_solver="exact" if dense else "lsmr", loss=loss,
                              f_scale=f_scale, max_nfev=max_nfev, ftol=1e-12, xtol=1e-12,
                              gtol=1e-12)
 
@@ -292,7 +317,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = 5.0,
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
-             sigma_location: float = 3e-6, max_nfev: int = 30,
+             sigma_location: float = 3e-6, max_nfev: int = 30, jac: str = "analytic",
              progress: bool = False) -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
@@ -311,6 +336,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
             (paper Section 5: 3 um); each nest's offset is estimated with this prior.
         max_nfev: most residual evaluations per fit.
+        jac: ``"analytic"`` (Pinocchio, sparse in the map nodes) or a scipy finite-difference
+            scheme (``"2-point"``, ``"3-point"``) on the same problem, for comparison.
         progress: show a progress bar.
 
     Returns:
@@ -320,6 +347,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         IdentificationError: for campaigns that cannot be identified.
         ValueError: for an unknown ``model``.
     """
+    if jac not in ("analytic", "2-point", "3-point", "cs"):
+        raise ValueError(f"jac: choose 'analytic', '2-point' or '3-point', got {jac!r}")
     if model not in MODELS:
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
     tic = time.perf_counter()
@@ -334,8 +363,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     unvisited = ident.unvisited_nodes(unknowns, q)
     unknowns = unknowns.with_fixed(unvisited)
     x_arm = unknowns.vector(start)
-    _, jac = unknowns.jacobian(x_arm, q)
-    gauges = ident.gauge_axes(unknowns, jac)
+    _, jac_now = unknowns.jacobian(x_arm, q)
+    gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
     sigma_class = sigma or DEFAULT_SIGMA
     n = len(q)
@@ -346,22 +375,26 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
               disable=not progress, leave=False) as bar:
         held = -1
         for _round in range(3):  # observability at the start, then at the solution
-            obs = ident.observability(unknowns, jac, gauge, sigma_class)
+            obs = ident.observability(unknowns, jac_now, gauge, sigma_class)
             if obs.hold.shape[0] == held:
                 break
             held = obs.hold.shape[0]
             constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
-            problem = _Problem(unknowns, q, measured, spat.location, constraints, sigma_class,
-                               sigma_location, bar)
-            res = problem.solve(np.concatenate([x_arm, x_loc]), loss, scale, max_nfev)
+            x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
+            x_now = np.concatenate([x_arm, x_loc])
+            problem = _Problem(unknowns, q, measured, spat.location, constraints, obs.scale,
+                               x_start, x_now, sigma_class, sigma_location, bar)
+            z0 = np.linalg.lstsq(problem.p, x_now - x_start, rcond=None)[0]
+            res = problem.solve(z0, loss, scale, max_nfev, jac)
             results.append(res)
             nfev += res.nfev
-            x_arm, x_loc = res.x[:problem.n_arm], res.x[problem.n_arm:]
-            _, jac = unknowns.jacobian(x_arm, q)
+            x_full = problem.x(res.x)
+            x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
+            _, jac_now = unknowns.jacobian(x_arm, q)
 
     data_res = res.fun[:3 * n]
     sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
-    covariance = problem.covariance(res.x, sig, obs.scale)
+    covariance = problem.covariance(x_full, sig)
     names = unknowns.names + [f"location{m}_d{c}" for m in np.unique(spat.location) for c in "xyz"]
     params = unknowns.parameters(x_arm)
     lines = ident.describe(unknowns, unvisited, obs)
@@ -377,7 +410,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     success = all(r.success for r in results)
     message = res.message if success else f"did not converge: {res.message}"
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
-                       x=res.x, covariance=covariance, sigma=sig,
+                       x=x_full, covariance=covariance, sigma=sig,
                        fun=data_res.reshape(n, 3), location=spat.location.copy(), success=success,
                        status=int(res.status), message=str(message),
                        nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,

@@ -7,7 +7,8 @@ translation): ``[alpha0, beta0, gamma0, mt_x, mt_y, mt_z, <error frames>, tool_x
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -38,6 +39,7 @@ class Unknowns:
     """Axes whose maps are estimated (empty for the DH-only model)."""
     free: np.ndarray
     """Mask over the full layout: True where the entry is estimated, shape (n_full,)."""
+    _cache: Any = field(default=None, init=False, repr=False, compare=False)
 
     @classmethod
     def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...]) -> Unknowns:
@@ -108,16 +110,90 @@ class Unknowns:
         """Return predicted MT-CS stylus centres for readouts q (N, n_axes), shape (N, 3), m."""
         return stylus_positions(self.arm, self.parameters(x), q, frame="mt")
 
-    def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
-        """Return predicted positions (N, 3) and d(positions)/d(free entries), sparse (3N, n_free).
+    def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
+        """Return predicted positions (N, 3) and d(positions)/d(free entries) as blocks.
 
-        Rows are sample-major (row 3 i + k is coordinate k of sample i).
+        Rows are sample-major (row 3 i + k is coordinate k of sample i). The last result is cached.
         """
+        key = (x.tobytes(), q.ctypes.data, q.shape)
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt")
         n = q.shape[0]
         dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool], axis=2)
-        blocks = [sp.csr_matrix(dense.reshape(3 * n, -1))]
-        blocks += [jac.nodes(params, a) for a in self.map_axes]
-        full = sp.hstack(blocks, format="csc")
-        return jac.position, sp.csr_matrix(full[:, np.flatnonzero(self.free)])
+        dense = dense.reshape(3 * n, -1)[:, self.free[:self.n_dense]]
+        # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, built straight in COO
+        free_index = np.cumsum(self.free) - 1 - int(self.free[:self.n_dense].sum())
+        rows, cols, vals = [], [], []
+        for axis in self.map_axes:
+            sl = self.map_slice(axis)
+            lower, upper, frac = params.map(axis).neighbours(q[:, axis - 1])
+            col = jac.angles[:, :, axis - 1]  # (N, 3)
+            for node, weight in ((lower, 1.0 - frac), (upper, frac)):
+                full_col = sl.start + node
+                keep = self.free[full_col] & (weight != 0.0)
+                r = (3 * np.flatnonzero(keep)[:, None] + np.arange(3)).reshape(-1)
+                rows.append(r)
+                cols.append(np.repeat(free_index[full_col[keep]], 3))
+                vals.append((col[keep] * weight[keep, None]).reshape(-1))
+        n_nodes = int(self.free[self.n_dense:].sum())
+        nodes = sp.csc_matrix((np.concatenate(vals) if vals else np.zeros(0),
+                               (np.concatenate(rows) if rows else np.zeros(0, int),
+                                np.concatenate(cols) if cols else np.zeros(0, int))),
+                              shape=(3 * n, n_nodes))
+        out = (jac.position, BlockJacobian(dense, nodes))
+        object.__setattr__(self, "_cache", (key, out))
+        return out
+
+
+@dataclass(frozen=True)
+class BlockJacobian:
+    """Jacobian w.r.t. the free entries, as two blocks (columns in this order).
+
+    A dense block (X0, translation, DH, tool) and a sparse block (map nodes, two entries per sample
+    and axis).
+    """
+
+    dense: np.ndarray
+    """d(positions)/d(non-map entries), shape (3N, n_dense)."""
+    nodes: sp.csc_matrix
+    """d(positions)/d(map nodes), shape (3N, n_nodes)."""
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(3N, n_free)."""
+        return self.dense.shape[0], self.dense.shape[1] + self.nodes.shape[1]
+
+    def sparse(self) -> sp.csr_matrix:
+        """Return the whole Jacobian as one sparse matrix (for small campaigns and tests)."""
+        return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
+
+    def normal(self) -> np.ndarray:
+        """Return J^T J, shape (n_free, n_free), from block products (no dense 3N x n matrix)."""
+        nd = self.dense.shape[1]
+        out = np.empty((self.shape[1], self.shape[1]))
+        out[:nd, :nd] = self.dense.T @ self.dense
+        cross = np.asarray((self.nodes.T @ self.dense))
+        out[nd:, :nd] = cross
+        out[:nd, nd:] = cross.T
+        out[nd:, nd:] = (self.nodes.T @ self.nodes).toarray()
+        return out
+
+    def matmul(self, m: np.ndarray) -> np.ndarray:
+        """Return J @ m for m of shape (n_free,) or (n_free, k)."""
+        nd = self.dense.shape[1]
+        return self.dense @ m[:nd] + self.nodes @ m[nd:]
+
+    def rmatmul(self, u: np.ndarray) -> np.ndarray:
+        """Return J^T @ u for u of shape (3N,)."""
+        return np.concatenate([self.dense.T @ u, self.nodes.T @ u])
+
+    def columns_sum(self, cols: np.ndarray) -> np.ndarray:
+        """Return the sum of the given columns (free-vector indices), shape (3N,)."""
+        nd = self.dense.shape[1]
+        out = self.dense[:, cols[cols < nd]].sum(axis=1)
+        node_cols = cols[cols >= nd] - nd
+        if node_cols.size:
+            out = out + np.asarray(self.nodes[:, node_cols].sum(axis=1)).ravel()
+        return out

@@ -1,0 +1,34 @@
+"""Write one section of BENCHMARKS.md (between markers), keeping the other sections."""
+
+from __future__ import annotations
+
+import platform
+import re
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
+HEAD = ("# Benchmarks\n\nEach section is written by the script it names; rerun it to refresh. "
+        "Ratios compare methods in the same run (the machines are noisy).\n")
+
+
+def machine() -> str:
+    """One line describing this machine."""
+    import os
+
+    return (f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+            f"numpy {np.__version__}")
+
+
+def write_section(name: str, body: str) -> None:
+    """Replace (or append) the section ``name`` of BENCHMARKS.md with ``body``."""
+    text = BENCH.read_text() if BENCH.exists() else HEAD
+    start, end = f"<!-- {name} -->", f"<!-- /{name} -->"
+    block = f"{start}\n{body.rstrip()}\n{end}"
+    if start in text:
+        text = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: block, text, flags=re.S)
+    else:
+        text = text.rstrip() + "\n\n" + block + "\n"
+    BENCH.write_text(text)
+    print(body)
