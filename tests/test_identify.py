@@ -20,7 +20,7 @@ from aacmm_pin.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.validate import validate
 from tests.helpers import SAMPLE
 
-SEEDS = (0, 1, 3)
+SEEDS = (0, 1, 2, 3)
 MODELS = (("dh", True), ("proposed", False), ("proposed", True))
 
 
