@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import copy
 import re
+import threading
 from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
@@ -174,6 +175,10 @@ class Arm:
         self.root_link: str = chain[0].parent
         """Name of the root link (the reference CS, r-CS)."""
 
+    def __reduce__(self) -> tuple:
+        """Pickle as the URDF path and name (reloaded on the other side, e.g. in a worker)."""
+        return (_load_named, (str(self.source), self.name))
+
     # ------------------------------------------------------------------ names
     @property
     def n_axes(self) -> int:
@@ -303,8 +308,7 @@ class IdentificationModel:
             parent = child
         self.model: pin.Model = pin.buildModelFromXML(_to_xml(robot))
         """The Pinocchio model."""
-        self.data: pin.Data = self.model.createData()
-        """Its workspace."""
+        self._local = threading.local()
         self.stylus_frame: int = self.model.getFrameId(arm.stylus_link)
         """Pinocchio frame id of the stylus sphere centre."""
         idx = {name: self.model.joints[self.model.getJointId(name)].idx_q
@@ -318,6 +322,14 @@ class IdentificationModel:
         self.tool_idx: np.ndarray = np.array([idx[n] for n in TOOL_JOINTS])
         """Configuration indices of the tool vector (x, y, z)."""
         assert self.model.nq == self.model.nv == len(idx)
+
+    @property
+    def data(self) -> pin.Data:
+        """The model's workspace, one per thread (Pinocchio's Data is not shared safely)."""
+        data = getattr(self._local, "data", None)
+        if data is None:
+            data = self._local.data = self.model.createData()
+        return data
 
 
 def _to_xml(robot: yourdfpy.Robot) -> str:
@@ -347,3 +359,16 @@ def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
         where = f" (line {lineno}, column {getattr(exc, 'offset', '?')})" if lineno else ""
         raise ArmModelError(path, f"cannot read URDF{where}: {exc}") from exc
     return Arm(urdf, path, str(arm))
+
+
+_LOADED: dict[tuple[str, str], Arm] = {}
+
+
+def _load_named(path: str, name: str) -> Arm:
+    """Load (once per process) the arm of a URDF path and keep the user's name for it."""
+    key = (path, name)
+    if key not in _LOADED:
+        arm = load_arm(path)
+        arm.name = name
+        _LOADED[key] = arm
+    return _LOADED[key]

@@ -7,6 +7,8 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from aacmm_pin.errors import AacmmError
 
 Handler = Callable[[argparse.Namespace], int]
@@ -91,6 +93,48 @@ def _validate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _uncertainty(args: argparse.Namespace) -> int:
+    import json
+
+    from aacmm_pin.arm import load_arm
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.export import write_calibration, write_maps_csv
+    from aacmm_pin.identify import identify
+    from aacmm_pin.plots import plot_encoder_maps
+    from aacmm_pin.uncertainty import monte_carlo, uncertainty_report
+
+    arm = load_arm(args.arm)
+    campaign = read_campaign(args.campaign)
+    cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
+                   progress=sys.stderr.isatty())
+    mc = monte_carlo(cal, campaign, args.trials, sigma_rtest=args.sigma_rtest_um * 1e-6,
+                     sigma_location=args.sigma_location_um * 1e-6, workers=args.workers,
+                     seed=args.seed, progress=sys.stderr.isatty())
+    out = write_calibration(cal, arm, args.out)
+    axes = sorted(cal.node_identifiable)
+    nodes = {a: np.degrees(cal.parameters.map(a).nodes) for a in axes}
+    std = {a: mc.node_std(a, nodes[a]) for a in axes}
+    write_maps_csv(cal, out / "encoder_maps.csv", std=std)
+    (out / "uncertainty.json").write_text(json.dumps(uncertainty_report(cal, mc), indent=2) + "\n")
+    if axes:
+        plot_encoder_maps({a: cal.parameters.map(a).values for a in axes},
+                          out / "fig6_encoder_maps.png", identifiable=cal.node_identifiable,
+                          std=std)
+    ratio = mc.ratio()
+    ratio = ratio[np.isfinite(ratio)]
+    print(f"{mc.trials} Monte Carlo trials ({mc.converged} converged), sigma R-Test "
+          f"{args.sigma_rtest_um} um, sigma location {args.sigma_location_um} um -> {out}")
+    print(f"Monte Carlo / linearised std: median {np.median(ratio):.3f}, "
+          f"{np.mean(np.abs(ratio - 1) <= 0.2):.0%} of {ratio.size} identified values within 20%")
+    if mc.length_std is not None:
+        print(f"length-error std (um), Monte Carlo: {np.round(mc.length_std.ravel() * 1e6, 2)}")
+    disagree = mc.disagreements()
+    if disagree:
+        print(f"differ by more than 20%: {', '.join(disagree[:12])}"
+              f"{' ...' if len(disagree) > 12 else ''}")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from aacmm_pin.demo import run_demo
 
@@ -146,6 +190,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
     p.add_argument("--json", type=Path, default=None, help="also write the errors as JSON")
     p.set_defaults(handler=_validate)
+
+    p = sub.add_parser("uncertainty", help="Monte Carlo uncertainty of every identified value")
+    p.add_argument("campaign", type=Path, help="campaign folder")
+    p.add_argument("--model", choices=("dh", "proposed"), default="proposed")
+    p.add_argument("--no-rtest", action="store_true", help="conventional SPAT (location means)")
+    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
+    p.add_argument("--trials", type=int, default=100, help="Monte Carlo trials (default 100)")
+    p.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
+    p.add_argument("--sigma-rtest-um", type=float, default=2.0, help="R-Test reading sigma, um")
+    p.add_argument("--sigma-location-um", type=float, default=3.0, help="R-Test location sigma, um")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first trial")
+    p.add_argument("--out", type=Path, default=Path("uncertainty"), help="output folder")
+    p.set_defaults(handler=_uncertainty)
 
     p = sub.add_parser("demo", help="the main job: simulate, identify the paper's 3 models, "
                                     "validate, figures")

@@ -14,6 +14,7 @@ data cannot determine.
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -89,6 +90,10 @@ class Calibration:
     """Per free arm entry (``unknowns.names``): whether the data determines it."""
     q: np.ndarray | None = field(default=None, repr=False)
     """The SPAT readouts used, shape (N, n_axes), rad."""
+    problem: Any = field(default=None, repr=False)
+    """The solved least-squares problem (structure and preconditioner), for :func:`refit`."""
+    settings: dict[str, Any] = field(default_factory=dict, repr=False)
+    """Solver settings (loss, f_scale, max_nfev) for :func:`refit`."""
 
     def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
         """Return ``other`` (e.g. the truth) moved into this calibration's gauge and held values.
@@ -265,6 +270,22 @@ class _Problem:
         info[na:, na:] = (self.nest.T @ self.nest).toarray() + self.prior ** 2 * np.eye(self.n_loc)
         return info
 
+    def factor(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (and cache) the reduced QR factors of the Jacobian at z."""
+        if getattr(self, "_factor", None) is None:
+            self._factor = np.linalg.qr(self.jac(z, dense=True))
+        return self._factor
+
+    def detached(self) -> _Problem:
+        """Return a copy without the progress bar (picklable)."""
+        out = copy.copy(self)
+        out.progress = None
+        return out
+
+    def z(self, x: np.ndarray) -> np.ndarray:
+        """Return the reduced coordinates of a full vector in the constraints' null space."""
+        return np.linalg.lstsq(self.p, x - self.x_ref, rcond=None)[0]
+
     def x(self, z: np.ndarray) -> np.ndarray:
         """Return the full vector for reduced coordinates z."""
         return self.x_ref + self.p @ z
@@ -384,7 +405,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             x_now = np.concatenate([x_arm, x_loc])
             problem = _Problem(unknowns, q, measured, spat.location, constraints, obs.scale,
                                x_start, x_now, sigma_class, sigma_location, bar)
-            z0 = np.linalg.lstsq(problem.p, x_now - x_start, rcond=None)[0]
+            z0 = problem.z(x_now)
             res = problem.solve(z0, loss, scale, max_nfev, jac)
             results.append(res)
             nfev += res.nfev
@@ -415,7 +436,9 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                        status=int(res.status), message=str(message),
                        nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,
                        runtime_s=time.perf_counter() - tic, raw=res, unknowns=final_u,
-                       constraints=constraints, identifiable=obs.identifiable, q=q)
+                       constraints=constraints, identifiable=obs.identifiable, q=q,
+                       problem=problem.detached(),
+                       settings={"loss": loss, "f_scale": scale, "max_nfev": max_nfev})
 
 
 def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> float:
@@ -426,3 +449,33 @@ def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> fl
     return float(np.sqrt(np.sum(data_residuals ** 2) / dof))
 
 
+def refit(cal: Calibration, measured: np.ndarray, iterations: int = 10) -> tuple[np.ndarray, bool]:
+    """Re-identify with other measured sphere centres, keeping the calibration's structure.
+
+    The unknowns, gauges, held directions and preconditioner of ``cal`` are kept and the solve
+    starts from its solution: what a Monte Carlo trial needs. Gauss-Newton steps on the nonlinear
+    residual with the Jacobian at the calibration's solution (factored once) until the step is
+    below 1e-12 of the reduced scale; ``least_squares`` takes over where that does not converge
+    (or for a robust loss).
+
+    Args:
+        cal: a calibration from :func:`identify`.
+        measured: measured sphere centres in the MT-CS, shape (N, 3), m (e.g. perturbed).
+        iterations: most Gauss-Newton steps.
+
+    Returns:
+        The full solution vector (arm entries then nest offsets, as ``cal.x``) and whether it
+        converged.
+    """
+    problem = copy.copy(cal.problem)
+    problem.measured = np.asarray(measured, dtype=float)
+    z = problem.z(cal.x)
+    if cal.settings["loss"] == "linear":
+        q_factor, r_factor = cal.problem.factor(z)
+        for _ in range(iterations):
+            step = np.linalg.solve(r_factor, q_factor.T @ problem.fun(z))
+            z = z - step
+            if np.linalg.norm(step) < 1e-12 * max(1.0, float(np.linalg.norm(z))):
+                return problem.x(z), True
+    res = problem.solve(z, cal.settings["loss"], cal.settings["f_scale"], cal.settings["max_nfev"])
+    return problem.x(res.x), bool(res.success)

@@ -283,9 +283,10 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
             socket += [name] * n
             if temp is not None:
                 t_bar.append(temp)
-    lengthbar = LengthBarLog(placement=np.concatenate(placement), socket=np.array(socket),
-                             q=np.radians(np.round(np.degrees(np.concatenate(q_bar)), 9)),
-                             t=None, temp=np.concatenate(t_bar) if thermal else None, lines=None)
+    lengthbar = None if not q_bar else LengthBarLog(
+        placement=np.concatenate(placement), socket=np.array(socket),
+        q=np.radians(np.round(np.degrees(np.concatenate(q_bar)), 9)),
+        t=None, temp=np.concatenate(t_bar) if thermal else None, lines=None)
     effects: dict[str, Any] = {"seed": config.seed, "switched_on": list(config.effects)}
     if "encoder" in config.effects:
         effects["encoder"] = "node tables above"
@@ -303,7 +304,7 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
         effects["backlash_half_rad"] = {str(a): b for a, b in config.backlash.items()}
     truth = truth.replace(extra={"effects": effects})
     campaign = Campaign(spat=spat, locations=measured_locations, lengthbar=lengthbar,
-                        bar=dict(BAR_LENGTHS), source=None)
+                        bar=dict(BAR_LENGTHS) if lengthbar is not None else {}, source=None)
     return Simulation(campaign, truth, np.concatenate(sphere_all), sockets)
 
 

@@ -115,9 +115,10 @@ class Unknowns:
 
         Rows are sample-major (row 3 i + k is coordinate k of sample i). The last result is cached.
         """
-        key = (x.tobytes(), q.ctypes.data, q.shape)
-        if self._cache is not None and self._cache[0] == key:
-            return self._cache[1]
+        key = x.tobytes()
+        cache = self._cache  # read once: other threads may replace it
+        if cache is not None and cache[0] == key and cache[1] is q:
+            return cache[2]
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt")
         n = q.shape[0]
@@ -143,7 +144,7 @@ class Unknowns:
                                 np.concatenate(cols) if cols else np.zeros(0, int))),
                               shape=(3 * n, n_nodes))
         out = (jac.position, BlockJacobian(dense, nodes))
-        object.__setattr__(self, "_cache", (key, out))
+        object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
         return out
 
 

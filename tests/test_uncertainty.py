@@ -1,0 +1,102 @@
+"""Uncertainty: calibrated against simulated truth, Monte Carlo vs linearised, executors, files."""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from aacmm_pin.arm import load_arm
+from aacmm_pin.campaign import write_campaign
+from aacmm_pin.cli import main
+from aacmm_pin.identify import identify
+from aacmm_pin.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.uncertainty import monte_carlo
+
+
+def _coverage_z(seed: int) -> np.ndarray:
+    """z-scores of one small simulated campaign's identifiable values (truth in the fit's gauge)."""
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=seed, samples_per_location=100,
+                                                  bar_placements=0))
+    cal = identify(sim.campaign, arm)
+    equivalent, _ = cal.equivalent(sim.truth)
+    u = cal.unknowns
+    std = np.sqrt(np.diag(cal.covariance))[:len(u.names)]
+    return ((u.vector(cal.parameters) - u.vector(equivalent)) / std)[cal.identifiable]
+
+
+def test_uncertainty_is_calibrated_over_50_campaigns():
+    """Over 50 simulated campaigns, 90-99% of identifiable values have their truth within k=2."""
+    with ProcessPoolExecutor(2) as pool:
+        zs = list(pool.map(_coverage_z, range(100, 150)))
+    z = np.concatenate(zs)
+    inside = np.mean(np.abs(z) <= 2)
+    print(f"k=2 coverage over 50 campaigns: {100 * inside:.2f}% of {z.size} identifiable values")
+    assert 0.90 <= inside <= 0.99
+
+
+@pytest.fixture(scope="module")
+def paper_sized():
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=7, samples_per_location=400))
+    return sim, identify(sim.campaign, arm)
+
+
+def test_monte_carlo_agrees_with_linearised(paper_sized):
+    """On the paper-sized problem MC and linearised std agree within 20% (200 trials: 5% noise)."""
+    sim, cal = paper_sized
+    mc = monte_carlo(cal, sim.campaign, 200, workers=1, seed=1)
+    ratio = mc.ratio()
+    ratio = ratio[np.isfinite(ratio)]
+    print(f"MC/linear std: median {np.median(ratio):.3f}, "
+          f"{100 * np.mean(np.abs(ratio - 1) <= 0.2):.1f}% of {ratio.size} within 20%")
+    assert mc.converged == 200
+    assert abs(np.median(ratio) - 1) < 0.05
+    # the std of 200 trials scatters by 5% (1/sqrt(2 x 199)); 20% is 4 of those
+    assert np.mean(np.abs(ratio - 1) <= 0.2) >= 0.98
+    length = mc.length_std / mc.length_linear_std
+    assert np.all(np.abs(length - 1) <= 0.2), length
+
+
+def test_trials_are_reproducible_through_any_executor(paper_sized):
+    """The same seeds give the same trials in-process, on threads and on processes."""
+    sim, cal = paper_sized
+    serial = monte_carlo(cal, sim.campaign, 6, workers=1, seed=3)
+    with ThreadPoolExecutor(2) as pool:
+        threads = monte_carlo(cal, sim.campaign, 6, executor=pool, seed=3)
+    processes = monte_carlo(cal, sim.campaign, 6, workers=2, seed=3)
+    np.testing.assert_allclose(threads.samples, serial.samples, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(processes.samples, serial.samples, rtol=0, atol=1e-15)
+
+
+def test_trials_run_on_a_local_dask_cluster(paper_sized):
+    """A Dask cluster's executor runs the trials with no change to the code."""
+    distributed = pytest.importorskip("dask.distributed", reason="Dask is an optional extra")
+    sim, cal = paper_sized
+    serial = monte_carlo(cal, sim.campaign, 4, workers=1, seed=5)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        remote = monte_carlo(cal, sim.campaign, 4, executor=client.get_executor(), seed=5)
+    np.testing.assert_allclose(remote.samples, serial.samples, rtol=0, atol=1e-15)
+
+
+def test_uncertainty_cli_writes_json_csv_and_figure(tmp_path):
+    """`aacmm-pin uncertainty` writes uncertainty.json, maps CSV with std_arcsec, and Fig. 6."""
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=2, samples_per_location=120,
+                                                  samples_per_socket=5, bar_placements=2))
+    write_campaign(sim.campaign, tmp_path / "c")
+    assert main(["uncertainty", str(tmp_path / "c"), "--trials", "8", "--workers", "1",
+                 "--out", str(tmp_path / "u")]) == 0
+    report = json.loads((tmp_path / "u" / "uncertainty.json").read_text())
+    assert report["trials"] == 8 and "dx21" in report["parameters"]
+    assert {"std_mc", "std_linear"} <= set(report["parameters"]["dx21"])
+    assert len(report["maps"]["3"]["std_mc_arcsec"]) == len(report["maps"]["3"]["node_deg"])
+    assert len(report["length_errors_std_um"]["mc"]) == 2
+    lines = (tmp_path / "u" / "encoder_maps.csv").read_text().splitlines()
+    assert lines[0].endswith("std_arcsec") and lines[1].split(",")[-1] != ""
+    assert (tmp_path / "u" / "fig6_encoder_maps.png").stat().st_size > 20_000
