@@ -135,6 +135,45 @@ def _uncertainty(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plan(args: argparse.Namespace) -> int:
+    import json
+
+    from aacmm_pin.arm import load_arm
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.identify import identify
+    from aacmm_pin.plan import plan
+
+    arm = load_arm(args.arm)
+    campaign = read_campaign(args.campaign)
+    cal = identify(campaign, arm, model=args.model, progress=sys.stderr.isatty())
+    centre = np.mean(list(campaign.locations.values()), axis=0)
+    steps = np.linspace(-args.spacing_mm, args.spacing_mm, args.grid) * 1e-3 if args.grid > 1 \
+        else np.zeros(1)
+    heights = [float(h) * 1e-3 for h in args.heights_mm.split(",")]
+    grid = np.array([centre + [dx, dy, dz] for dz in heights for dx in steps for dy in steps])
+    result = plan(cal, campaign, grid=grid, n_postures=args.postures, seed=args.seed)
+    data = result.to_dict()
+    arcsec = 180 / np.pi * 3600
+    print(f"worst axis: A{result.worst_axis}, map uncertainty (RMS node std, k=1) "
+          + ", ".join(f"A{a} {v * arcsec:.1f}" for a, v in result.map_std.items()) + " arcsec")
+    for axis, ranges in result.worst_ranges.items():
+        text = "; ".join(f"{lo:g}..{hi:g} deg ({s * arcsec:.1f} arcsec)" for lo, hi, s in ranges)
+        print(f"  A{axis} worst ranges: {text or 'none'}")
+    if result.length_std is not None:
+        print(f"length-error uncertainty now: {result.length_std * 1e6:.2f} um RMS")
+    print(f"{'rank':>4}  {'nest x, y, z (mm, MT-CS)':>28}  {'family':<28} "
+          f"{'worst axis after':>17} {'reduction':>9} {'length std after':>16}")
+    for c in data["candidates"][:args.top]:
+        x, y, z = c["location_mt_mm"]
+        length = "" if c["length_std_after_um"] is None else f"{c['length_std_after_um']:.2f} um"
+        print(f"{c['rank']:>4}  {x:>8.1f} {y:>8.1f} {z:>9.1f}  {c['family']:<28} "
+              f"{c['worst_axis_std_after_arcsec']:>12.2f} arcsec {c['reduction_percent']:>8.1f}% "
+              f"{length:>16}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(data, indent=2) + "\n")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from aacmm_pin.demo import run_demo
 
@@ -204,11 +243,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("uncertainty"), help="output folder")
     p.set_defaults(handler=_uncertainty)
 
+    p = sub.add_parser("plan", help="where to measure next: rank candidate SPATs")
+    p.add_argument("campaign", type=Path, help="campaign folder")
+    p.add_argument("--model", choices=("proposed",), default="proposed")
+    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
+    p.add_argument("--grid", type=int, default=3, help="candidate nests per side (default 3)")
+    p.add_argument("--spacing-mm", type=float, default=260.0,
+                   help="half width of the candidate grid around the nests' centre (default 260)")
+    p.add_argument("--heights-mm", default="0,250", help="candidate heights above the nests")
+    p.add_argument("--postures", type=int, default=40, help="postures per candidate SPAT")
+    p.add_argument("--top", type=int, default=10, help="candidates to print")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", type=Path, default=None, help="also write the plan as JSON")
+    p.set_defaults(handler=_plan)
+
     p = sub.add_parser("demo", help="the main job: simulate, identify the paper's 3 models, "
                                     "validate, figures")
     p.add_argument("--out", type=Path, default=Path("aacmm-pin-demo"), help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated campaign")
     p.set_defaults(handler=_demo)
+
+    from aacmm_pin.acquire.cli import add_parsers as add_acquisition
+
+    add_acquisition(sub)
     return parser
 
 

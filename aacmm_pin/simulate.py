@@ -137,17 +137,19 @@ class TrueArm:
         return p_r @ self.truth.rotation().T + self.truth.translation
 
     def solve_ik(self, targets: np.ndarray, rng: np.random.Generator, temp: np.ndarray | None,
-                 iterations: int = 25) -> np.ndarray:
+                 iterations: int = 25, starts: np.ndarray | None = None) -> np.ndarray:
         """Return readouts (N, n_axes) putting the true stylus on each target (N, 3) in the r-CS.
 
-        Random starts within the joint limits, damped Newton steps projected on the limits,
-        restarts for the samples that do not reach the target to 1e-12 m.
+        Random starts within the joint limits (or within ``starts``, shape (n_axes, 2), rad, to
+        favour a posture family), damped Newton steps projected on the limits, restarts for the
+        samples that do not reach the target to 1e-12 m.
         """
         lim = self.arm.joint_limits
+        box = lim if starts is None else np.clip(starts, lim[:, :1], lim[:, 1:])
         q = np.empty((targets.shape[0], self.arm.n_axes))
         todo = np.arange(targets.shape[0])
         for _attempt in range(100):
-            qs = rng.uniform(lim[:, 0], lim[:, 1], size=(todo.size, self.arm.n_axes))
+            qs = rng.uniform(box[:, 0], box[:, 1], size=(todo.size, self.arm.n_axes))
             active = np.arange(todo.size)
             for _ in range(iterations):
                 sel = todo[active]
@@ -230,13 +232,34 @@ class Simulation:
     """True socket positions in the r-CS: placement -> socket -> (3,), m."""
 
 
+def simulate_spat(true_arm: TrueArm, p0: np.ndarray, n: int, rng: np.random.Generator,
+                  temp: np.ndarray | None = None, starts: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Simulate one SPAT of n samples at the R-Test nest whose true zero position is p0 (MT-CS).
+
+    Returns:
+        ``(q, sphere, displacement)``: readouts (n, n_axes) rad as written to file, true sphere
+        centres (n, 3) m in the MT-CS, measured R-Test displacements (n, 3) m (with noise).
+    """
+    config, truth = true_arm.config, true_arm.truth
+    disp = np.zeros((n, 3))
+    if "rtest" in config.effects:  # sphere pushed in its seat, mostly sideways
+        direction = rng.normal(size=(n, 3)) * [1.0, 1.0, 0.3]
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        disp = config.rtest_max * rng.uniform(0, 1, (n, 1)) ** 0.5 * direction
+    target_r = (p0 + disp - truth.translation) @ truth.rotation()
+    q = true_arm.solve_ik(target_r, rng, temp, starts=starts)
+    q = np.radians(np.round(np.degrees(q), 9))  # as written to file: truth follows the file
+    sphere = true_arm.positions(q, temp, frame="mt")
+    return q, sphere, sphere - p0 + rng.normal(0.0, config.sigma_rtest, (n, 3))
+
+
 def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simulation:
     """Simulate a SPAT + length-bar campaign on a virtual version of ``arm``."""
     config = config or SimulationConfig()
     rng = np.random.default_rng(config.seed)
     truth = random_truth(arm, config, rng)
     true_arm = TrueArm(arm, truth, config)
-    rot = truth.rotation()
     thermal = "thermal" in config.effects
 
     def temps(n: int) -> np.ndarray | None:
@@ -247,21 +270,12 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
     loc_col, q_all, disp_all, sphere_all = [], [], [], []
     temp_all: list[np.ndarray] = []
     for m, p0 in locations_true.items():
-        n = config.samples_per_location
-        disp = np.zeros((n, 3))
-        if "rtest" in config.effects:  # sphere pushed in its seat, mostly sideways
-            direction = rng.normal(size=(n, 3)) * [1.0, 1.0, 0.3]
-            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-            disp = config.rtest_max * rng.uniform(0, 1, (n, 1)) ** 0.5 * direction
-        temp = temps(n)
-        target_r = (p0 + disp - truth.translation) @ rot
-        q = true_arm.solve_ik(target_r, rng, temp)
-        q = np.radians(np.round(np.degrees(q), 9))  # as written to file: truth follows the file
-        sphere = true_arm.positions(q, temp, frame="mt")
-        loc_col.append(np.full(n, m))
+        temp = temps(config.samples_per_location)
+        q, sphere, disp = simulate_spat(true_arm, p0, config.samples_per_location, rng, temp)
+        loc_col.append(np.full(len(q), m))
         q_all.append(q)
         sphere_all.append(sphere)
-        disp_all.append(sphere - p0 + rng.normal(0.0, config.sigma_rtest, (n, 3)))
+        disp_all.append(disp)
         if temp is not None:
             temp_all.append(temp)
     n_spat = sum(len(c) for c in loc_col)

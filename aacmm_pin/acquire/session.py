@@ -1,0 +1,362 @@
+"""One acquisition run: read the ports, pair by time, write spat.csv rows, report the faults.
+
+:func:`acquire` opens the arm's port and the gauge ports (one :class:`PortReader` thread each),
+pairs every arm sample with the gauge readings nearest in time (:class:`Pairer`), turns the three
+readings into the sphere displacement with the nest's sensor directions (:class:`Nest`) and appends
+each row to ``spat.csv`` at once, flushed (:class:`SpatWriter`). A status line (rows, rate, last
+readouts and displacement, displacement range, faults) goes to ``status`` while it runs; at the end
+the fault counts are printed and written to a small JSON summary.
+
+The run stops when ``seconds`` have passed or ``stop`` is set (Ctrl-C, SIGTERM: status 0), or when
+it cannot go on (status 1): the arm's port or a gauge channel gone for ``give_up`` seconds (port
+lost and not back, or silent). In every case each good row is already on disk.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import queue
+import shutil
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from aacmm_pin.acquire.faults import FAULT_KINDS, AcquisitionError, PortCounts
+from aacmm_pin.acquire.nest import Nest
+from aacmm_pin.acquire.pairing import Pairer
+from aacmm_pin.acquire.ports import PortConfig, PortReader, arm_port, gauge_port, open_port
+from aacmm_pin.acquire.protocols import COUNTER_MODULUS, HEIDENHAIN_REQUEST, GaugeSpec
+from aacmm_pin.acquire.writer import SpatWriter
+
+
+@dataclass(frozen=True)
+class AcquisitionConfig:
+    """What to record and how; SI units (m, s)."""
+
+    campaign: Path
+    """Campaign folder: spat.csv is appended to, locations.csv gets ``zero``."""
+    location: int
+    """R-Test location (nest) being recorded, >= 1."""
+    arm: str
+    """Arm port: device path or pyserial URL."""
+    gauges: tuple[GaugeSpec, ...]
+    """Gauge ports; together they must carry channels 1, 2 and 3."""
+    zero: np.ndarray | None = None
+    """Nest zero position in the MT-CS, shape (3,), m; None leaves locations.csv alone."""
+    nest: Nest = field(default_factory=Nest)
+    """Sensor directions (default orthogonal)."""
+    arm_format: str = "nmea"
+    """Arm line format, ``nmea`` or ``csv``."""
+    n_axes: int = 7
+    """Readouts per arm line."""
+    baudrate: int = 115200
+    """Baud rate of every port."""
+    seconds: float | None = None
+    """Length of the run, s; None: until stopped."""
+    decimate: int = 1
+    """Write every n-th pair only."""
+    max_skew: float = 0.01
+    """Largest time difference between an arm sample and a gauge reading paired with it, s."""
+    timeout: float = 0.5
+    """Silence of a port counted as a timeout, s."""
+    give_up: float = 5.0
+    """A port gone (lost, silent) this long stops the run, s."""
+    gauge_range: float = 1e-3
+    """Gauge readings beyond +- this are out-of-range faults, m."""
+    heidenhain_request: bytes = HEIDENHAIN_REQUEST
+    """Request byte(s) of the heidenhain gauges."""
+    mitutoyo_request: bytes | None = None
+    """Request bytes of the mitutoyo ports, or None if they stream."""
+    poll_interval: float = 0.0
+    """Least time between two requests to a polled gauge, s."""
+    fsync_interval: float = 1.0
+    """Seconds between fsyncs of spat.csv."""
+    status_interval: float = 0.5
+    """Seconds between status lines."""
+    summary: Path | None = None
+    """JSON summary file (default ``campaign/acquire-location<M>.json``)."""
+
+    def __post_init__(self) -> None:
+        channels = sorted(g.channel for g in self.gauges if g.channel is not None)
+        streams = [g for g in self.gauges if g.channel is None]
+        if len(set(channels)) != len(channels) or (not streams and channels != [1, 2, 3]):
+            raise ValueError(f"gauges: channels 1, 2 and 3 are needed, once each; got "
+                             f"{', '.join(str(g) for g in self.gauges) or 'none'}")
+        if self.decimate < 1 or self.max_skew <= 0 or self.timeout <= 0 or self.give_up <= 0:
+            raise ValueError("decimate >= 1, max_skew, timeout and give_up > 0 expected")
+        object.__setattr__(self, "campaign", Path(self.campaign))
+        if self.zero is not None:
+            object.__setattr__(self, "zero", np.asarray(self.zero, dtype=float).reshape(3))
+
+    @property
+    def summary_path(self) -> Path:
+        """Where the JSON summary goes."""
+        return self.summary or self.campaign / f"acquire-location{self.location}.json"
+
+
+@dataclass
+class AcquisitionSummary:
+    """What a run recorded and what went wrong; written as JSON (mm, um, s)."""
+
+    config: AcquisitionConfig
+    """The run's configuration."""
+    rows_written: int = 0
+    """Rows written to spat.csv by this run."""
+    rows_before: int = 0
+    """Data rows spat.csv held before the run."""
+    duration_s: float = 0.0
+    """Length of the run, s."""
+    stop_reason: str = ""
+    """Why the run ended."""
+    status: int = 0
+    """Exit status: 0 stopped as asked, 1 stopped because a port was gone."""
+    ports: dict[str, PortCounts] = field(default_factory=dict)
+    """Port name -> its counts."""
+    port_urls: dict[str, str] = field(default_factory=dict)
+    """Port name -> device path or URL."""
+    unpaired: int = 0
+    """Arm samples without a gauge reading within max_skew on some channel (not written)."""
+    missed_samples: int = 0
+    """Arm samples missing from the counter sequence (lost in transit or dropped as faults)."""
+    d_min: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
+    """Smallest displacement per axis over the rows written, m."""
+    d_max: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
+    """Largest displacement per axis over the rows written, m."""
+    last_q: list[float] = field(default_factory=list)
+    """Last readouts written, rad."""
+    last_d: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Last displacement written, m."""
+    locations_message: str = ""
+    """What happened to locations.csv."""
+    repaired_bytes: int = 0
+    """Bytes of an incomplete last line of spat.csv removed before writing."""
+
+    @property
+    def rate_hz(self) -> float:
+        """Rows written per second over the run."""
+        return self.rows_written / self.duration_s if self.duration_s > 0 else 0.0
+
+    @property
+    def faults(self) -> dict[str, int]:
+        """Fault kind -> count over every port."""
+        return {k: sum(getattr(c, k) for c in self.ports.values()) for k in FAULT_KINDS}
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form (mm, um, s)."""
+        cfg = self.config
+        span = np.isfinite(self.d_min)
+        return {
+            "campaign": str(cfg.campaign), "location": cfg.location,
+            "spat_csv": str(cfg.campaign / "spat.csv"),
+            "rows_written": self.rows_written, "rows_before": self.rows_before,
+            "duration_s": round(self.duration_s, 3), "rate_hz": round(self.rate_hz, 1),
+            "stop_reason": self.stop_reason, "status": self.status,
+            "faults": self.faults, "unpaired": self.unpaired,
+            "missed_samples": self.missed_samples,
+            "ports": {name: {"port": self.port_urls.get(name, ""), **c.to_dict()}
+                      for name, c in self.ports.items()},
+            "displacement_range_um": {axis: ([lo * 1e6, hi * 1e6] if ok else None) for axis, lo, hi, ok
+                                      in zip("xyz", self.d_min, self.d_max, span)},
+            "locations": self.locations_message, "repaired_bytes": self.repaired_bytes,
+        }
+
+    def status_line(self, rate: float) -> str:
+        """Return the one-line live status (rows, rate, last values, range, faults)."""
+        q = " ".join(f"{math.degrees(v):.3f}" for v in self.last_q) or "-"
+        d = " ".join(f"{v * 1e6:+.1f}" for v in self.last_d)
+        span = ("range " + " ".join(f"{a} {lo * 1e6:+.1f}..{hi * 1e6:+.1f}" for a, lo, hi in
+                                    zip("xyz", self.d_min, self.d_max)) if self.rows_written
+                else "range -")
+        faults = {k: v for k, v in self.faults.items() if v}
+        text = ", ".join(f"{k} {v}" for k, v in faults.items()) or "none"
+        return (f"loc {self.config.location} | {self.rows_written} rows {rate:.0f} Hz | q {q} deg | "
+                f"d {d} um | {span} um | unpaired {self.unpaired} | faults {text}")
+
+    def report(self) -> str:
+        """Return the end-of-run report: rows, reason, fault table, locations.csv, summary file."""
+        cfg = self.config
+        lines = [f"acquire: location {cfg.location}: {self.rows_written} rows appended to "
+                 f"{cfg.campaign / 'spat.csv'} in {self.duration_s:.1f} s ({self.rate_hz:.0f} Hz); "
+                 f"stopped: {self.stop_reason}"]
+        kinds = ("lines", *FAULT_KINDS, "reconnects")
+        width = max([len(n) + len(self.port_urls.get(n, "")) + 1 for n in self.ports] + [4])
+        lines.append("  " + "port".ljust(width) + "".join(f"{k:>13}" for k in kinds))
+        for name, c in self.ports.items():
+            where = f"{name} {self.port_urls.get(name, '')}"
+            lines.append("  " + where.ljust(width) + "".join(f"{getattr(c, k):>13}" for k in kinds))
+        lines.append(f"  unpaired arm samples (not written): {self.unpaired}; "
+                     f"missed arm samples (counter gaps): {self.missed_samples}")
+        if self.repaired_bytes:
+            lines.append(f"  removed an incomplete last line ({self.repaired_bytes} bytes) of "
+                         "spat.csv left by an interrupted run")
+        lines.append(f"  {self.locations_message}")
+        lines.append(f"  summary: {cfg.summary_path}")
+        return "\n".join(lines)
+
+
+def _port_configs(cfg: AcquisitionConfig) -> list[PortConfig]:
+    """Return the arm's port configuration, then the gauges'."""
+    common: dict[str, Any] = {"baudrate": cfg.baudrate, "timeout": cfg.timeout,
+                              "give_up": cfg.give_up}
+    ports = [arm_port(cfg.arm, cfg.n_axes, cfg.arm_format, **common)]
+    for spec in cfg.gauges:
+        request = cfg.heidenhain_request if spec.fmt == "heidenhain" else cfg.mitutoyo_request
+        name = spec.fmt if spec.channel is None else f"{spec.fmt}:{spec.channel}"
+        ports.append(gauge_port(name, spec.port, spec.fmt, spec.channel, cfg.gauge_range, request,
+                                poll_interval=cfg.poll_interval, **common))
+    if len({p.name for p in ports}) != len(ports):
+        raise ValueError("gauges: two ports with the same name; give each port once")
+    return ports
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write JSON through a temporary file and an atomic rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
+            status: TextIO | None = None) -> AcquisitionSummary:
+    """Record one location's SPAT into the campaign folder; see the module docstring.
+
+    Args:
+        config: ports, location, nest and limits.
+        stop: set it to end the run (e.g. from a signal handler); None: only ``seconds`` or a
+            gone port end it.
+        status: stream of the live status line and the final report (e.g. ``sys.stderr``);
+            None prints nothing.
+
+    Returns:
+        The summary (also written as JSON to ``config.summary_path``).
+
+    Raises:
+        AcquisitionError: if a port cannot be opened or the campaign files conflict (nothing is
+            written then).
+    """
+    cfg = config
+    stop = stop or threading.Event()
+    writer = SpatWriter(cfg.campaign, cfg.location, cfg.n_axes, cfg.zero, cfg.fsync_interval)
+    summary = AcquisitionSummary(cfg, rows_before=writer.rows_before,
+                                 locations_message=writer.locations_message,
+                                 repaired_bytes=writer.repaired_bytes)
+    configs = _port_configs(cfg)
+    events: queue.Queue = queue.Queue()
+    halt = threading.Event()
+    opened: list[Any] = []
+    try:
+        for pc in configs:
+            opened.append(open_port(pc.url, pc.baudrate))
+    except AcquisitionError:
+        for port in opened:
+            port.close()
+        raise
+    readers = [PortReader(pc, events, halt, port) for pc, port in zip(configs, opened)]
+    for pc in configs:
+        summary.ports[pc.name] = PortCounts()
+        summary.port_urls[pc.name] = pc.url
+    tty = bool(status is not None and getattr(status, "isatty", lambda: False)())
+    width = shutil.get_terminal_size().columns - 1
+    pairer = Pairer((1, 2, 3), cfg.max_skew)
+    t0, wall0 = time.monotonic(), time.time()
+    last_status, rows_at_status, rate = t0, 0, 0.0
+    last_counter: int | None = None
+    n_pairs = 0
+
+    def handle(event: tuple) -> str | None:
+        nonlocal last_counter
+        what, name = event[0], event[1]
+        counts = summary.ports[name]
+        if what == "data":
+            counts.lines += len(event[3])
+            if event[2] == "arm":
+                for t, (counter, q) in event[3]:
+                    if counter is not None and last_counter is not None:
+                        summary.missed_samples += (counter - last_counter - 1) % COUNTER_MODULUS
+                    last_counter = counter if counter is not None else last_counter
+                    pairer.add_arm(t, q)
+            else:
+                for t, (channel, value) in event[3]:
+                    pairer.add_gauge(channel, t, value)
+        elif what == "fault":
+            counts.add(event[2])
+        elif what == "reconnect":
+            counts.reconnects += 1
+        elif what == "gone":
+            return f"{name} port gone: {event[3]}"
+        return None
+
+    def write(pairs: list) -> None:
+        nonlocal n_pairs
+        for pair in pairs:
+            n_pairs += 1
+            if (n_pairs - 1) % cfg.decimate:
+                continue
+            d = cfg.nest.displacement(np.array(pair.readings))
+            writer.write(wall0 + (pair.t - t0), pair.q, d)
+            summary.rows_written += 1
+            summary.last_q, summary.last_d = pair.q, d
+            np.minimum(summary.d_min, d, out=summary.d_min)
+            np.maximum(summary.d_max, d, out=summary.d_max)
+
+    reason = None
+    for reader in readers:
+        reader.start()
+    try:
+        while reason is None:
+            try:
+                items = [events.get(timeout=0.01)]
+                while True:
+                    items.append(events.get_nowait())
+            except queue.Empty:
+                pass
+            for item in items:
+                if item is not None:
+                    gone = handle(item)
+                    reason = reason or gone
+            now = time.monotonic()
+            write(pairer.pop(now))
+            summary.unpaired = pairer.unpaired
+            summary.duration_s = now - t0
+            if reason is not None:
+                summary.status = 1
+            elif stop.is_set():
+                reason = "stopped (signal or request)"
+            elif cfg.seconds is not None and now - t0 >= cfg.seconds:
+                reason = f"time up ({cfg.seconds:g} s)"
+            if now - last_status >= cfg.status_interval:
+                rate = (summary.rows_written - rows_at_status) / (now - last_status)
+                last_status, rows_at_status = now, summary.rows_written
+                if status is not None:
+                    line = summary.status_line(rate)
+                    status.write(f"\r{line[:width]}\x1b[K" if tty else line + "\n")
+                    status.flush()
+                _write_json(cfg.summary_path, summary.to_dict() | {"running": True})
+    finally:
+        halt.set()
+        for reader in readers:
+            reader.join(timeout=1.0)
+        try:
+            while True:
+                item = events.get_nowait()
+                if item[0] != "gone":
+                    handle(item)
+        except queue.Empty:
+            pass
+        write(pairer.pop())
+        writer.close()
+        summary.unpaired = pairer.unpaired
+        summary.duration_s = time.monotonic() - t0
+        summary.stop_reason = reason or "interrupted"
+        _write_json(cfg.summary_path, summary.to_dict())
+        if status is not None:
+            status.write(("\n" if tty else "") + summary.report() + "\n")
+            status.flush()
+    return summary
