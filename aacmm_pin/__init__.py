@@ -23,13 +23,16 @@ from aacmm_pin.export import write_calibration
 from aacmm_pin.identify import Calibration, IdentificationError, identify, measured_positions
 from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
+from aacmm_pin.plan import Plan, plan
 from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
 from aacmm_pin.validate import ValidationResult, validate
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "Calibration", "IdentificationError", "ValidationResult", "identify", "measured_positions",
+    "Calibration", "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
+    "identify", "measured_positions", "monte_carlo", "plan",
     "validate", "write_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",

@@ -75,9 +75,33 @@ class MonteCarloResult:
 
 
 def _trial_batch(cal: Calibration, base: np.ndarray, location: np.ndarray, use_rtest: bool,
-                 sigma_rtest: float, sigma_location: float, seeds: list[int]
-                 ) -> tuple[np.ndarray, int]:
-    """Run trials with these seeds; return their solutions (k, n) and how many converged."""
+                 sigma_rtest: float, sigma_location: float, seeds: list[int],
+                 campaign: Campaign | None = None) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """Run trials with these seeds.
+
+    Returns their solutions (k, n), how many converged, and their length errors
+    (k, n_placements, n_pairs) on the campaign's bar (None without one).
+
+    BLAS runs single-threaded here: a trial's small products gain nothing from threads, and
+    spinning BLAS threads of several workers on few cores slow everything down many times.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        x, ok = _trials(cal, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
+        lengths = None
+        if campaign is not None and campaign.lengthbar is not None and campaign.bar:
+            u = cal.unknowns
+            assert u is not None
+            n_arm = len(u.names)
+            lengths = np.array([validate(u.arm, u.parameters(xi[:n_arm]), campaign).errors
+                                for xi in x])
+        return x, ok, lengths
+
+
+def _trials(cal: Calibration, base: np.ndarray, location: np.ndarray, use_rtest: bool,
+            sigma_rtest: float, sigma_location: float, seeds: list[int]
+            ) -> tuple[np.ndarray, int]:
     out, ok = [], 0
     ids, index = np.unique(location, return_inverse=True)
     for seed in seeds:
@@ -155,20 +179,30 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
         base = measured_positions(campaign, False)
     workers = workers or os.cpu_count() or 1
     seeds = [seed + i for i in range(trials)]
-    chunk = max(1, min(10, trials // (4 * workers) or 1))
+    parallel = executor is not None or workers > 1
+    # few large batches: each ships the problem once; the Jacobian is factored here, once
+    n_batches = 2 * workers if parallel else max(1, trials // 10)
+    chunk = max(1, -(-trials // n_batches))
     batches = [seeds[i:i + chunk] for i in range(0, trials, chunk)]
-    args = (cal, base, spat.location, cal.use_rtest, sigma_rtest, sigma_location)
+    assert cal.problem is not None
+    cal.problem.factor(cal.problem.z(cal.x))
+    has_bar = campaign.lengthbar is not None and bool(campaign.bar)
+    bar_only = Campaign(spat=None, locations={}, lengthbar=campaign.lengthbar,
+                        bar=campaign.bar) if has_bar else None
     results: list[Any] = []
     own = executor is None and workers > 1
     pool = ProcessPoolExecutor(workers) if own else executor
     with tqdm(total=trials, desc="Monte Carlo", unit="trial", disable=not progress) as bar:
         if pool is None:
             for batch in batches:
-                results.append(_trial_batch(*args, batch))
+                results.append(_trial_batch(cal, base, spat.location, cal.use_rtest, sigma_rtest,
+                                            sigma_location, batch, bar_only))
                 bar.update(len(batch))
         else:
             try:
-                futures = [pool.submit(_trial_batch, *args, batch) for batch in batches]
+                futures = [pool.submit(_trial_batch, cal, base, spat.location, cal.use_rtest,
+                                       sigma_rtest, sigma_location, batch, bar_only)
+                           for batch in batches]
                 for future, batch in zip(futures, batches):
                     results.append(future.result())
                     bar.update(len(batch))
@@ -181,13 +215,8 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     if cal.identifiable is not None:
         identifiable[:cal.identifiable.size] = cal.identifiable
     length_std = length_lin = None
-    if campaign.lengthbar is not None and campaign.bar:
-        unknowns = cal.unknowns
-        assert unknowns is not None
-        n_arm = len(unknowns.names)
-        errs = np.array([validate(unknowns.arm, unknowns.parameters(x[:n_arm]), campaign).errors
-                         for x in samples])
-        length_std = errs.std(axis=0, ddof=1)
+    if has_bar:
+        length_std = np.concatenate([r[2] for r in results]).std(axis=0, ddof=1)
         length_lin = length_linear_std(cal, campaign)
     return MonteCarloResult(names=list(cal.names), samples=samples,
                             std=samples.std(axis=0, ddof=1),

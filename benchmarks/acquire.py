@@ -1,7 +1,7 @@
 """Acquisition rate and CPU use with the arm and the gauges at 1 kHz each, on pseudo-terminals.
 
 Run: ``python benchmarks/acquire.py [SECONDS]`` (default 10 s per configuration, about 30 s in
-all). Prints a markdown section for BENCHMARKS.md (it does not write the file).
+all). Writes its section of BENCHMARKS.md.
 
 ``fake-devices`` runs in its own process (arm at 1 kHz; Heidenhain-style gauges answering
 ``acquire``'s requests at 1 kHz each, or one Mitutoyo-style port streaming three channels at 1 kHz);
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from aacmm_pin.acquire.protocols import parse_gauge_spec  # noqa: E402
 from aacmm_pin.acquire.session import AcquisitionConfig, acquire  # noqa: E402
-from benchmarks._report import machine  # noqa: E402
+from benchmarks._report import machine, write_section  # noqa: E402
 
 RATE = 1000.0
 
@@ -76,7 +76,7 @@ def main() -> None:
         f"| {r['format']} | {r['arm_hz']:.0f} | {r['gauge_hz']:.0f} | {r['rows_hz']:.0f} | "
         f"{r['unpaired'] * 100:.1f} | {r['faults']} | {r['cpu'] * 100:.0f} | {r['us_per_row']:.0f} | "
         f"{r['fake_cpu'] * 100:.0f} |" for r in results)
-    print(f"""## Acquisition rate and CPU use (`python benchmarks/acquire.py`)
+    write_section("acquire", f"""## Acquisition rate and CPU use (`python benchmarks/acquire.py`)
 
 {machine()}; {seconds:g} s per run. The arm streams `$A,...*HH` lines at 1 kHz on a pty; the gauges
 are three Heidenhain-style counters polled at 1 kHz each (one pty each) or one Mitutoyo-style port
