@@ -40,7 +40,7 @@ def bench(gauge_format: str, seconds: float, work: Path) -> dict:
     desc = work / f"fake-{gauge_format}.json"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "aacmm_pin.acquire.cli", "fake-devices", "--gauge-format",
+        [sys.executable, "-m", "aacmm_pin", "fake-devices", "--gauge-format",
          gauge_format, "--rate-hz", str(RATE), "--seconds", str(seconds + 30), "--json",
          str(desc)], stdout=subprocess.DEVNULL, env=env, cwd=ROOT)
     try:

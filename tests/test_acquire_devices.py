@@ -26,7 +26,7 @@ from aacmm_pin.campaign import read_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-CLI = [sys.executable, "-m", "aacmm_pin.acquire.cli"]
+CLI = [sys.executable, "-m", "aacmm_pin"]
 FAULTS = ["--garbage", "0.01", "--checksum-errors", "0.01", "--out-of-range", "0.005",
           "--timeouts", "1", "--silence-s", "0.15"]
 ACQUIRE = ["--timeout-s", "0.1", "--poll-hz", "500", "--decimate", "2", "--status-s", "0.2"]

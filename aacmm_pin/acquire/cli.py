@@ -12,12 +12,10 @@ import json
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
-
-from aacmm_pin.errors import AacmmError
 
 
 @contextmanager
@@ -341,20 +339,3 @@ def add_parsers(subparsers: Any) -> None:
 
 
 Handler = Callable[[argparse.Namespace], int]
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run these subcommands standalone; return the exit status (errors printed, status 2)."""
-    parser = argparse.ArgumentParser(prog="python -m aacmm_pin.acquire.cli")
-    add_parsers(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        handler: Handler = args.handler
-        return handler(args)
-    except AacmmError as exc:
-        print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

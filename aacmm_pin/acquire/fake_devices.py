@@ -28,7 +28,7 @@ import select
 import threading
 import time
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -258,11 +258,9 @@ class FakeDevices:
 
         return silent
 
-    def _run_arm(self, fd: int, rng: np.random.Generator) -> None:
-        """Stream arm lines at ``rate`` until stopped."""
-        cfg = self.config
-        period = 1.0 / cfg.rate
-        next_t, counter, silent = time.monotonic(), 0, self._silences(rng)
+    def _ticks(self, period: float) -> Iterator[tuple[float, int]]:
+        """Yield (now, n) at the line rate until stopped: n lines are due (at most 50 at once)."""
+        next_t = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
             if now < next_t:
@@ -270,6 +268,14 @@ class FakeDevices:
                 continue
             n = min(int((now - next_t) / period) + 1, 50)
             next_t = max(next_t + n * period, now - 0.1)
+            yield now, n
+
+    def _run_arm(self, fd: int, rng: np.random.Generator) -> None:
+        """Stream arm lines at ``rate`` until stopped."""
+        cfg = self.config
+        period = 1.0 / cfg.rate
+        counter, silent = 0, self._silences(rng)
+        for now, n in self._ticks(period):
             chunk = []
             for _ in range(n):
                 counter += 1
@@ -323,14 +329,8 @@ class FakeDevices:
     def _run_mitutoyo(self, fd: int, rng: np.random.Generator) -> None:
         """Stream the three channels at ``rate`` until stopped."""
         period = 1.0 / self.config.rate
-        next_t, silent = time.monotonic(), self._silences(rng)
-        while not self._stop.is_set():
-            now = time.monotonic()
-            if now < next_t:
-                self._stop.wait(next_t - now)
-                continue
-            n = min(int((now - next_t) / period) + 1, 50)
-            next_t = max(next_t + n * period, now - 0.1)
+        silent = self._silences(rng)
+        for now, n in self._ticks(period):
             if not silent(now):
                 self._write(fd, b"".join(self._gauge_line(c, rng) for c in (1, 2, 3)))
 
