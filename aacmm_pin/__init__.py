@@ -27,12 +27,13 @@ from aacmm_pin.plan import Plan, plan
 from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
 from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
 from aacmm_pin.validate import ValidationResult, validate
+from aacmm_pin.viewer import View, view
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Calibration", "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
-    "identify", "measured_positions", "monte_carlo", "plan",
+    "identify", "measured_positions", "monte_carlo", "plan", "View", "view",
     "validate", "write_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",

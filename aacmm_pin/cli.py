@@ -264,7 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=_demo)
 
     from aacmm_pin.acquire.cli import add_parsers as add_acquisition
+    from aacmm_pin.viewer import add_parsers as add_viewer
 
+    add_viewer(sub)
     add_acquisition(sub)
     return parser
 

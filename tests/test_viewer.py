@@ -1,0 +1,290 @@
+"""The MeshCat viewer: its recorded scene, the static HTML and the live server, in headless Chromium.
+
+The browser tests drive Debian's ``chromium`` (``.ci/run`` installs it with apt-get) through PyPI
+``playwright`` with ``executable_path``: nothing is downloaded. They skip only where chromium is
+absent. ``AACMM_PIN_VIEWER_PNG=examples/figures/viewer.png python -m pytest tests/test_viewer.py``
+also writes the README screenshot.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import io
+import os
+import re
+import shutil
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aacmm_pin.arm import load_arm
+from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.export import write_calibration
+from aacmm_pin.identify import identify
+from aacmm_pin.kinematics import predict
+from aacmm_pin.parameters import read_parameters
+from aacmm_pin.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.viewer import add_parsers, view
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+FLAGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--no-first-run"]  # --user-data-dir: the fresh profile folder of launch_persistent_context
+VIEWPORT = {"width": 1000, "height": 650}
+SCREENSHOT_ENV = "AACMM_PIN_VIEWER_PNG"
+
+# Scene-tree lookups that never create nodes (viewer.scene_tree.find() would), and a capture of the
+# 3-D content alone: background, grid, axes and the legend panels hidden.
+JS_MISSING = """paths => paths.filter(p => {
+  let n = viewer.scene_tree;
+  for (const k of p.split('/').filter(Boolean)) { n = n.children[k]; if (!n) return true; }
+  return !n.children['<object>'];
+})"""
+JS_NODE = """path => {
+  let n = viewer.scene_tree;
+  for (const k of path.split('/').filter(Boolean)) { n = n.children[k]; if (!n) return null; }
+  return n.object;
+}"""
+JS_IN_MESHCAT = f"""path => {{
+  const node = {JS_NODE}, o = node(path), root = node('/meshcat');
+  root.updateMatrixWorld(true);
+  return [Array.from(o.matrixWorld.elements), Array.from(root.matrixWorld.elements)];
+}}"""
+JS_CAPTURE = """hide => {
+  const paths = hide.map(p => p.split('/').filter(Boolean));
+  const was = paths.map(p => viewer.scene_tree.find(p).object.visible);
+  for (const p of paths) viewer.set_property(p, 'visible', false);
+  const url = viewer.capture_image();
+  paths.forEach((p, i) => viewer.set_property(p, 'visible', was[i]));
+  return url;
+}"""
+CHROME = ["/Background", "/Grid", "/Axes", "/Cameras/default/rotated/<object>/legend",
+          "/Cameras/default/rotated/<object>/coverage"]
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    """A small simulated campaign and its DH and proposed calibration folders."""
+    out = tmp_path_factory.mktemp("viewer")
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(samples_per_location=50, samples_per_socket=5,
+                                                  bar_placements=2))
+    write_campaign(sim.campaign, out / "campaign")
+    for model in ("dh", "proposed"):
+        write_calibration(identify(sim.campaign, arm, model=model), arm, out / model)
+    return out
+
+
+@pytest.fixture(scope="module")
+def static(folders):
+    """The static HTML of the DH calibration compared with the proposed one."""
+    result = view(folders / "dh", folders / "campaign", html=folders / "view.html",
+                  compare=[folders / "proposed"])
+    return result
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    """Headless Debian chromium under playwright (one fresh profile for the module)."""
+    if CHROMIUM is None:
+        pytest.skip("no chromium on PATH (Debian package 'chromium', installed by .ci/run): "
+                    "MeshCat's WebGL page cannot be rendered")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        context = p.chromium.launch_persistent_context(
+            str(tmp_path_factory.mktemp("chromium-profile")), executable_path=CHROMIUM,
+            headless=True, args=FLAGS, viewport=VIEWPORT)
+        yield context
+        context.close()
+
+
+def _independent_residuals(folders: Path, label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nest, predicted and measured centres in the r-CS, from the files (Eq. 3-4 by hand)."""
+    campaign = read_campaign(folders / "campaign")
+    params = read_parameters(folders / label)
+    rot, t = params.rotation(), params.translation
+    spat = campaign.spat
+    nest_mt = np.array([campaign.locations[int(m)] for m in spat.location])
+    to_r = np.linalg.inv(rot)
+    nest = (nest_mt - t) @ to_r.T
+    measured = (nest_mt + spat.displacement - t) @ to_r.T
+    return nest, predict(load_arm(params.arm), params, spat.q), measured
+
+
+def _buffer(scene, path: str, attribute: str = "position") -> np.ndarray:
+    """Decode one attribute of the geometry last set at ``path`` in the recorded commands."""
+    import umsgpack
+
+    data = [d for kind, p, d in scene.commands if kind == "set_object" and p == path][-1]
+    attr = umsgpack.unpackb(data)["object"]["geometries"][0]["data"]["attributes"][attribute]
+    return np.frombuffer(attr["array"].data, dtype=np.float32).reshape(-1, attr["itemSize"])
+
+
+def test_import_leaves_meshcat_and_matplotlib_out():
+    """Importing the viewer imports neither meshcat nor matplotlib (they load inside functions)."""
+    code = ("import sys, aacmm_pin.viewer, aacmm_pin._viewer_scene; "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'meshcat', 'matplotlib'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.strip() == "[]"
+
+
+def test_scene_draws_every_residual_magnified_in_few_objects(folders, static):
+    """Each model's N arrows go from the predicted to the measured centre, 1000x about the nest."""
+    scene = static.scene
+    assert static.labels == ["dh", "proposed"] and static.url is None
+    for label in ("dh", "proposed"):
+        nest, pred, meas = _independent_residuals(folders, label)
+        seg = _buffer(scene, f"/meshcat/models/{label}/residuals")
+        assert seg.shape == (2 * len(nest), 3)
+        np.testing.assert_allclose(seg[0::2], nest + 1000 * (pred - nest), atol=2e-6)
+        np.testing.assert_allclose(seg[1::2], nest + 1000 * (meas - nest), atol=2e-6)
+        info = next(m for m in scene.info["models"] if m["label"] == label)
+        assert info["rms_um"] == pytest.approx(np.sqrt(np.mean((pred - meas) ** 2)) * 1e6, rel=1e-6)
+    rms = {m["label"]: m["rms_um"] for m in scene.info["models"]}
+    assert rms["proposed"] < rms["dh"] / 3  # the encoder maps shrink the residuals
+    objects = [p for kind, p, _ in scene.commands if kind == "set_object"]
+    assert len(objects) < 60  # batched: not one object per sample
+    assert scene.info["scale"] == 1000.0 and scene.info["vmax_um"] >= max(
+        m["max_um"] for m in scene.info["models"]) * 0.5
+    q = read_campaign(folders / "campaign").spat.q
+    for axis, counts in scene.coverage.items():
+        wrapped = (np.degrees(q[:, axis - 1]) + 180) % 360 - 180  # periodic: 180 deg is -180 deg
+        hist, _ = np.histogram(wrapped, bins=np.arange(-180, 181, 5.0))
+        np.testing.assert_array_equal(counts, hist)
+
+
+def test_spat_only_and_bar_only_campaigns_are_drawn(folders, tmp_path):
+    """A campaign without length bar has no bars; one without SPATs has no residual arrows."""
+    full = read_campaign(folders / "campaign")
+    spat_only = Campaign(spat=full.spat, locations=full.locations, lengthbar=None, bar={})
+    bar_only = Campaign(spat=None, locations={}, lengthbar=full.lengthbar, bar=full.bar)
+    paths = view(folders / "dh", spat_only, html=tmp_path / "a.html").scene.info["residual_paths"]
+    assert "/meshcat/models/dh/residuals" in paths and "/meshcat/models/dh/bar" not in paths
+    scene = view(folders / "dh", bar_only, html=tmp_path / "b.html").scene
+    assert scene.info["residual_paths"] == ["/meshcat/models/dh/bar"] and scene.location is None
+    with pytest.raises(ValueError, match="location"):
+        view(folders / "dh", full, html=tmp_path / "c.html", location=9)
+
+
+def test_cli_view_writes_one_self_contained_file(folders, tmp_path, capsys):
+    """``aacmm-pin view CALDIR CAMPAIGN --html FILE --compare CALDIR2`` writes one offline page."""
+    parser = argparse.ArgumentParser(prog="aacmm-pin")
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    out = tmp_path / "report" / "view.html"
+    args = parser.parse_args(["view", str(folders / "proposed"), str(folders / "campaign"),
+                              "--html", str(out), "--compare", str(folders / "dh"),
+                              "--location", "2"])
+    assert args.handler(args) == 0
+    assert f"wrote {out}" in capsys.readouterr().out
+    text = out.read_text()
+    tags = _Tags()
+    tags.feed(text)
+    assert tags.names >= {"html", "script", "div"} and tags.external == []  # nothing to fetch
+    assert {u for u in re.findall(r"https?://[^\s\"'<>)]+", text)} <= {"http://www.w3.org/1999/xhtml"}
+    assert '"location": 2' in text and 200_000 < len(text) < 5_000_000
+
+
+def test_cli_view_serves_until_told_then_stops_the_server(folders, capsys):
+    """Without --html, ``view`` serves on localhost, prints the URL and stops the server after."""
+    from urllib.error import URLError
+    from urllib.request import urlopen
+
+    parser = argparse.ArgumentParser(prog="aacmm-pin")
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["view", str(folders / "proposed"), str(folders / "campaign"),
+                              "--serve-for", "0.2"])
+    assert args.handler(args) == 0
+    url = re.search(r"serving (http://127\.0\.0\.1:\d+/static/)", capsys.readouterr().out).group(1)
+    with pytest.raises(URLError):
+        urlopen(url, timeout=2)
+
+
+def test_static_html_renders_offline_in_chromium(folders, static, browser):
+    """The file renders offline: arm links and residuals in the scene tree, posed as Pinocchio says."""
+    page = browser.new_page()
+    requests: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    page.goto(static.html.resolve().as_uri())
+    page.wait_for_function("() => window.aacmm_pin && window.aacmm_pin.ready", timeout=20_000)
+    info = page.evaluate("() => window.aacmm_pin")
+    assert len(info["arm_paths"]) == 11 and "/meshcat/arm/visuals/link2_0" in info["arm_paths"]
+    assert "/meshcat/models/dh/residuals" in info["residual_paths"]
+    assert page.evaluate(JS_MISSING, info["arm_paths"] + info["residual_paths"]) == []
+    n_vertices = page.evaluate(f"() => ({JS_NODE})('/meshcat/models/proposed/residuals/<object>')"
+                               ".geometry.attributes.position.count")
+    assert n_vertices == 2 * 200
+    page.evaluate("() => { viewer.animator.pause(); viewer.animator.seek(0); }")
+    _assert_stylus_at(page, static, read_campaign(folders / "campaign").spat.q[info["postures"][0]])
+    drawn = _drawn_pixels(page, CHROME)
+    without_residuals = _drawn_pixels(page, CHROME + ["/meshcat/models"])
+    assert drawn > 0.01 * VIEWPORT["width"] * VIEWPORT["height"]  # not blank
+    assert drawn - without_residuals > 500  # the residuals themselves are drawn
+    assert all(u.startswith(("file:", "data:")) for u in requests), requests
+    if os.environ.get(SCREENSHOT_ENV):
+        page.wait_for_timeout(500)  # textures of the legend panels
+        page.screenshot(path=os.environ[SCREENSHOT_ENV])
+    page.close()
+
+
+def test_live_server_page_in_chromium_and_pose(folders, browser, capsys):
+    """The live server prints a localhost URL, serves the scene; pose() and show_model() act on it."""
+    result = view(folders / "proposed", folders / "campaign", compare=[folders / "dh"])
+    try:
+        assert result.url.startswith("http://127.0.0.1:") and result.url in capsys.readouterr().out
+        page = browser.new_page()
+        page.goto(result.url)
+        paths = result.scene.info["arm_paths"] + result.scene.info["residual_paths"]
+        page.wait_for_function(f"() => viewer.connection.readyState === 1 && ({JS_MISSING})"
+                               f"({paths!r}).length === 0", timeout=20_000)
+        assert _drawn_pixels(page, CHROME) > 0.01 * VIEWPORT["width"] * VIEWPORT["height"]
+        page.evaluate("() => viewer.animator.pause()")
+        q = np.radians([30, -20, 40, 60, -30, 45, 10])
+        result.pose(q)
+        page.wait_for_timeout(300)
+        _assert_stylus_at(page, result, q)
+        result.show_model("dh")
+        page.wait_for_function(f"() => ({JS_NODE})('/meshcat/models/dh').visible && "
+                               f"!({JS_NODE})('/meshcat/models/proposed').visible", timeout=5_000)
+        page.close()
+    finally:
+        proc = result._vis.window.server_proc if result._vis is not None else None
+        result.close()
+    assert proc is None or proc.poll() is not None
+
+
+class _Tags(HTMLParser):
+    """Tag names of a page and every src/href that is not inline data (script bodies not parsed)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.names: set[str] = set()
+        self.external: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self.names.add(tag)
+        self.external += [v for k, v in attrs if k in ("src", "href") and v and not v.startswith("data:")]
+
+
+def _assert_stylus_at(page, result, q: np.ndarray) -> None:
+    """The drawn stylus sphere sits at Pinocchio's stylus centre for readouts ``q`` (r-CS)."""
+    world, root = (np.array(m).reshape(4, 4).T for m in
+                   page.evaluate(JS_IN_MESHCAT, "/meshcat/arm/visuals/stylus_0"))
+    drawn = (np.linalg.inv(root) @ world)[:3, 3]
+    model = result.scene.models[0]
+    np.testing.assert_allclose(drawn, predict(model.arm, model.params, q[None])[0], atol=1e-6)
+
+
+def _drawn_pixels(page, hide: list[str]) -> int:
+    """Number of pixels the renderer drew with ``hide`` hidden (transparent background)."""
+    from PIL import Image
+
+    url = page.evaluate(JS_CAPTURE, hide)
+    rgba = np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGBA"))
+    return int((rgba[..., 3] > 0).sum())
