@@ -26,6 +26,7 @@ Two Pinocchio views of one arm:
 from __future__ import annotations
 
 import copy
+import hashlib
 import re
 import threading
 from dataclasses import dataclass
@@ -361,12 +362,12 @@ def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
     return Arm(urdf, path, str(arm))
 
 
-_LOADED: dict[tuple[str, str], Arm] = {}
+_LOADED: dict[tuple[str, str, str], Arm] = {}
 
 
 def _load_named(path: str, name: str) -> Arm:
     """Load (once per process) the arm of a URDF path and keep the user's name for it."""
-    key = (path, name)
+    key = (path, name, hashlib.sha1(Path(path).read_bytes()).hexdigest())  # an edited file reloads
     if key not in _LOADED:
         arm = load_arm(path)
         arm.name = name

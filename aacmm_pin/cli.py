@@ -277,7 +277,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         handler: Handler = args.handler
         return handler(args)
-    except AacmmError as exc:
+    except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -243,6 +243,7 @@ class _Problem:
         # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
         self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
         self.prior = sigma / sigma_location
+        self.sigma_location = sigma_location
         self.x_ref = x_ref
         cons = constraints.toarray() * scale[None, :]
         basis = np.eye(self.n_arm)
@@ -318,9 +319,17 @@ class _Problem:
                               matvec=matvec, rmatvec=rmatvec)
 
     def covariance(self, x: np.ndarray, sigma: float) -> np.ndarray:
-        """Return the linearised covariance of the full vector at x for data noise sigma (m)."""
-        info = self.t.T @ self.normal_matrix(x) @ self.t / sigma ** 2
-        # the nest prior rows were weighted for the solve's sigma; rescale them to this sigma
+        """Return the linearised covariance of the full vector at x for data noise sigma (m).
+
+        ``T^T (J^T J / sigma^2 + blockdiag(0, I / sigma_location^2)) T``, inverted: the data rows
+        with this sigma, the nest offsets' prior with its own sigma whatever the data's.
+        """
+        info = self.normal_matrix(x)
+        na = self.n_arm
+        info[na:, na:] -= self.prior ** 2 * np.eye(self.n_loc)  # the solve's weighting, removed
+        info /= sigma ** 2
+        info[na:, na:] += np.eye(self.n_loc) / self.sigma_location ** 2
+        info = self.t.T @ info @ self.t
         cov_y = np.linalg.pinv(info, rcond=1e-14, hermitian=True)
         return self.t @ cov_y @ self.t.T
 
@@ -400,6 +409,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             if obs.hold.shape[0] == held:
                 break
             held = obs.hold.shape[0]
+            used = obs  # the observability the constraints (and the results below) come from
             constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
             x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
             x_now = np.concatenate([x_arm, x_loc])
@@ -413,6 +423,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
             _, jac_now = unknowns.jacobian(x_arm, q)
 
+    obs = used
     data_res = res.fun[:3 * n]
     sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
     covariance = problem.covariance(x_full, sig)
@@ -435,7 +446,9 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                        fun=data_res.reshape(n, 3), location=spat.location.copy(), success=success,
                        status=int(res.status), message=str(message),
                        nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,
-                       runtime_s=time.perf_counter() - tic, raw=res, unknowns=final_u,
+                       runtime_s=time.perf_counter() - tic,
+                       raw=OptimizeResult({k: v for k, v in res.items() if k != "jac"}),
+                       unknowns=final_u,
                        constraints=constraints, identifiable=obs.identifiable, q=q,
                        problem=problem.detached(),
                        settings={"loss": loss, "f_scale": scale, "max_nfev": max_nfev})
@@ -470,7 +483,8 @@ def refit(cal: Calibration, measured: np.ndarray, iterations: int = 10) -> tuple
     problem = copy.copy(cal.problem)
     problem.measured = np.asarray(measured, dtype=float)
     z = problem.z(cal.x)
-    if cal.settings["loss"] == "linear":
+    small = z.size * problem.q.shape[0] * 3 < DENSE_LIMIT
+    if cal.settings["loss"] == "linear" and small:
         q_factor, r_factor = cal.problem.factor(z)
         for _ in range(iterations):
             step = np.linalg.solve(r_factor, q_factor.T @ problem.fun(z))

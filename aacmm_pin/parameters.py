@@ -151,10 +151,14 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
     maps_data = data.get("encoder_maps") or {}
     step = maps_data.get("step_deg", DEFAULT_STEP_DEG) if isinstance(maps_data, dict) else None
     maps: dict[int, EncoderMap] = {}
-    if not isinstance(step, (int, float)) or 360.0 / step != round(360.0 / step):
+    axes_data = maps_data.get("axes") or {} if isinstance(maps_data, dict) else {}
+    if not isinstance(axes_data, dict):
+        bad("encoder_maps.axes", "must be an object of axis: [values]")
+        axes_data = {}
+    if not isinstance(step, (int, float)) or step <= 0 or 360.0 / step != round(360.0 / step):
         bad("encoder_maps.step_deg", f"must divide 360, got {step!r}")
     else:
-        for key, values in (maps_data.get("axes") or {}).items():
+        for key, values in axes_data.items():
             try:
                 maps[int(key)] = EncoderMap(np.asarray(values, dtype=float), float(step))
             except (TypeError, ValueError) as exc:

@@ -181,6 +181,8 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
     cov = np.linalg.inv(info)
     std_now = _map_std(np.diag(cov), u)
     estimated = [a for a in u.map_axes if cal.node_identifiable[a].any()]
+    if not estimated:
+        raise ValueError("cal: no axis has an identified map node; nothing to plan for")
     rms_now = {a: float(np.sqrt(np.mean(std_now[a] ** 2))) for a in u.map_axes}
     worst = max(estimated, key=lambda a: rms_now[a])
     nodes_deg = {a: np.degrees(u.start.map(a).nodes) for a in u.map_axes}

@@ -85,9 +85,15 @@ def _trial_batch(cal: Calibration, base: np.ndarray, location: np.ndarray, use_r
     BLAS runs single-threaded here: a trial's small products gain nothing from threads, and
     spinning BLAS threads of several workers on few cores slow everything down many times.
     """
+    import contextlib
+    import threading
+
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1):
+    # the limit is process-wide: set it only from a main thread (serial, or a worker process),
+    # never from threads of a thread pool, which would undo each other's limits
+    main = threading.current_thread() is threading.main_thread()
+    with threadpool_limits(limits=1) if main else contextlib.nullcontext():
         x, ok = _trials(cal, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
         lengths = None
         if campaign is not None and campaign.lengthbar is not None and campaign.bar:
@@ -131,6 +137,9 @@ def length_jacobian(cal: Calibration, campaign: Campaign) -> tuple[np.ndarray, n
         for j, (a, b) in enumerate(pairs):
             sel = [(log.placement == k) & (log.socket == s) for s in (a, b)]
             rows = [np.flatnonzero(m) for m in sel]
+            if rows[0].size == 0 or rows[1].size == 0:  # pair not measured here: no error
+                errors[i, j] = np.nan
+                continue
             mean = [pos[r].mean(axis=0) for r in rows]
             d = mean[1] - mean[0]
             errors[i, j] = np.linalg.norm(d) - campaign.bar[(a, b)]
@@ -146,7 +155,7 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
     """Return the linearised std of each length error, shape (n_placements, n_pairs), m."""
     _, grads = length_jacobian(cal, campaign)
     g = grads.reshape(-1, grads.shape[-1])
-    var = np.einsum("ij,jk,ik->i", g, cal.covariance, g)
+    var = np.einsum("ij,jk,ik->i", g, cal.covariance, g)  # NaN-free: missing pairs have g = 0
     return np.sqrt(np.clip(var, 0, None)).reshape(grads.shape[:2])
 
 

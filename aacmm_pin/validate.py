@@ -23,21 +23,22 @@ class ValidationResult:
     pairs: list[tuple[str, str]]
     """Calibrated socket pairs (from, to), as in bar.csv."""
     errors: np.ndarray
-    """Measured minus calibrated distance, shape (n_placements, n_pairs), in m."""
+    """Measured minus calibrated distance, shape (n_placements, n_pairs), in m; NaN where a
+    placement did not measure both sockets of a pair."""
 
     @property
     def rms(self) -> float:
-        """RMS of all length errors, m."""
-        return float(np.sqrt(np.mean(self.errors ** 2)))
+        """RMS of all length errors, m (pairs not measured in a placement are left out)."""
+        return float(np.sqrt(np.nanmean(self.errors ** 2)))
 
     @property
     def max_abs(self) -> float:
-        """Largest absolute length error, m."""
-        return float(np.abs(self.errors).max())
+        """Largest absolute length error, m (pairs not measured in a placement are left out)."""
+        return float(np.nanmax(np.abs(self.errors)))
 
     def to_dict(self) -> dict[str, Any]:
         """Return the JSON form: ``{"placements": [{"placement": 1, "AB_um": ..}], "rms_um", ..}``."""
-        rows = [{"placement": int(k), **{f"{a}{b}_um": float(e * 1e6)
+        rows = [{"placement": int(k), **{f"{a}{b}_um": None if np.isnan(e) else float(e * 1e6)
                                          for (a, b), e in zip(self.pairs, errs)}}
                 for k, errs in zip(self.placements, self.errors)]
         return {"placements": rows, "rms_um": self.rms * 1e6, "max_abs_um": self.max_abs * 1e6}

@@ -83,3 +83,14 @@ def test_parameters_that_do_not_fit_the_arm(tmp_path):
     with pytest.raises(FileFormatError) as info:
         check_against_arm(params, arm)
     assert {"dh.zz99", "dh.a76", "encoder_maps.axes.9"} <= {p.column for p in info.value.problems}
+
+
+@pytest.mark.parametrize("maps, key", [({"step_deg": 0, "axes": {}}, "encoder_maps.step_deg"),
+                                       ({"step_deg": 5.0, "axes": [[0.0] * 72]}, "encoder_maps.axes")])
+def test_bad_map_section_is_named(tmp_path, maps, key):
+    """A zero step or a list instead of an axis object is a named problem, not a crash."""
+    path = tmp_path / "parameters.json"
+    path.write_text(json.dumps({"arm": "aacmm7", "dh": {}, "tool": [0, 0, -0.12],
+                                "encoder_maps": maps}))
+    with pytest.raises(FileFormatError, match=key.replace(".", r"\.")):
+        read_parameters(path)

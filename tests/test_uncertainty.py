@@ -100,3 +100,52 @@ def test_uncertainty_cli_writes_json_csv_and_figure(tmp_path):
     lines = (tmp_path / "u" / "encoder_maps.csv").read_text().splitlines()
     assert lines[0].endswith("std_arcsec") and lines[1].split(",")[-1] != ""
     assert (tmp_path / "u" / "fig6_encoder_maps.png").stat().st_size > 20_000
+
+
+@pytest.mark.parametrize("seed", [20, 21])
+def test_covariance_right_for_other_noise_levels(seed):
+    """With 5 um R-Test noise (sigma estimated from the residuals) the uncertainty stays calibrated."""
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=seed, samples_per_location=150,
+                                                  bar_placements=0, sigma_rtest=5e-6))
+    cal = identify(sim.campaign, arm)
+    equivalent, _ = cal.equivalent(sim.truth)
+    u = cal.unknowns
+    std = np.sqrt(np.diag(cal.covariance))
+    z = ((u.vector(cal.parameters) - u.vector(equivalent)) / std[:len(u.names)])[cal.identifiable]
+    print(f"sigma estimated {cal.sigma * 1e6:.2f} um; z std {z.std():.2f} over {z.size} values")
+    assert abs(cal.sigma - 5e-6) < 0.3e-6
+    assert 0.8 < z.std() < 1.25
+    nest = std[len(u.names):]
+    assert np.all(nest <= 3e-6)  # the posterior of a nest offset cannot exceed its 3 um prior
+
+
+def test_large_campaign_path_pickles_and_runs_monte_carlo(monkeypatch):
+    """The LSMR (operator) path gives the dense path's estimate and its calibration runs MC in workers."""
+    import importlib
+    import pickle
+
+    identify_module = importlib.import_module("aacmm_pin.identify")  # the module, not the function
+
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=3, samples_per_location=80,
+                                                  bar_placements=0))
+    dense = identify(sim.campaign, arm)
+    monkeypatch.setattr(identify_module, "DENSE_LIMIT", 0)
+    large = identify(sim.campaign, arm)
+    assert large.success
+    np.testing.assert_allclose(large.x, dense.x, rtol=0, atol=1e-9)
+    pickle.dumps(large)
+    mc = monte_carlo(large, sim.campaign, 4, workers=2, seed=0)
+    assert mc.converged == 4
+
+
+def test_bad_argument_is_a_message_not_a_traceback(tmp_path, capsys):
+    """`--trials 1` is refused with the argument named and exit status 2."""
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=4, samples_per_location=60, bar_placements=0))
+    write_campaign(sim.campaign, tmp_path / "c")
+    assert main(["uncertainty", str(tmp_path / "c"), "--trials", "1", "--out",
+                 str(tmp_path / "u")]) == 2
+    err = capsys.readouterr().err
+    assert "trials" in err and "Traceback" not in err
