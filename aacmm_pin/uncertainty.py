@@ -181,11 +181,9 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
 
     if trials < 2:
         raise ValueError(f"trials: need at least 2, got {trials}")
-    base = measured_positions(campaign, True)
+    base = measured_positions(campaign, cal.use_rtest)
     spat = campaign.spat
     assert spat is not None
-    if not cal.use_rtest:
-        base = measured_positions(campaign, False)
     workers = workers or os.cpu_count() or 1
     seeds = [seed + i for i in range(trials)]
     parallel = executor is not None or workers > 1
