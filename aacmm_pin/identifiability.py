@@ -46,6 +46,7 @@ def plausible_sizes(unknowns: Unknowns) -> np.ndarray:
     out = [PLAUSIBLE["base_angle"]] * 3 + [PLAUSIBLE["base_length"]] * 3
     out += [PLAUSIBLE["angle"] if f.is_angle else PLAUSIBLE["length"] for f in arm.error_frames]
     out += [PLAUSIBLE["length"]] * 3
+    out += [float(v) for t in unknowns.terms for v in t.plausible]
     n_nodes = unknowns.free.size - len(out)
     return np.array(out + [PLAUSIBLE["node"]] * n_nodes)
 

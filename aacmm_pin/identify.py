@@ -28,6 +28,7 @@ from tqdm.auto import tqdm
 from aacmm_pin import identifiability as ident
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign
+from aacmm_pin.effects import Samples, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
@@ -102,8 +103,7 @@ class Calibration:
         change of the predictions on the campaign's postures (m).
         """
         assert self.unknowns is not None and self.q is not None
-        full = Unknowns(self.unknowns.arm, self.unknowns.start, self.unknowns.map_axes,
-                        np.ones_like(self.unknowns.free))
+        full = self.unknowns.with_free(np.ones_like(self.unknowns.free))
         _, jac = full.jacobian(full.full_vector(self.parameters), self.q)
         assert self.constraints is not None
         vec, rms = ident.equivalent_vector(self.unknowns, jac.sparse(), self.constraints,
@@ -153,6 +153,17 @@ class Calibration:
             "unidentifiable": list(self.unidentifiable),
             "std": {n: float(s) for n, s in self.std.items()},
         }
+
+
+def spat_samples(campaign: Campaign, arm: Arm) -> Samples:
+    """Return the SPAT samples' temperature, motion and R-Test displacement (less location mean)."""
+    spat = campaign.spat
+    assert spat is not None
+    dev = spat.displacement.copy()
+    for m in np.unique(spat.location):
+        sel = spat.location == m
+        dev[sel] -= dev[sel].mean(axis=0)
+    return Samples(arm, spat.q, spat.temp, spat.t, dev)
 
 
 def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray:
@@ -348,7 +359,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
              sigma_location: float = 3e-6, max_nfev: int = 30, jac: str = "analytic",
-             progress: bool = False) -> Calibration:
+             progress: bool = False, extensions: tuple[Term, ...] = ()) -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
     Args:
@@ -369,6 +380,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         jac: ``"analytic"`` (Pinocchio, sparse in the map nodes) or a scipy finite-difference
             scheme (``"2-point"``, ``"3-point"``) on the same problem, for comparison.
         progress: show a progress bar.
+        extensions: further terms of the effect library (:mod:`aacmm_pin.effects`) to estimate
+            (angle, scale or measurement kind; map terms are ``map_axes``).
 
     Returns:
         The calibration; ``success`` is False (with a message) when the solver did not converge.
@@ -389,7 +402,9 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     q, measured = spat.q, measured_positions(campaign, use_rtest)
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), campaign)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
-    unknowns = Unknowns.full(arm, start, axes if model == "proposed" else ())
+    unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
+                             tuple(t for t in extensions if t.kind != "map"),
+                             spat_samples(campaign, arm))
     unvisited = ident.unvisited_nodes(unknowns, q)
     unknowns = unknowns.with_fixed(unvisited)
     x_arm = unknowns.vector(start)

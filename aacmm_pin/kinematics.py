@@ -16,6 +16,7 @@ import pinocchio as pin
 import scipy.sparse as sp
 
 from aacmm_pin.arm import Arm
+from aacmm_pin.effects import Samples, apply_terms
 from aacmm_pin.encoder_map import correct_readouts
 from aacmm_pin.parameters import Parameters
 
@@ -59,8 +60,28 @@ def _readouts_2d(readouts: np.ndarray, arm: Arm) -> np.ndarray:
     return q
 
 
+def extension_effects(arm: Arm, params: Parameters, q_read: np.ndarray,
+                      samples: Samples | None) -> tuple[np.ndarray, np.ndarray]:
+    """Return the extensions' angle offsets (N, n_axes) rad and length scale (N,).
+
+    ``samples`` gives what the terms depend on (temperature, motion); None builds it from the
+    readouts alone (row order as time order, no temperature).
+    """
+    if not params.extensions:
+        return np.zeros_like(q_read), np.ones(q_read.shape[0])
+    if samples is None or not samples.matches(q_read):
+        samples = Samples(arm, q_read)
+    return apply_terms(params.extensions, samples, arm.n_axes)
+
+
+def _scaled(pos: np.ndarray, scale: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Return positions scaled about the r-CS origin (at ``origin`` in the output frame)."""
+    return origin + scale[:, None] * (pos - origin)
+
+
 def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndarray,
-                                 frame: str = "mt") -> np.ndarray:
+                                 frame: str = "mt", offsets: np.ndarray | None = None
+                                 ) -> np.ndarray:
     """Return the identification model's configurations, shape (N, nq).
 
     Args:
@@ -68,6 +89,7 @@ def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndar
         params: DH values, tool, X0, translation and maps.
         readouts: encoder readouts, shape (N, n_axes), in rad.
         frame: ``"mt"`` to include the r-CS -> MT-CS transform, ``"r"`` for the r-CS.
+        offsets: further angle errors (extensions), shape (N, n_axes), rad.
     """
     if frame not in ("r", "mt"):
         raise ValueError(f"frame: choose 'r' or 'mt', got {frame!r}")
@@ -78,35 +100,42 @@ def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndar
         alpha, beta, gamma = params.rotation_abc
         q[:, ident.base_idx] = [*params.translation, beta, alpha, gamma]
     q[:, ident.axis_idx] = correct_readouts(q_read, params.encoder_maps)
+    if offsets is not None:
+        q[:, ident.axis_idx] += offsets
     q[:, ident.error_idx] = [params.dh.get(n, f.nominal) for n, f in
                              zip(arm.error_names, arm.error_frames)]
     q[:, ident.tool_idx] = params.tool
     return q
 
 
-def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r"
-                     ) -> np.ndarray:
+def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r",
+                     samples: Samples | None = None) -> np.ndarray:
     """Return stylus sphere centres for N readouts, shape (N, 3), in m.
 
     Args:
         arm: the arm.
-        params: calibrated parameters (maps, DH values, tool, and X0 for the MT-CS).
+        params: calibrated parameters (maps, DH values, tool, X0 for the MT-CS, extensions).
         readouts: encoder readouts, shape (N, n_axes), in rad.
         frame: ``"r"`` (r-CS, the arm's own frame) or ``"mt"`` (the R-Test's MT-CS).
+        samples: temperature and motion of the samples, for extensions that need them.
     """
     ident = arm.identification
     model, data, fid = ident.model, ident.data, ident.stylus_frame
-    q = identification_configuration(arm, params, readouts, frame)
+    q_read = _readouts_2d(readouts, arm)
+    offsets, scale = extension_effects(arm, params, q_read, samples)
+    q = identification_configuration(arm, params, q_read, frame, offsets)
     out = np.empty((q.shape[0], 3))
     forward, update = pin.forwardKinematics, pin.updateFramePlacement  # bound once: hot loop
     for i, qi in enumerate(q):
         forward(model, data, qi)
         out[i] = update(model, data, fid).translation
+    if params.extensions:
+        out = _scaled(out, scale, params.translation if frame == "mt" else np.zeros(3))
     return out
 
 
-def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "mt"
-                     ) -> StylusJacobians:
+def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "mt",
+                     samples: Samples | None = None) -> StylusJacobians:
     """Return stylus centres and their analytic Jacobians for N readouts.
 
     Args:
@@ -114,10 +143,13 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         params: parameters at which to linearise.
         readouts: encoder readouts, shape (N, n_axes), in rad.
         frame: ``"mt"`` (MT-CS, with X0 and translation) or ``"r"`` (r-CS).
+        samples: temperature and motion of the samples, for extensions that need them.
     """
     ident = arm.identification
     model, data, fid = ident.model, ident.data, ident.stylus_frame
-    q = identification_configuration(arm, params, readouts, frame)
+    q_read = _readouts_2d(readouts, arm)
+    offsets, scale = extension_effects(arm, params, q_read, samples)
+    q = identification_configuration(arm, params, q_read, frame, offsets)
     n = q.shape[0]
     pos = np.empty((n, 3))
     jac = np.empty((n, 6, model.nv))
@@ -126,7 +158,11 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         jac[i] = frame_jacobian(model, data, qi, fid, _WORLD)
         pos[i] = placements[fid].translation
     jac = jac[:, :3]
-    q_read = _readouts_2d(readouts, arm)
+    if params.extensions:  # every length scaled about the r-CS origin: all but the translation
+        origin = params.translation if frame == "mt" else np.zeros(3)
+        pos = _scaled(pos, scale, origin)
+        jac = jac * scale[:, None, None]
+        jac[:, :, ident.base_idx[:3]] /= scale[:, None, None]
     angles = jac[:, :, ident.axis_idx]
     slope = np.ones_like(q_read)
     for axis in params.encoder_maps:
@@ -144,18 +180,28 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     )
 
 
-def predict(arm: Arm, params: Parameters, readouts: np.ndarray) -> np.ndarray:
+def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples | None = None
+            ) -> np.ndarray:
     """Return stylus centres in the r-CS for N readouts with the *runtime* model, shape (N, 3), m.
 
     This is what a robotics stack does with a calibrated arm: wrap the readouts with the encoder
-    maps, then run forward kinematics of the URDF whose error frames hold the calibrated values.
+    maps (and the angle terms of the extensions), then run forward kinematics of the URDF whose
+    error frames hold the calibrated values (and scale by a thermal term, if any).
+
+    Args:
+        arm: the nominal arm.
+        params: calibrated parameters.
+        readouts: encoder readouts, shape (N, n_axes), in rad.
+        samples: temperature and motion of the samples, for extensions that need them.
     """
     model = arm.runtime_model(params.dh, params.tool)
     data = model.createData()
     fid = model.getFrameId(arm.stylus_link)
-    q = correct_readouts(_readouts_2d(readouts, arm), params.encoder_maps)
+    q_read = _readouts_2d(readouts, arm)
+    offsets, scale = extension_effects(arm, params, q_read, samples)
+    q = correct_readouts(q_read, params.encoder_maps) + offsets
     out = np.empty((q.shape[0], 3))
     for i, qi in enumerate(q):
         pin.forwardKinematics(model, data, qi)
         out[i] = pin.updateFramePlacement(model, data, fid).translation
-    return out
+    return out * scale[:, None]

@@ -6,7 +6,10 @@
      "dh": {"dx21": 0.0, ...},                 # every error frame of the arm, m or rad
      "tool": [x, y, z],                        # tool vector in the last axis' frame, m
      "base_to_mt": {"rotation_abc": [alpha0, beta0, gamma0], "translation": [x, y, z]},
-     "encoder_maps": {"step_deg": 5.0, "axes": {"1": [72 values, rad], ...}}}
+     "encoder_maps": {"step_deg": 5.0, "axes": {"1": [72 values, rad], ...}},
+     "extensions": {"compliance[A2]": [k], "thermal": [alpha], ...}}   # optional, SI
+
+Extensions are terms of the effect library (:mod:`aacmm_pin.effects`) added by discovery.
 
 Missing maps mean zero error. The r-CS -> MT-CS transform is
 ``p_mt = D_b(beta0) D_a(alpha0) D_c(gamma0) p_r + translation`` (paper Eq. 4). Keys this file does
@@ -52,6 +55,8 @@ class Parameters:
     """Axis number (1-based) -> encoder error map; axes not listed have zero error."""
     step_deg: float = DEFAULT_STEP_DEG
     """Node step of the maps, in degrees."""
+    extensions: dict[str, np.ndarray] = field(default_factory=dict)
+    """Effect-library term key (e.g. ``compliance[A2]``) -> its parameter values (SI)."""
     extra: dict[str, Any] = field(default_factory=dict)
     """Top-level keys of the file that this class does not interpret, kept as read."""
 
@@ -62,6 +67,8 @@ class Parameters:
                 raise ValueError(f"{name}: needs 3 values, got {value.size}")
             object.__setattr__(self, name, value)
         object.__setattr__(self, "dh", {k: float(v) for k, v in self.dh.items()})
+        object.__setattr__(self, "extensions", {k: np.array(v, dtype=float).reshape(-1)
+                                                for k, v in self.extensions.items()})
         for axis, emap in self.encoder_maps.items():
             if emap.step_deg != self.step_deg:
                 raise ValueError(f"encoder_maps: axis {axis} has step {emap.step_deg} deg, "
@@ -96,11 +103,13 @@ class Parameters:
             "encoder_maps": {"step_deg": self.step_deg,
                              "axes": {str(k): self.encoder_maps[k].values.tolist()
                                       for k in sorted(self.encoder_maps)}},
+            **({"extensions": {k: v.tolist() for k, v in self.extensions.items()}}
+               if self.extensions else {}),
             **self.extra,
         }
 
 
-_KNOWN = ("arm", "units", "dh", "tool", "base_to_mt", "encoder_maps")
+_KNOWN = ("arm", "units", "dh", "tool", "base_to_mt", "encoder_maps", "extensions")
 
 
 def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parameters:
@@ -163,12 +172,39 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                 maps[int(key)] = EncoderMap(np.asarray(values, dtype=float), float(step))
             except (TypeError, ValueError) as exc:
                 bad(f"encoder_maps.axes.{key}", str(exc))
+    extensions = _extensions(data.get("extensions") or {}, bad)
     if problems:
         raise FileFormatError(problems)
     return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, rotation_abc=rot,
-                      translation=trans, encoder_maps=maps,
+                      translation=trans, encoder_maps=maps, extensions=extensions,
                       step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
                       extra={k: v for k, v in data.items() if k not in _KNOWN})
+
+
+def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
+    """Return the checked ``extensions`` entries; report bad ones through ``bad(key, reason)``."""
+    from aacmm_pin.effects import term_from_key
+
+    if not isinstance(data, dict):
+        bad("extensions", "must be an object of term: [values]")
+        return {}
+    out = {}
+    for key, values in data.items():
+        try:
+            term = term_from_key(key)
+        except KeyError:
+            bad(f"extensions.{key}", "not a term of the effect library (e.g. compliance[A2], "
+                "thermal, backlash[A3], crosstalk[A2<-A3], encoder_harmonic[A4], rtest)")
+            continue
+        try:
+            arr = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            arr = np.zeros(0)
+        if arr.size != len(term.names) or not np.all(np.isfinite(arr)):
+            bad(f"extensions.{key}", f"needs {len(term.names)} finite numbers, got {values!r}")
+            continue
+        out[key] = arr
+    return out
 
 
 def read_parameters(path: str | Path) -> Parameters:
@@ -214,5 +250,10 @@ def check_against_arm(params: Parameters, arm: Arm) -> None:
     problems += [Problem(params.arm, None, f"encoder_maps.axes.{k}",
                          f"the arm has axes 1..{arm.n_axes}")
                  for k in params.encoder_maps if not 1 <= k <= arm.n_axes]
+    from aacmm_pin.effects import term_from_key
+
+    problems += [Problem(params.arm, None, f"extensions.{k}", f"the arm has axes 1..{arm.n_axes}")
+                 for k in params.extensions
+                 if any(not 1 <= a <= arm.n_axes for a in term_from_key(k).axes)]
     if problems:
         raise FileFormatError(problems)

@@ -101,8 +101,13 @@ class TrueArm:
         self._model = arm.runtime_model(truth.dh, truth.tool)
         self._data = self._model.createData()
 
-    def angle_offsets(self, q_readout: np.ndarray, t_order: np.ndarray | None = None) -> np.ndarray:
-        """Return the joint angle errors of the effects beyond the maps, shape (N, n_axes), rad."""
+    def angle_offsets(self, q_readout: np.ndarray, direction: np.ndarray | None = None
+                      ) -> np.ndarray:
+        """Return the joint angle errors of the effects beyond the maps, shape (N, n_axes), rad.
+
+        ``direction`` (N, n_axes) is each axis' direction of motion (backlash); None takes it from
+        consecutive rows of ``q_readout``.
+        """
         cfg, out = self.config, np.zeros_like(q_readout)
         if "compliance" in cfg.effects:
             for i, q in enumerate(q_readout):
@@ -110,16 +115,18 @@ class TrueArm:
                 for axis, k in cfg.compliance.items():
                     out[i, axis - 1] += k * tau[axis - 1]
         if "backlash" in cfg.effects:
-            direction = np.sign(np.diff(q_readout, axis=0, prepend=q_readout[:1]))
+            if direction is None:
+                direction = motion_direction(q_readout)
             for axis, half in cfg.backlash.items():
                 out[:, axis - 1] += half * direction[:, axis - 1]
         return out
 
-    def _position_jacobian(self, q_readout: np.ndarray, temp: np.ndarray | None
-                           ) -> tuple[np.ndarray, np.ndarray]:
+    def _position_jacobian(self, q_readout: np.ndarray, temp: np.ndarray | None,
+                           direction: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Return true r-CS positions (N, 3) and d(position)/d(readouts) (N, 3, n_axes)."""
-        jac = stylus_jacobians(self.arm, self.truth, q_readout + self.angle_offsets(q_readout),
-                               frame="r")
+        offsets = self.angle_offsets(q_readout, np.zeros_like(q_readout) if direction is None
+                                     else direction)
+        jac = stylus_jacobians(self.arm, self.truth, q_readout + offsets, frame="r")
         pos = jac.position
         if "thermal" in self.config.effects and temp is not None:
             pos = pos * (1.0 + self.config.thermal_alpha * (temp - 20.0))[:, None]
@@ -142,18 +149,35 @@ class TrueArm:
 
         Random starts within the joint limits (or within ``starts``, shape (n_axes, 2), rad, to
         favour a posture family), damped Newton steps projected on the limits, restarts for the
-        samples that do not reach the target to 1e-12 m.
+        samples that do not reach the target to 1e-12 m. With backlash, the postures are found
+        without it, then refined from there with the directions of motion of that sequence.
         """
+        q = self._solve_ik(targets, rng, temp, iterations, starts, None, None)
+        if "backlash" not in self.config.effects:
+            return q
+        for _ in range(3):  # directions follow the sequence; a few passes until they settle
+            direction = motion_direction(q)
+            q = self._solve_ik(targets, rng, temp, iterations, starts, direction, q)
+            if np.array_equal(motion_direction(q), direction):
+                break
+        return q
+
+    def _solve_ik(self, targets: np.ndarray, rng: np.random.Generator, temp: np.ndarray | None,
+                  iterations: int, starts: np.ndarray | None, direction: np.ndarray | None,
+                  q_init: np.ndarray | None) -> np.ndarray:
         lim = self.arm.joint_limits
         box = lim if starts is None else np.clip(starts, lim[:, :1], lim[:, 1:])
         q = np.empty((targets.shape[0], self.arm.n_axes))
         todo = np.arange(targets.shape[0])
-        for _attempt in range(100):
+        for attempt in range(100):
             qs = rng.uniform(box[:, 0], box[:, 1], size=(todo.size, self.arm.n_axes))
+            if attempt == 0 and q_init is not None:
+                qs = q_init.copy()
             active = np.arange(todo.size)
             for _ in range(iterations):
                 sel = todo[active]
-                pos, jac = self._position_jacobian(qs[active], None if temp is None else temp[sel])
+                pos, jac = self._position_jacobian(qs[active], None if temp is None else temp[sel],
+                                                   None if direction is None else direction[sel])
                 err = targets[sel] - pos
                 moving = np.linalg.norm(err, axis=1) > 1e-12
                 active, err, jac = active[moving], err[moving], jac[moving]
@@ -171,6 +195,11 @@ class TrueArm:
                 return q
         raise AacmmError(f"IK found no posture within the joint limits for {todo.size} targets, "
                          f"e.g. {targets[todo[0]].round(4).tolist()} m")
+
+
+def motion_direction(q: np.ndarray) -> np.ndarray:
+    """Return the sign of each axis' motion since the previous row, shape (N, n_axes) (0 first)."""
+    return np.sign(np.diff(q, axis=0, prepend=q[:1]))
 
 
 def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -> Parameters:
@@ -279,6 +308,12 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
         if temp is not None:
             temp_all.append(temp)
     n_spat = sum(len(c) for c in loc_col)
+    if "backlash" in config.effects:  # directions run on across locations: the sphere follows
+        q_cat = np.concatenate(q_all)
+        sphere_new = true_arm.positions(q_cat, np.concatenate(temp_all) if thermal else None, "mt")
+        split = np.cumsum([len(q) for q in q_all])[:-1]
+        disp_all = [d - s + n for d, s, n in zip(disp_all, sphere_all, np.split(sphere_new, split))]
+        sphere_all = np.split(sphere_new, split)
     spat = SpatLog(location=np.concatenate(loc_col), q=np.concatenate(q_all),
                    displacement=np.concatenate(disp_all),
                    t=np.arange(n_spat) * 0.1 if ("backlash" in config.effects or thermal) else None,
@@ -288,15 +323,21 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
     sockets = {k + 1: s for k, s in enumerate(_bar_sockets(rng, config.bar_placements))}
     placement, socket, q_bar = [], [], []
     t_bar: list[np.ndarray] = []
+    targets = []
     for k, by_socket in sockets.items():
         for name, pos in by_socket.items():
             n = config.samples_per_socket
             temp = temps(n)
-            q_bar.append(true_arm.solve_ik(np.tile(pos, (n, 1)), rng, temp))
+            targets.append(np.tile(pos, (n, 1)))
+            if "backlash" not in config.effects:
+                q_bar.append(true_arm.solve_ik(targets[-1], rng, temp))
             placement.append(np.full(n, k))
             socket += [name] * n
             if temp is not None:
                 t_bar.append(temp)
+    if "backlash" in config.effects and targets:  # one motion sequence over the whole bar log
+        q_bar = [true_arm.solve_ik(np.concatenate(targets), rng,
+                                   np.concatenate(t_bar) if thermal else None)]
     lengthbar = None if not q_bar else LengthBarLog(
         placement=np.concatenate(placement), socket=np.array(socket),
         q=np.radians(np.round(np.degrees(np.concatenate(q_bar)), 9)),

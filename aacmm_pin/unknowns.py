@@ -2,7 +2,9 @@
 
 Vector layout (paper Eq. 5-6, with the reference-sample differencing replaced by an unknown
 translation): ``[alpha0, beta0, gamma0, mt_x, mt_y, mt_z, <error frames>, tool_x, tool_y, tool_z,
-<free nodes of map 1>, <free nodes of map 2>, ...]``. Any entry can be held fixed at its start value.
+<extension terms' parameters>, <free nodes of map 1>, <free nodes of map 2>, ...]``. Any entry can be
+held fixed at its start value. Extension terms come from the effect library
+(:mod:`aacmm_pin.effects`); ``samples`` gives what they depend on for the identification's readouts.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from aacmm_pin.arm import Arm
+from aacmm_pin.effects import Samples, Term
 from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
@@ -39,19 +42,34 @@ class Unknowns:
     """Axes whose maps are estimated (empty for the DH-only model)."""
     free: np.ndarray
     """Mask over the full layout: True where the entry is estimated, shape (n_full,)."""
+    terms: tuple[Term, ...] = ()
+    """Extension terms (angle, scale or measurement kind) whose parameters are estimated."""
+    samples: Samples | None = field(default=None, compare=False)
+    """Temperature, motion and R-Test displacement of the identification's samples."""
     _cache: Any = field(default=None, init=False, repr=False, compare=False)
 
     @classmethod
-    def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...]) -> Unknowns:
+    def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...],
+             terms: tuple[Term, ...] = (), samples: Samples | None = None) -> Unknowns:
         """Return the layout with every parameter and every node of ``map_axes`` free."""
-        n = 6 + len(arm.error_names) + 3 + sum(start.map(a).n_nodes for a in map_axes)
-        return cls(arm, start, tuple(map_axes), np.ones(n, dtype=bool))
+        n = (6 + len(arm.error_names) + 3 + sum(len(t.names) for t in terms)
+             + sum(start.map(a).n_nodes for a in map_axes))
+        return cls(arm, start, tuple(map_axes), np.ones(n, dtype=bool), tuple(terms), samples)
 
     # ------------------------------------------------------------ names and slices
     @property
+    def n_terms(self) -> int:
+        """Number of extension parameters in the full layout."""
+        return sum(len(t.names) for t in self.terms)
+
+    @property
     def n_dense(self) -> int:
-        """Number of non-map entries in the full layout (X0, translation, DH, tool)."""
-        return 6 + len(self.arm.error_names) + 3
+        """Number of non-map entries in the full layout (X0, translation, DH, tool, extensions)."""
+        return 6 + len(self.arm.error_names) + 3 + self.n_terms
+
+    def with_free(self, free: np.ndarray) -> Unknowns:
+        """Return the same layout with another free mask."""
+        return Unknowns(self.arm, self.start, self.map_axes, free, self.terms, self.samples)
 
     def map_slice(self, axis: int) -> slice:
         """Slice of one map's nodes in the full layout."""
@@ -67,6 +85,7 @@ class Unknowns:
     def full_names(self) -> list[str]:
         """Names of every entry of the full layout."""
         names = [*BASE_NAMES, *self.arm.error_names, *TOOL_NAMES]
+        names += [n for t in self.terms for n in t.names]
         for a in self.map_axes:
             names += [node_name(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
         return names
@@ -78,13 +97,14 @@ class Unknowns:
 
     def with_fixed(self, fixed: np.ndarray) -> Unknowns:
         """Return a layout in which the entries of the full-layout mask ``fixed`` are held."""
-        return Unknowns(self.arm, self.start, self.map_axes, self.free & ~fixed)
+        return self.with_free(self.free & ~fixed)
 
     # ------------------------------------------------------------ vector <-> parameters
     def full_vector(self, params: Parameters) -> np.ndarray:
         """Return every entry of the full layout for these parameters."""
         parts = [params.rotation_abc, params.translation,
                  np.array([params.dh[n] for n in self.arm.error_names]), params.tool]
+        parts += [params.extensions.get(t.key, np.zeros(len(t.names))) for t in self.terms]
         parts += [params.map(a).values for a in self.map_axes]
         return np.concatenate(parts)
 
@@ -100,15 +120,43 @@ class Unknowns:
         maps = dict(self.start.encoder_maps)
         for a in self.map_axes:
             maps[a] = EncoderMap(full[self.map_slice(a)], self.start.step_deg)
+        extensions = dict(self.start.extensions)
+        at = 9 + n_err
+        for t in self.terms:
+            extensions[t.key] = full[at:at + len(t.names)]
+            at += len(t.names)
         return self.start.replace(
             rotation_abc=full[0:3], translation=full[3:6],
             dh=dict(zip(self.arm.error_names, full[6:6 + n_err])),
-            tool=full[6 + n_err:9 + n_err], encoder_maps=maps)
+            tool=full[6 + n_err:9 + n_err], encoder_maps=maps, extensions=extensions)
+
+    def _samples(self, q: np.ndarray) -> Samples | None:
+        return self.samples if self.samples is not None and self.samples.matches(q) else None
+
+    def measurement_shift(self, params: Parameters, q: np.ndarray) -> np.ndarray:
+        """Return the measurement terms' change of the modelled point, shape (N, 3), m."""
+        out = np.zeros((q.shape[0], 3))
+        samples = self._samples(q)
+        for t in self.terms:
+            if t.kind == "measurement" and samples is not None:
+                out += t.basis(samples) @ params.extensions[t.key]
+        return out
+
+    def term_columns(self, params: Parameters, q: np.ndarray, jac: Any) -> np.ndarray:
+        """Return d(model point)/d(extension parameters) at ``params``, shape (N, 3, n_terms).
+
+        ``jac`` are the stylus Jacobians at ``params`` (:func:`stylus_jacobians`).
+        """
+        samples = self._samples(q) or Samples(self.arm, q)
+        cols = [term_jacobian(t, samples, jac, params) for t in self.terms]
+        return np.concatenate(cols, axis=2) if cols else np.zeros((q.shape[0], 3, 0))
 
     # ------------------------------------------------------------ model
     def positions(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Return predicted MT-CS stylus centres for readouts q (N, n_axes), shape (N, 3), m."""
-        return stylus_positions(self.arm, self.parameters(x), q, frame="mt")
+        params = self.parameters(x)
+        pos = stylus_positions(self.arm, params, q, frame="mt", samples=self._samples(q))
+        return pos + self.measurement_shift(params, q) if self.terms else pos
 
     def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
         """Return predicted positions (N, 3) and d(positions)/d(free entries) as blocks.
@@ -120,9 +168,10 @@ class Unknowns:
         if cache is not None and cache[0] == key and cache[1] is q:
             return cache[2]
         params = self.parameters(x)
-        jac = stylus_jacobians(self.arm, params, q, frame="mt")
+        jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
-        dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool], axis=2)
+        dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool,
+                                self.term_columns(params, q, jac)], axis=2)
         dense = dense.reshape(3 * n, -1)[:, self.free[:self.n_dense]]
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, built straight in COO
         free_index = np.cumsum(self.free) - 1 - int(self.free[:self.n_dense].sum())
@@ -143,9 +192,30 @@ class Unknowns:
                                (np.concatenate(rows) if rows else np.zeros(0, int),
                                 np.concatenate(cols) if cols else np.zeros(0, int))),
                               shape=(3 * n, n_nodes))
-        out = (jac.position, BlockJacobian(dense, nodes))
+        position = jac.position + self.measurement_shift(params, q) if self.terms else jac.position
+        out = (position, BlockJacobian(dense, nodes))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
         return out
+
+
+def term_jacobian(term: Term, samples: Samples, jac: Any, params: Parameters) -> np.ndarray:
+    """Return d(model point)/d(term parameters), shape (N, 3, k), at ``params``.
+
+    Args:
+        term: an angle, scale or measurement term.
+        samples: the samples' temperature, motion and displacement.
+        jac: :class:`aacmm_pin.kinematics.StylusJacobians` in the MT-CS at ``params``.
+        params: the parameters (for the translation and the term's current scale).
+    """
+    basis = term.basis(samples)
+    if term.kind == "angle":
+        return jac.angles[:, :, term.axis - 1, None] * basis[:, None, :]
+    if term.kind == "scale":
+        scale = 1.0 + basis @ params.extensions.get(term.key, np.zeros(basis.shape[1]))
+        return ((jac.position - params.translation) / scale[:, None])[:, :, None] * basis[:, None, :]
+    if term.kind == "measurement":
+        return basis
+    raise ValueError(f"{term.key}: kind {term.kind!r} has no columns (maps are node columns)")
 
 
 @dataclass(frozen=True)

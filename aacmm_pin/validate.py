@@ -9,6 +9,7 @@ import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
+from aacmm_pin.effects import Samples
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import Parameters
@@ -64,7 +65,7 @@ def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResu
     log = campaign.lengthbar
     if log is None or not campaign.bar:
         raise AacmmError("the campaign has no length-bar data (lengthbar.csv and bar.csv)")
-    points = predict(arm, params, log.q)
+    points = predict(arm, params, log.q, Samples(arm, log.q, log.temp, log.t))
     placements = list(dict.fromkeys(int(k) for k in log.placement))
     pairs = list(campaign.bar)
     errors = np.full((len(placements), len(pairs)), np.nan)

@@ -1,0 +1,494 @@
+r"""Discovery of what a model is missing: score named effects on held-out data, add, refit, repeat.
+
+The loop (:func:`discover`):
+
+1. fit the current model (:func:`aacmm_pin.identify` with the current extension terms);
+2. linearise it at the solution and, for every candidate term of the effect library
+   (:mod:`aacmm_pin.effects`; one per axis where the effect is per-axis), fit the residuals with
+   the model's own directions plus the term's columns (each parameter with a Gaussian prior of its
+   plausible size, so terms the data cannot see are shrunk, not overfitted) and measure
+   * the held-out RMS: leave one R-Test location out, refit on the others, predict the left-out
+     SPAT (less its mean: its nest offset is unknown) and pool over the locations;
+   * an F test of the fit improvement against the noise level (Bonferroni over the candidates) and
+     the BIC change, with the term's effective number of parameters;
+3. the best term (largest held-out improvement) that is significant, improves the BIC and the
+   held-out RMS is named; further axes of the same effect join it while they stay significant
+   given the ones already in (forward selection); the model is refitted with them (nonlinear);
+4. stop when no candidate is significant: "nothing is missing".
+
+Held-out RMS after a step is measured on the refitted model, the length-bar error (when the campaign
+has one) by :func:`aacmm_pin.validate` with each model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+from scipy import stats
+from tqdm.auto import tqdm
+
+from aacmm_pin.arm import Arm, load_arm
+from aacmm_pin.campaign import Campaign
+from aacmm_pin.effects import LIBRARY, Samples, Term
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.identifiability import PLAUSIBLE
+from aacmm_pin.identify import Calibration, identify, spat_samples
+from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
+from aacmm_pin.unknowns import term_jacobian
+
+STARTS = ("dh", "proposed")
+ALPHA = 1e-3
+"""Family-wise false-discovery rate of one step's F tests (Bonferroni over the candidates)."""
+
+
+@dataclass(frozen=True)
+class Score:
+    """How much one candidate term (given the model) explains of the residuals."""
+
+    term: Term
+    """The candidate."""
+    n_parameters: int
+    """Number of parameters of the term."""
+    k_eff: float
+    """Effective number of parameters the data determines (trace of the term's hat matrix)."""
+    fit_rms: float
+    """Fit RMS with the term, m (linearised)."""
+    heldout_rms: float
+    """Leave-one-location-out RMS with the term, m (linearised)."""
+    heldout_gain: float
+    """Held-out SSR decrease over the noise variance (chi-square units); > 0 is better."""
+    p_value: float
+    """F test of the fit improvement (per candidate, before the Bonferroni correction)."""
+    bic_gain: float
+    """BIC decrease (positive: the term pays for its parameters)."""
+    significant: bool = False
+    """Whether it passes all tests of a step (set by the loop)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form (um)."""
+        return {"effect": self.term.effect, "axes": list(self.term.axes), "term": self.term.key,
+                "score": self.heldout_gain, "heldout_rms_um": self.heldout_rms * 1e6,
+                "fit_rms_um": self.fit_rms * 1e6, "p_value": self.p_value,
+                "bic_gain": self.bic_gain, "k_eff": self.k_eff, "significant": self.significant}
+
+
+class _Linearised:
+    """A calibration linearised at its solution, for scoring candidate terms on the residuals.
+
+    All in the identification's reduced coordinates (constraints met, columns preconditioned) with
+    a Gaussian prior of the plausible sizes on the arm directions (and the nest offsets' own prior
+    rows): held-out refits are then well posed even where one location alone saw a direction.
+    """
+
+    def __init__(self, cal: Calibration, samples: Samples):
+        problem = cal.problem
+        assert problem is not None and cal.unknowns is not None
+        z = problem.z(cal.x)
+        self.cal, self.samples = cal, samples
+        self.r = problem.fun(z)
+        self.jac = problem.jac(z, dense=True)
+        self.n_data = 3 * len(cal.location)
+        self.sigma = float(cal.sigma)
+        r_inv = np.linalg.lstsq(problem.t, problem.p, rcond=None)[0]
+        self.ridge = self.sigma ** 2 * (r_inv.T @ r_inv)
+        rows_loc = np.repeat(cal.location, 3)
+        self.groups = [np.flatnonzero(rows_loc == m) for m in np.unique(cal.location)]
+        self.prior_rows = np.arange(self.n_data, len(self.r))
+        self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
+                                                        samples.q, frame="mt", samples=samples)
+        self._base_grams: list[tuple[np.ndarray, np.ndarray]] | None = None
+        self.base = self.evaluate(np.zeros((len(self.r), 0)))
+        self._given: tuple[np.ndarray, dict[str, float]] | None = None
+
+    def columns(self, term: Term) -> np.ndarray:
+        """Return the term's columns, scaled by the plausible sizes, shape (rows, k)."""
+        if term.kind == "map":
+            emap = self.cal.parameters.map(term.axis)
+            weights = emap.weights(self.samples.q[:, term.axis - 1]).toarray()
+            weights = weights[:, np.abs(weights).sum(axis=0) > 0]
+            cols = self.stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :]
+            cols = cols * PLAUSIBLE["node"]
+        else:
+            cols = term_jacobian(term, self.samples, self.stylus, self.cal.parameters)
+            cols = cols * term.plausible
+        out = np.zeros((len(self.r), cols.shape[2]))
+        out[:self.n_data] = cols.reshape(self.n_data, -1)
+        return out
+
+    def evaluate(self, extra: np.ndarray) -> dict[str, float]:
+        """Fit the residuals with the model's directions plus ``extra`` columns (prior sigma^2).
+
+        Returns fit SSR, held-out SSR and rows, the effective parameter count of ``extra``.
+        """
+        jac, r, k = self.jac, self.r, extra.shape[1]
+        p = jac.shape[1]
+        ridge = sla.block_diag(self.ridge, self.sigma ** 2 * np.eye(k))
+
+        if self._base_grams is None:  # the model's own blocks, shared by every candidate
+            self._base_grams = [(jac[g].T @ jac[g], jac[g].T @ r[g])
+                                for g in [*self.groups, self.prior_rows]]
+
+        def gram(rows: np.ndarray, base: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+            e = extra[rows]
+            cross = jac[rows].T @ e
+            return (np.block([[base[0], cross], [cross.T, e.T @ e]]),
+                    np.concatenate([base[1], e.T @ r[rows]]))
+
+        grams = [gram(g, b) for g, b in zip(self.groups, self._base_grams)]
+        g_prior, b_prior = gram(self.prior_rows, self._base_grams[-1])
+        g_all = sum((g for g, _ in grams), g_prior)
+        b_all = sum((b for _, b in grams), b_prior)
+
+        def solve(g: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return -sla.solve(g + ridge, b, assume_a="pos")
+
+        def residual(rows: np.ndarray, d: np.ndarray) -> np.ndarray:
+            return r[rows] + jac[rows] @ d[:p] + extra[rows] @ d[p:]
+
+        d_all = solve(g_all, b_all)
+        fit_ssr = float(np.sum(residual(np.arange(self.n_data), d_all) ** 2))
+        held = 0.0
+        for rows, (g, b) in zip(self.groups, grams):
+            e = residual(rows, solve(g_all - g, b_all - b)).reshape(-1, 3)
+            held += float(np.sum((e - e.mean(axis=0)) ** 2))
+        k_eff = 0.0
+        if k:
+            schur = g_all[p:, p:] - g_all[p:, :p] @ sla.solve(g_all[:p, :p] + self.ridge,
+                                                             g_all[:p, p:], assume_a="pos")
+            eig = np.clip(np.linalg.eigvalsh(schur), 0.0, None)
+            k_eff = float(np.sum(eig / (eig + self.sigma ** 2)))
+        return {"fit_ssr": fit_ssr, "held_ssr": held, "k_eff": k_eff}
+
+    def score(self, term: Term, given: np.ndarray | None = None) -> tuple[Score, np.ndarray]:
+        """Return the score of ``term`` (added to the model and the ``given`` columns)."""
+        base_cols = np.zeros((len(self.r), 0)) if given is None else given
+        if given is None:
+            base = self.base
+        elif self._given is not None and self._given[0] is given:
+            base = self._given[1]
+        else:
+            base = self.evaluate(base_cols)
+            self._given = (given, base)
+        cols = self.columns(term)
+        both = np.hstack([base_cols, cols])
+        new = self.evaluate(both)
+        k_eff = max(new["k_eff"] - base["k_eff"], 1e-9)
+        dof = max(self.n_data - self.jac.shape[1] - new["k_eff"], 1.0)
+        var = new["fit_ssr"] / dof
+        gain = base["fit_ssr"] - new["fit_ssr"]
+        f_stat = max(gain, 0.0) / k_eff / var
+        n_held = self.n_data
+        return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff,
+                     fit_rms=float(np.sqrt(new["fit_ssr"] / self.n_data)),
+                     heldout_rms=float(np.sqrt(new["held_ssr"] / n_held)),
+                     heldout_gain=float((base["held_ssr"] - new["held_ssr"]) / var),
+                     p_value=float(stats.f.sf(f_stat, k_eff, dof)),
+                     bic_gain=float(gain / var - k_eff * np.log(self.n_data))), both
+
+    @property
+    def heldout_rms(self) -> float:
+        """Leave-one-location-out RMS of the model itself, m."""
+        return float(np.sqrt(self.base["held_ssr"] / self.n_data))
+
+    def view(self, term: Term) -> tuple[str, np.ndarray]:
+        """Return a label and the residual of every sample seen along the term's direction.
+
+        Angle terms: the residual as an angle error of the term's axis (arcsec, least squares on
+        d(position)/d(angle)); scale terms: along the r-CS radius (um); measurement terms: along the
+        R-Test displacement (um).
+        """
+        res = self.cal.fun
+        if term.kind in ("angle", "map"):
+            j = self.stylus.angles[:, :, term.axis - 1]
+            angle = np.sum(j * res, axis=1) / np.maximum(np.sum(j * j, axis=1), 1e-30)
+            return f"A{term.axis} angle residual (arcsec)", np.degrees(angle) * 3600
+        if term.kind == "scale":
+            radial = self.stylus.position - self.cal.parameters.translation
+            radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+            return "radial residual (um)", np.sum(res * radial, axis=1) * 1e6
+        disp = self.samples.displacement
+        unit = np.zeros_like(res) if disp is None else disp / np.maximum(
+            np.linalg.norm(disp, axis=1, keepdims=True), 1e-12)
+        return "residual along the displacement (um)", np.sum(res * unit, axis=1) * 1e6
+
+
+@dataclass
+class Step:
+    """One named effect: what was added and how the gap changed."""
+
+    effect: str
+    terms: list[Term]
+    description: str
+    fit_rms_before: float
+    fit_rms_after: float
+    heldout_rms_before: float
+    heldout_rms_after: float
+    bar_rms_before: float | None
+    bar_rms_after: float | None
+    score: Score
+    runners_up: list[Score]
+    values: dict[str, float]
+    views: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    """Per term: variable label and values, residual label, residuals before and after (figures)."""
+
+    @property
+    def axes(self) -> list[int]:
+        """Axes named (sorted), empty for arm-wide effects."""
+        return sorted({a for t in self.terms for a in t.axes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the step as in ``discovery.json`` (um)."""
+        forms = sorted({"map" if t.kind == "map" else "harmonic" for t in self.terms})
+        out: dict[str, Any] = {
+            "effect": self.effect, "axes": self.axes, "terms": [t.key for t in self.terms],
+            "description": self.description,
+            "fit_rms_before_um": self.fit_rms_before * 1e6,
+            "fit_rms_after_um": self.fit_rms_after * 1e6,
+            "heldout_rms_before_um": self.heldout_rms_before * 1e6,
+            "heldout_rms_after_um": self.heldout_rms_after * 1e6,
+            "score": self.score.heldout_gain, "p_value": self.score.p_value,
+            "bic_gain": self.score.bic_gain, "k_eff": self.score.k_eff,
+            "runners_up": [s.to_dict() for s in self.runners_up],
+            "values": self.values,
+        }
+        if self.effect == "encoder":
+            out["form"] = forms
+        if self.bar_rms_before is not None:
+            out["bar_rms_before_um"] = self.bar_rms_before * 1e6
+            out["bar_rms_after_um"] = (self.bar_rms_after or 0.0) * 1e6
+        return out
+
+
+@dataclass
+class Discovery:
+    """Result of :func:`discover`."""
+
+    start: str
+    steps: list[Step]
+    missing: list[dict[str, Any]]
+    stopped_because: str
+    calibration: Calibration
+    """The final model's calibration (write it with :func:`aacmm_pin.write_calibration`)."""
+    start_calibration: Calibration
+    heldout_rms: list[float]
+    """Held-out RMS of the start model and after every step, m."""
+    fit_rms: list[float]
+    bar_rms: list[float | None]
+    noise: float
+    """Noise level (sigma per coordinate) of the final model, m."""
+    n_candidates: list[int]
+    runtime_s: float
+
+    @property
+    def named(self) -> list[tuple[str, list[int]]]:
+        """(effect, axes) of every step, in order."""
+        return [(s.effect, s.axes) for s in self.steps]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the ``discovery.json`` content."""
+        cal = self.calibration
+        return {
+            "start": self.start, "steps": [s.to_dict() for s in self.steps],
+            "missing": self.missing, "stopped_because": self.stopped_because,
+            "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
+                    "fit_rms_um": [v * 1e6 for v in self.fit_rms],
+                    "bar_rms_um": [None if v is None else v * 1e6 for v in self.bar_rms]},
+            "final": {"extensions": sorted(cal.parameters.extensions),
+                      "map_axes": list(cal.unknowns.map_axes) if cal.unknowns else [],
+                      "noise_um": self.noise * 1e6},
+            "candidates_scored": self.n_candidates, "runtime_s": self.runtime_s,
+            "library": {name: e.description for name, e in LIBRARY.items()},
+        }
+
+
+def _bar_rms(arm: Arm, cal: Calibration, campaign: Campaign) -> float | None:
+    from aacmm_pin.validate import validate
+
+    if campaign.lengthbar is None or not campaign.bar:
+        return None
+    return validate(arm, cal.parameters, campaign).rms
+
+
+def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: bool) -> bool:
+    if term.effect == "rtest":  # the measured displacement is used, or not
+        return use_rtest
+    if term.kind == "map":  # a map may replace a harmonic term of its axis
+        return term.axis in map_axes
+    if term.effect == "encoder":
+        return term.axis in map_axes or any(t.effect == "encoder" and t.axes == term.axes
+                                            for t in terms)
+    return any(t.key == term.key for t in terms)
+
+
+def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
+             effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
+             alpha: float = ALPHA, progress: bool = False) -> Discovery:
+    """Find the effects the ``start`` model is missing on a campaign, add them and refit.
+
+    Args:
+        campaign: SPAT campaign (with ``temp_c`` / ``t_s`` columns where the effects need them;
+            a length bar, when present, is reported before and after every step).
+        arm: the arm (default: the embedded default arm).
+        start: ``"dh"`` (DH errors, tool) or ``"proposed"`` (also every axis' encoder map).
+        effects: names of library effects to try (default: all of :data:`aacmm_pin.effects.LIBRARY`).
+        use_rtest: whether the start model uses each sample's R-Test displacement.
+        max_steps: most effects to add.
+        alpha: family-wise false-discovery rate of a step's significance test.
+        progress: show progress bars.
+
+    Returns:
+        The steps, the final calibration and why the loop stopped.
+
+    Raises:
+        ValueError: for an unknown start or effect name.
+        IdentificationError: if the campaign cannot be identified (see :func:`identify`).
+    """
+    if start not in STARTS:
+        raise ValueError(f"start: choose from {', '.join(STARTS)}, got {start!r}")
+    names = list(LIBRARY) if effects is None else list(effects)
+    if unknown := [n for n in names if n not in LIBRARY]:
+        raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(LIBRARY)}")
+    tic = time.perf_counter()
+    arm = arm or load_arm()
+    samples = spat_samples(campaign, arm)
+    map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
+    terms: list[Term] = []
+
+    def fit() -> Calibration:
+        cal = identify(campaign, arm, model="proposed" if map_axes else "dh", use_rtest=use_rtest,
+                       map_axes=tuple(map_axes) or None, extensions=tuple(terms))
+        if not cal.success:
+            raise AacmmError(f"discovery: the fit with {', '.join(t.key for t in terms) or start} "
+                             f"did not converge: {cal.message}")
+        return cal
+
+    cal = first = fit()
+    lin = _Linearised(cal, samples)
+    steps: list[Step] = []
+    held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [_bar_rms(arm, cal, campaign)]
+    n_candidates: list[int] = []
+    stopped, missing = "", []
+    bar = tqdm(total=max_steps, desc="discover", unit="step", disable=not progress, leave=False)
+    for _ in range(max_steps):
+        candidates = [t for n in names if not LIBRARY[n].in_start
+                      for t in LIBRARY[n].candidates(arm, samples)
+                      if not _in_model(t, terms, map_axes, use_rtest)]
+        n_candidates.append(len(candidates))
+        if not candidates:
+            stopped = "every effect of the library is in the model"
+            break
+        threshold = alpha / len(candidates)
+        scores = [lin.score(t)[0] for t in candidates]
+        scores = [_mark(s, threshold) for s in scores]
+        scores.sort(key=lambda s: -s.heldout_gain)
+        good = [s for s in scores if s.significant]
+        if not good:
+            best = scores[0]
+            stopped = (f"no candidate is significant against the noise "
+                       f"({lin.sigma * 1e6:.2f} um): the best, {best.term.key}, changes the held-out "
+                       f"RMS by {(best.heldout_rms - lin.heldout_rms) * 1e6:+.3f} um, "
+                       f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
+                       f"{best.bic_gain:.1f}")
+            break
+        chosen = _forward(lin, good[0], [s.term for s in scores], threshold)
+        new_terms = [s.term for s in chosen]
+        map_axes += [t.axis for t in new_terms if t.kind == "map"]
+        terms = [t for t in terms if not (t.effect == "encoder" and t.axis in map_axes)]
+        terms += [t for t in new_terms if t.kind != "map" and t.effect != "rtest"]
+        use_rtest = use_rtest or any(t.effect == "rtest" for t in new_terms)
+        new_cal = fit()
+        new_lin = _Linearised(new_cal, samples)
+        views = []
+        for t in new_terms[:4]:
+            label, values = t.variable(samples)
+            res_label, before = lin.view(t)
+            views.append({"term": t.key, "variable": label, "x": values, "residual": res_label,
+                          "before": before, "after": new_lin.view(t)[1]})
+        effect = good[0].term.effect
+        step = Step(
+            effect=effect, terms=new_terms,
+            description="; ".join(t.describe() for t in new_terms),
+            fit_rms_before=cal.fit_rms, fit_rms_after=new_cal.fit_rms,
+            heldout_rms_before=lin.heldout_rms, heldout_rms_after=new_lin.heldout_rms,
+            bar_rms_before=bars[-1], bar_rms_after=_bar_rms(arm, new_cal, campaign),
+            score=good[0], runners_up=[s for s in scores if s.term.effect != effect][:5],
+            values={n: float(v) for t in new_terms if t.key in new_cal.parameters.extensions
+                    for n, v in zip(t.names, new_cal.parameters.extensions[t.key])},
+            views=views)
+        steps.append(step)
+        cal, lin = new_cal, new_lin
+        held.append(lin.heldout_rms)
+        fits.append(cal.fit_rms)
+        bars.append(step.bar_rms_after)
+        bar.update(1)
+    else:
+        candidates = [t for n in names if not LIBRARY[n].in_start
+                      for t in LIBRARY[n].candidates(arm, samples)
+                      if not _in_model(t, terms, map_axes, use_rtest)]
+        threshold = alpha / max(len(candidates), 1)
+        still = [_mark(lin.score(t)[0], threshold) for t in candidates]
+        missing = [s.to_dict() for s in sorted(still, key=lambda s: -s.heldout_gain) if s.significant]
+        stopped = (f"reached max_steps = {max_steps}" + (
+            f"; {len(missing)} candidates are still significant (see missing)" if missing else
+            "; nothing else is significant"))
+    bar.close()
+    return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
+                     calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
+                     bar_rms=bars, noise=cal.sigma, n_candidates=n_candidates,
+                     runtime_s=time.perf_counter() - tic)
+
+
+def _forward(lin: _Linearised, best: Score, candidates: list[Term], threshold: float
+             ) -> list[Score]:
+    """Return the best term and the further axes of its effect that are significant given it.
+
+    Forward selection on the linearised model over every candidate of the effect (one masked by a
+    larger error at the start may be significant once that is explained); an encoder map may
+    replace a harmonic term of the same axis (the map holds every harmonic its nodes resolve).
+    """
+    chosen = [best]
+    pool = [t for t in candidates if t.effect == best.term.effect and t != best.term]
+    while True:
+        given = np.hstack([lin.columns(c.term) for c in chosen])
+        taken = {c.term.axes: c.term for c in chosen}
+        pool = [t for t in pool if t.axes not in taken or (
+            t.kind == "map" and taken[t.axes].kind != "map")]
+        rescored = [s for s in (_mark(lin.score(t, given)[0], threshold) for t in pool)
+                    if s.significant]
+        if not rescored:
+            return chosen
+        nxt = max(rescored, key=lambda s: s.heldout_gain)
+        chosen = [c for c in chosen if c.term.axes != nxt.term.axes] + [nxt]
+        pool = [t for t in pool if t != nxt.term]
+
+
+def _mark(score: Score, threshold: float) -> Score:
+    """Return the score marked significant when it passes the F test, the BIC and the held-out."""
+    ok = score.p_value < threshold and score.bic_gain > 0 and score.heldout_gain > 0
+    return dataclasses.replace(score, significant=bool(ok))
+
+
+def write_discovery(result: Discovery, arm: Arm, folder: str | Path) -> Path:
+    """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
+
+    Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
+    the named effect's variable before and after), and the CALDIR files of
+    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...).
+    """
+    from aacmm_pin.discovery_figures import gap_figure, step_figure
+    from aacmm_pin.export import write_calibration
+
+    folder = Path(folder)
+    write_calibration(result.calibration, arm, folder)
+    (folder / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    gap_figure(result, folder / "discovery_gap.png")
+    for k, step in enumerate(result.steps, start=1):
+        step_figure(step, k, folder / f"discovery_step{k}.png")
+    return folder

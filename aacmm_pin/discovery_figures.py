@@ -1,0 +1,71 @@
+"""Figures of a discovery run: residuals against a named effect's variable, and the gap per step."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from aacmm_pin.plots import DPI, MODEL_COLOURS, _new_figure
+
+if TYPE_CHECKING:
+    from aacmm_pin.discover import Discovery, Step
+
+
+def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """Return bin centres and bin means of y over x (bins with >= 3 samples)."""
+    values = np.unique(x)
+    if values.size <= 3:  # a discrete variable (e.g. a direction of motion)
+        return values, np.array([y[x == v].mean() for v in values])
+    edges = np.linspace(x.min(), x.max(), bins + 1)
+    which = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
+    keep = [b for b in range(bins) if np.sum(which == b) >= 3]
+    return (0.5 * (edges[keep] + edges[np.array(keep) + 1]),
+            np.array([y[which == b].mean() for b in keep]))
+
+
+def step_figure(step: Step, k: int, path: str | Path) -> None:
+    """Write the residuals against each named term's variable, before and after step ``k``."""
+    views: list[dict[str, Any]] = step.views
+    fig = _new_figure(4.2 * max(len(views), 1), 3.4)
+    axes = fig.subplots(1, max(len(views), 1), squeeze=False)[0]
+    for ax, view in zip(axes, views):
+        x = np.asarray(view["x"], dtype=float)
+        for key, colour, label in (("before", MODEL_COLOURS[0], "before"),
+                                   ("after", MODEL_COLOURS[3], "after")):
+            y = np.asarray(view[key], dtype=float)
+            ax.plot(x, y, ".", ms=2, alpha=0.35, color=colour)
+            bx, by = _binned(x, y)
+            ax.plot(bx, by, "-o", ms=3, color=colour, label=f"{label} (bin means)")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(view["variable"])
+        ax.set_ylabel(view["residual"])
+        ax.set_title(view["term"], fontsize=9)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"step {k}: {step.effect} {step.axes or ''} - held-out RMS "
+                 f"{step.heldout_rms_before * 1e6:.2f} -> {step.heldout_rms_after * 1e6:.2f} um",
+                 fontsize=10)
+    fig.savefig(path, dpi=DPI)
+
+
+def gap_figure(result: Discovery, path: str | Path) -> None:
+    """Write the held-out RMS, fit RMS and length-bar RMS of the start model and every step."""
+    fig = _new_figure(6.4, 3.6)
+    ax = fig.subplots()
+    labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
+                                            for s in result.steps]
+    x = np.arange(len(labels))
+    ax.plot(x, np.array(result.heldout_rms) * 1e6, "-o", color=MODEL_COLOURS[2],
+            label="held-out RMS (leave one location out)")
+    ax.plot(x, np.array(result.fit_rms) * 1e6, "-s", color=MODEL_COLOURS[3], label="fit RMS")
+    if all(v is not None for v in result.bar_rms):
+        ax.plot(x, np.array(result.bar_rms, dtype=float) * 1e6, "-^", color=MODEL_COLOURS[4],
+                label="length-bar RMS")
+    ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8, label="noise (sigma)")
+    ax.set_xticks(x, labels, rotation=15, fontsize=8)
+    ax.set_ylabel("um")
+    ax.set_yscale("log")
+    ax.set_title(f"gap per step; stopped: {result.stopped_because[:70]}", fontsize=8)
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=DPI)

@@ -1,0 +1,418 @@
+r"""The effect library: named extensions of the arm model, for :func:`aacmm_pin.discover`.
+
+An *effect* (:class:`Effect`) is a physical cause of measurement error with a plain-language
+description; it proposes *terms* (:class:`Term`), one per axis where the effect is per-axis, each
+with a few parameters, their plausible sizes and the Jacobian of the model with respect to them.
+Terms are linear in their parameters and act in one of four ways (:attr:`Term.kind`):
+
+* ``"angle"``: an error of the true angle of one axis,
+  :math:`\Delta\theta_n = B(\text{samples}) \, v` with a basis B of shape (N, k);
+* ``"scale"``: a uniform scale of every length of the arm (r-CS positions times
+  :math:`1 + B v`);
+* ``"measurement"``: a change of the *measured* point (R-Test), not of the arm;
+* ``"map"``: the paper's encoder error map of one axis (its nodes are the parameters).
+
+Built-in effects: ``encoder`` (map or low-order harmonics), ``compliance`` (gravity torque from the
+URDF inertias by Pinocchio's generalized gravity), ``thermal`` (``temp_c``), ``backlash`` (direction
+of motion), ``crosstalk`` (angle of a neighbouring axis), ``rtest`` (the sphere moving in its seat)
+and ``tool`` (in every start model). Register your own with :func:`register_effect` (and
+:func:`register_term` so that ``parameters.json`` can name its terms).
+
+Calibrated values of the terms live in ``Parameters.extensions`` (``parameters.json``
+``"extensions": {"compliance[A2]": [k], ...}``, SI units) and are applied by
+:func:`aacmm_pin.stylus_positions` and :func:`aacmm_pin.predict`.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from aacmm_pin.arm import Arm
+from aacmm_pin.errors import AacmmError
+
+ARCSEC = np.pi / 180 / 3600
+REFERENCE_TEMPERATURE_C = 20.0
+"""ISO 1 reference temperature, deg C: the thermal term is zero there."""
+
+
+class Samples:
+    """What effects may depend on, per sample: readouts, temperature, time, motion, gravity.
+
+    Args:
+        arm: the arm (its URDF inertias give the gravity torques).
+        q: encoder readouts, shape (N, n_axes), rad.
+        temp: arm temperature, shape (N,), deg C, or None.
+        t: time stamps, shape (N,), s, or None (row order is then the time order).
+        displacement: R-Test displacement less its location's mean, shape (N, 3), m, or None.
+    """
+
+    def __init__(self, arm: Arm, q: np.ndarray, temp: np.ndarray | None = None,
+                 t: np.ndarray | None = None, displacement: np.ndarray | None = None):
+        self.arm = arm
+        self.q = np.atleast_2d(np.asarray(q, dtype=float))
+        self.temp = None if temp is None else np.asarray(temp, dtype=float)
+        self.t = None if t is None else np.asarray(t, dtype=float)
+        self.displacement = displacement
+        self._gravity: np.ndarray | None = None
+        self._direction: np.ndarray | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return int(self.q.shape[0])
+
+    def matches(self, q: np.ndarray) -> bool:
+        """Whether these samples describe readouts ``q`` (same array or same values)."""
+        return q is self.q or (q.shape == self.q.shape and bool(np.array_equal(q, self.q)))
+
+    @property
+    def gravity(self) -> np.ndarray:
+        """Gravity torque on every axis at the readouts, shape (N, n_axes), N m.
+
+        Pinocchio's generalized gravity of the nominal runtime model (URDF inertias, gravity along
+        -z of the r-CS); the torque an axis' joint must hold, so a compliant joint deflects by
+        ``k * torque``.
+        """
+        if self._gravity is None:
+            model = self.arm.runtime_model()
+            data = model.createData()
+            self._gravity = np.array([pin.computeGeneralizedGravity(model, data, qi)[:self.arm.n_axes]
+                                      for qi in self.q]).reshape(self.n, self.arm.n_axes)
+        return self._gravity
+
+    @property
+    def direction(self) -> np.ndarray:
+        """Sign of each axis' motion since the previous sample (time order), shape (N, n_axes).
+
+        The first sample (and an axis at rest) gets 0.
+        """
+        if self._direction is None:
+            order = np.argsort(self.t, kind="stable") if self.t is not None else np.arange(self.n)
+            step = np.diff(self.q[order], axis=0, prepend=self.q[order][:1])
+            out = np.empty_like(step)
+            out[order] = np.sign(step)
+            self._direction = out
+        return self._direction
+
+
+@dataclass(frozen=True, eq=False)
+class Term:
+    """One extension of the model: a few parameters, linear in their effect (see module doc).
+
+    Terms are equal when their keys are. Build them with the constructors below (e.g.
+    :func:`compliance`) or your own; ``basis_of`` and ``variable_of`` should be module-level
+    functions or ``functools.partial`` of them, so that calibrations pickle.
+    """
+
+    key: str
+    """Unique name, e.g. ``compliance[A2]`` (the key in ``parameters.json``)."""
+    effect: str
+    """Name of the effect this term belongs to."""
+    kind: str
+    """``"angle"``, ``"scale"``, ``"measurement"`` or ``"map"``."""
+    names: tuple[str, ...]
+    """Names of the parameters, e.g. ``compliance[A2].k``."""
+    plausible: tuple[float, ...]
+    """Plausible size of every parameter (SI): the scale of its prior."""
+    description: str
+    """Plain-language description."""
+    basis_of: Callable[[Samples], np.ndarray] = field(repr=False)
+    """Samples -> basis: (N, k) for angle and scale terms, (N, 3, k) for measurement terms."""
+    variable_of: Callable[[Samples], tuple[str, np.ndarray]] = field(repr=False)
+    """Samples -> (label with unit, per-sample values) of the term's variable (figures)."""
+    axes: tuple[int, ...] = ()
+    """Axes the term acts on (empty for arm-wide terms); an angle term changes ``axes[0]``."""
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Term) and other.key == self.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    @property
+    def axis(self) -> int:
+        """The axis whose angle an ``angle`` or ``map`` term changes (1-based)."""
+        return self.axes[0]
+
+    def basis(self, samples: Samples) -> np.ndarray:
+        """Return the basis on these samples (see :attr:`basis_of`)."""
+        return self.basis_of(samples)
+
+    def variable(self, samples: Samples) -> tuple[str, np.ndarray]:
+        """Return the label and per-sample values of the term's variable."""
+        return self.variable_of(samples)
+
+    def describe(self) -> str:
+        """Return the plain-language description."""
+        return self.description
+
+
+def _readout(axis: int, samples: Samples) -> tuple[str, np.ndarray]:
+    return f"A{axis} readout (deg)", np.degrees(samples.q[:, axis - 1])
+
+
+def _no_basis(samples: Samples) -> np.ndarray:
+    return np.zeros((samples.n, 0))
+
+
+def _harmonics(axis: int, order: int, samples: Samples) -> np.ndarray:
+    theta = samples.q[:, axis - 1]
+    return np.column_stack([f(h * theta) for h in range(1, order + 1) for f in (np.cos, np.sin)])
+
+
+def _gravity(axis: int, samples: Samples) -> np.ndarray:
+    return samples.gravity[:, axis - 1:axis]
+
+
+def _gravity_variable(axis: int, samples: Samples) -> tuple[str, np.ndarray]:
+    return f"gravity torque on A{axis} (N m)", samples.gravity[:, axis - 1]
+
+
+def _temperature(samples: Samples) -> np.ndarray:
+    if samples.temp is None:
+        raise AacmmError("the model has a thermal term: the readouts need a temp_c column")
+    return (samples.temp - REFERENCE_TEMPERATURE_C)[:, None]
+
+
+def _temperature_variable(samples: Samples) -> tuple[str, np.ndarray]:
+    return "arm temperature (deg C)", _temperature(samples)[:, 0] + REFERENCE_TEMPERATURE_C
+
+
+def _direction(axis: int, samples: Samples) -> np.ndarray:
+    return samples.direction[:, axis - 1:axis]
+
+
+def _direction_variable(axis: int, samples: Samples) -> tuple[str, np.ndarray]:
+    return f"A{axis} direction of motion", samples.direction[:, axis - 1]
+
+
+def _neighbour(source: int, samples: Samples) -> np.ndarray:
+    theta = samples.q[:, source - 1]
+    return np.column_stack([np.cos(theta), np.sin(theta)])
+
+
+def _displacement(samples: Samples) -> np.ndarray:
+    out = np.zeros((samples.n, 3, 3))
+    if samples.displacement is not None:
+        for c in range(3):
+            out[:, c, c] = -samples.displacement[:, c]  # residual = model - measured
+    return out
+
+
+def _displacement_variable(samples: Samples) -> tuple[str, np.ndarray]:
+    disp = samples.displacement if samples.displacement is not None else np.zeros((samples.n, 3))
+    return "R-Test displacement from its mean (um)", np.linalg.norm(disp, axis=1) * 1e6
+
+
+def encoder_map(axis: int) -> Term:
+    """The paper's encoder error map of one axis (its nodes are the parameters, in the maps)."""
+    return Term(f"encoder_map[A{axis}]", "encoder", "map", (), (),
+                f"angular position measurement error of axis A{axis}: an error that depends on the "
+                f"A{axis} angle (encoder map, nodes every few degrees)",
+                _no_basis, partial(_readout, axis), (axis,))
+
+
+def encoder_harmonic(axis: int, order: int = 3) -> Term:
+    """Encoder error of one axis as harmonics 1..order of its angle (for sparse data)."""
+    key = f"encoder_harmonic[A{axis}]"
+    return Term(key, "encoder", "angle",
+                tuple(f"{key}.{f}{h}" for h in range(1, order + 1) for f in ("cos", "sin")),
+                (20 * ARCSEC,) * (2 * order),
+                f"angular position measurement error of axis A{axis}: harmonics 1..{order} of the "
+                f"A{axis} angle", partial(_harmonics, axis, order), partial(_readout, axis), (axis,))
+
+
+def compliance(axis: int) -> Term:
+    """Gravity-induced deflection of one joint: ``k * gravity torque`` (k in rad per N m)."""
+    key = f"compliance[A{axis}]"
+    return Term(key, "compliance", "angle", (f"{key}.k",), (1e-5,),  # 20 arcsec at 10 N m
+                f"gravity compliance of joint A{axis}: the arm's own weight bends it by k x the "
+                f"gravity torque on A{axis} (torque from the URDF inertias)",
+                partial(_gravity, axis), partial(_gravity_variable, axis), (axis,))
+
+
+def thermal() -> Term:
+    """Uniform thermal expansion of every length: scale ``1 + alpha (T - 20 deg C)``."""
+    return Term("thermal", "thermal", "scale", ("thermal.alpha",), (2.3e-5,),
+                "thermal expansion: every length of the arm scales with its temperature "
+                "(1 + alpha (T - 20 deg C))", _temperature, _temperature_variable)
+
+
+def backlash(axis: int) -> Term:
+    """Direction-dependent angular error of one axis: ``+-half`` by the direction of motion."""
+    key = f"backlash[A{axis}]"
+    return Term(key, "backlash", "angle", (f"{key}.half",), (10 * ARCSEC,),
+                f"backlash of axis A{axis}: an angular error whose sign follows the direction in "
+                f"which A{axis} last moved", partial(_direction, axis),
+                partial(_direction_variable, axis), (axis,))
+
+
+def crosstalk(axis: int, source: int) -> Term:
+    """Angular error of one axis depending on a neighbouring axis' angle (first harmonic)."""
+    key = f"crosstalk[A{axis}<-A{source}]"
+    return Term(key, "crosstalk", "angle", (f"{key}.cos", f"{key}.sin"), (10 * ARCSEC,) * 2,
+                f"crosstalk: the A{axis} angle reads wrong by an amount that depends on the "
+                f"A{source} angle (e.g. bearing or encoder runout coupled across axes)",
+                partial(_neighbour, source), partial(_readout, source), (axis, source))
+
+
+def rtest() -> Term:
+    """The stylus moving in its seat: the R-Test displacement enters with a gain per coordinate.
+
+    With the displacement ignored (``use_rtest=False``) the gains come out near 1.
+    """
+    return Term("rtest", "rtest", "measurement", ("rtest.gain_x", "rtest.gain_y", "rtest.gain_z"),
+                (1.0, 1.0, 1.0), "the stylus sphere moves in its seat: the R-Test's measured "
+                "displacement must be added to the nest position (Eq. 3)",
+                _displacement, _displacement_variable)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A named physical effect and how it proposes terms for an arm and its samples."""
+
+    name: str
+    """Name, e.g. ``"compliance"``."""
+    description: str
+    """Plain-language description."""
+    candidates: Callable[[Arm, Samples], list[Term]]
+    """Return the terms worth trying on these samples (one per axis for per-axis effects)."""
+    in_start: bool = False
+    """Whether every start model already has it (e.g. the tool vector)."""
+
+
+def _varies(values: np.ndarray, tol: float) -> bool:
+    return bool(values.size and np.ptp(values) > tol)
+
+
+def _encoder(arm: Arm, s: Samples) -> list[Term]:
+    out: list[Term] = []
+    for a in range(1, arm.n_axes + 1):
+        if _varies(s.q[:, a - 1], np.radians(1.0)):
+            out += [encoder_map(a), encoder_harmonic(a)]
+    return out
+
+
+def _compliance(arm: Arm, s: Samples) -> list[Term]:
+    return [compliance(a) for a in range(1, arm.n_axes + 1) if _varies(s.gravity[:, a - 1], 1e-2)]
+
+
+def _thermal(arm: Arm, s: Samples) -> list[Term]:
+    return [thermal()] if s.temp is not None and _varies(s.temp, 0.05) else []
+
+
+def _backlash(arm: Arm, s: Samples) -> list[Term]:
+    d = s.direction
+    return [backlash(a) for a in range(1, arm.n_axes + 1)
+            if (d[:, a - 1] > 0).sum() >= 3 and (d[:, a - 1] < 0).sum() >= 3]
+
+
+def _crosstalk(arm: Arm, s: Samples) -> list[Term]:
+    return [crosstalk(a, b) for a in range(1, arm.n_axes + 1) for b in (a - 1, a + 1)
+            if 1 <= b <= arm.n_axes and _varies(s.q[:, b - 1], np.radians(5.0))
+            and _varies(s.q[:, a - 1], np.radians(1.0))]
+
+
+def _rtest(arm: Arm, s: Samples) -> list[Term]:
+    disp = s.displacement
+    return [rtest()] if disp is not None and np.abs(disp).max(initial=0.0) > 0 else []
+
+
+LIBRARY: dict[str, Effect] = {}
+"""Registered effects by name (built-ins first); :func:`register_effect` adds more."""
+_TERMS: dict[str, Callable[[str], Term | None]] = {}
+
+
+def register_effect(effect: Effect) -> None:
+    """Add (or replace) an effect of the library."""
+    LIBRARY[effect.name] = effect
+
+
+def register_term(parse: Callable[[str], Term | None], name: str) -> None:
+    """Register a parser from a ``parameters.json`` key to a term (None if not its key)."""
+    _TERMS[name] = parse
+
+
+def term_from_key(key: str) -> Term:
+    """Return the term a ``parameters.json`` extensions key names.
+
+    Raises:
+        KeyError: if no registered term has this key.
+    """
+    for parse in _TERMS.values():
+        term = parse(key)
+        if term is not None:
+            return term
+    raise KeyError(key)
+
+
+def _axis_key(key: str, prefix: str) -> int | None:
+    match = re.fullmatch(rf"{re.escape(prefix)}\[A(\d+)\]", key)
+    return int(match.group(1)) if match else None
+
+
+def _cross_parse(key: str) -> Term | None:
+    match = re.fullmatch(r"crosstalk\[A(\d+)<-A(\d+)\]", key)
+    return crosstalk(int(match.group(1)), int(match.group(2))) if match else None
+
+
+def _axis_parser(prefix: str, cls: Callable[[int], Term]) -> Callable[[str], Term | None]:
+    def parse(key: str) -> Term | None:
+        axis = _axis_key(key, prefix)
+        return None if axis is None else cls(axis)
+    return parse
+
+
+for _name, _description, _candidates in (
+        ("encoder", "angular position measurement error of an axis (encoder map or harmonics)",
+         _encoder),
+        ("compliance", "gravity-induced joint deflection: k x gravity torque (URDF inertias)",
+         _compliance),
+        ("thermal", "thermal expansion of the arm's lengths with the temp_c column", _thermal),
+        ("backlash", "direction-dependent angular error of an axis", _backlash),
+        ("crosstalk", "angular error of an axis that depends on a neighbouring axis' angle",
+         _crosstalk),
+        ("rtest", "the stylus moving in its seat (measured R-Test displacement)", _rtest)):
+    register_effect(Effect(_name, _description, _candidates))
+register_effect(Effect("tool", "stylus/tool vector error (part of every start model)",
+                       lambda arm, s: [], in_start=True))
+register_term(_axis_parser("encoder_harmonic", encoder_harmonic), "encoder_harmonic")
+register_term(_axis_parser("compliance", compliance), "compliance")
+register_term(_axis_parser("backlash", backlash), "backlash")
+register_term(_cross_parse, "crosstalk")
+register_term(lambda key: thermal() if key == "thermal" else None, "thermal")
+register_term(lambda key: rtest() if key == "rtest" else None, "rtest")
+
+
+def terms_of(extensions: dict[str, Any]) -> list[Term]:
+    """Return the terms named by a parameters' extensions (keys of ``Parameters.extensions``)."""
+    return [term_from_key(k) for k in extensions]
+
+
+def apply_terms(extensions: dict[str, np.ndarray], samples: Samples, n_axes: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the angle offsets (N, n_axes) rad and the length scale (N,) of the extensions.
+
+    Measurement terms change the measured point, not the arm: they are left out here.
+    """
+    offsets = np.zeros((samples.n, n_axes))
+    scale = np.ones(samples.n)
+    for key, values in extensions.items():
+        term = term_from_key(key)
+        if term.kind == "angle":
+            offsets[:, term.axis - 1] += term.basis(samples) @ np.asarray(values, dtype=float)
+        elif term.kind == "scale":
+            scale += term.basis(samples) @ np.asarray(values, dtype=float)
+    return offsets, scale
+
+
+def effect_names(terms: Iterable[Term]) -> list[str]:
+    """Return the distinct effect names of some terms, in order."""
+    return list(dict.fromkeys(t.effect for t in terms))
