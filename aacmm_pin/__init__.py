@@ -10,6 +10,7 @@ from aacmm_pin.campaign import (
     write_campaign,
     write_points,
 )
+from aacmm_pin.discovery import Discovery, discover, write_discovery
 from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles
 from aacmm_pin.errors import (
     AacmmError,
@@ -32,7 +33,7 @@ from aacmm_pin.viewer import View, view
 __version__ = "0.1.0"
 
 __all__ = [
-    "Calibration", "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
+    "Calibration", "Discovery", "discover", "write_discovery", "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
     "identify", "measured_positions", "monte_carlo", "plan", "View", "view",
     "validate", "write_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",

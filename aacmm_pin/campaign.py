@@ -407,11 +407,25 @@ def read_readouts(path: str | Path) -> np.ndarray:
     Raises:
         CampaignFormatError: listing every problem in the q columns, with line and column.
     """
+    return read_readout_columns(path)[0]
+
+
+def read_readout_columns(path: str | Path
+                         ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Read encoder readouts and, when present, the ``temp_c`` and ``t_s`` columns.
+
+    Returns:
+        ``(q, temp, t)``: readouts (N, n) rad, temperature (N,) deg C or None, time (N,) s or None.
+
+    Raises:
+        CampaignFormatError: listing every problem in these columns, with line and column.
+    """
     problems: list[Problem] = []
-    table = _read_table(Path(path), (), True, (), problems, others_allowed=True)
+    table = _read_table(Path(path), (), True, _OPTIONAL, problems, others_allowed=True)
     if problems or table is None:
         raise CampaignFormatError(problems)
-    return _matrix(table, _q_names(table.n_axes), math.pi / 180.0)
+    fields = _log_fields(table)
+    return fields["q"], fields["temp"], fields["t"]
 
 
 def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:

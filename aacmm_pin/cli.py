@@ -33,14 +33,16 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_readouts, write_points
+    from aacmm_pin.campaign import read_readout_columns, write_points
+    from aacmm_pin.effects import Samples
     from aacmm_pin.kinematics import predict
     from aacmm_pin.parameters import check_against_arm, read_parameters
 
     params = read_parameters(args.params)
     arm = load_arm(args.arm or params.arm)
     check_against_arm(params, arm)
-    points = predict(arm, params, read_readouts(args.readouts))
+    q, temp, t = read_readout_columns(args.readouts)
+    points = predict(arm, params, q, Samples(arm, q, temp, t))
     write_points(args.out, points)
     print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS) to {args.out}")
     return 0
@@ -75,6 +77,34 @@ def _print_calibration(cal: object, out: Path) -> None:
           f"{cal.runtime_s:.1f} s -> {out}")
     for line in cal.unidentifiable:
         print(f"  not identifiable: {line}")
+
+
+def _discover(args: argparse.Namespace) -> int:
+    from aacmm_pin.arm import load_arm
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.discovery import discover, write_discovery
+
+    arm = load_arm(args.arm)
+    effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
+                                                 if e.strip()]
+    result = discover(read_campaign(args.campaign), arm, args.start, effects=effects,
+                      use_rtest=not args.no_rtest, max_steps=args.max_steps,
+                      progress=sys.stderr.isatty())
+    write_discovery(result, arm, args.out)
+    held = result.heldout_rms
+    print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
+          f"{result.fit_rms[0] * 1e6:.2f} um")
+    for k, step in enumerate(result.steps, start=1):
+        axes = f" on {', '.join(f'A{a}' for a in step.axes)}" if step.axes else ""
+        print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
+              f"{step.heldout_rms_after * 1e6:.2f} um, fit RMS {step.fit_rms_before * 1e6:.2f} -> "
+              f"{step.fit_rms_after * 1e6:.2f} um")
+    if not result.steps:
+        print("nothing is missing")
+    print(f"stopped: {result.stopped_because}")
+    print(f"wrote {args.out / 'discovery.json'}, figures and the final model (CALDIR) "
+          f"in {args.out} ({result.runtime_s:.1f} s)")
+    return 0
 
 
 def _validate(args: argparse.Namespace) -> int:
@@ -223,6 +253,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=float, default=5.0, help="map node step (default 5)")
     p.set_defaults(handler=_identify)
+
+    p = sub.add_parser("discover", help="find what a model is missing: name the effect, add it, "
+                                        "show the held-out gap shrink")
+    p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("--start", choices=("dh", "proposed"), default="dh",
+                   help="start model: dh (DH errors, tool; default) or proposed (also encoder maps)")
+    p.add_argument("--effects", default=None,
+                   help="comma-separated library effects to try (default: all)")
+    p.add_argument("--no-rtest", action="store_true",
+                   help="start without the R-Test displacements (location means)")
+    p.add_argument("--max-steps", type=int, default=6, help="most effects to add (default 6)")
+    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
+    p.add_argument("--out", type=Path, default=Path("discovery"),
+                   help="output folder: discovery.json, figures, final CALDIR (default discovery)")
+    p.set_defaults(handler=_discover)
 
     p = sub.add_parser("validate", help="length-bar errors of a calibration (paper Fig. 9)")
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")

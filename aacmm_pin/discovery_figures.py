@@ -10,7 +10,7 @@ import numpy as np
 from aacmm_pin.plots import DPI, MODEL_COLOURS, _new_figure
 
 if TYPE_CHECKING:
-    from aacmm_pin.discover import Discovery, Step
+    from aacmm_pin.discovery import Discovery, Step
 
 
 def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, np.ndarray]:
