@@ -33,7 +33,8 @@ from aacmm_pin.viewer import View, view
 __version__ = "0.1.0"
 
 __all__ = [
-    "Calibration", "Discovery", "discover", "write_discovery", "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
+    "Calibration", "Discovery", "discover", "write_discovery",
+    "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
     "identify", "measured_positions", "monte_carlo", "plan", "View", "view",
     "validate", "write_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",

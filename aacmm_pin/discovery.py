@@ -34,6 +34,7 @@ import scipy.linalg as sla
 from scipy import stats
 from tqdm.auto import tqdm
 
+from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import LIBRARY, Samples, Term
@@ -45,7 +46,7 @@ from aacmm_pin.unknowns import term_jacobian
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
-"""Family-wise false-discovery rate of one step's F tests (Bonferroni over the candidates)."""
+"""Family-wise error rate of one step's F tests (Bonferroni over the candidates)."""
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,7 @@ class _Linearised:
         self.ridge = self.sigma ** 2 * (r_inv.T @ r_inv)
         rows_loc = np.repeat(cal.location, 3)
         self.groups = [np.flatnonzero(rows_loc == m) for m in np.unique(cal.location)]
+        self.n_held = self.n_data - 3 * len(self.groups)  # each left-out SPAT less its mean
         self.prior_rows = np.arange(self.n_data, len(self.r))
         self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
                                                         samples.q, frame="mt", samples=samples)
@@ -184,7 +186,7 @@ class _Linearised:
         var = new["fit_ssr"] / dof
         gain = base["fit_ssr"] - new["fit_ssr"]
         f_stat = max(gain, 0.0) / k_eff / var
-        n_held = self.n_data
+        n_held = self.n_held
         return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff,
                      fit_rms=float(np.sqrt(new["fit_ssr"] / self.n_data)),
                      heldout_rms=float(np.sqrt(new["held_ssr"] / n_held)),
@@ -195,7 +197,7 @@ class _Linearised:
     @property
     def heldout_rms(self) -> float:
         """Leave-one-location-out RMS of the model itself, m."""
-        return float(np.sqrt(self.base["held_ssr"] / self.n_data))
+        return float(np.sqrt(self.base["held_ssr"] / self.n_held))
 
     def view(self, term: Term) -> tuple[str, np.ndarray]:
         """Return a label and the residual of every sample seen along the term's direction.
@@ -340,7 +342,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         effects: names of library effects to try (default: all of :data:`aacmm_pin.effects.LIBRARY`).
         use_rtest: whether the start model uses each sample's R-Test displacement.
         max_steps: most effects to add.
-        alpha: family-wise false-discovery rate of a step's significance test.
+        alpha: family-wise error rate of a step's significance tests (Bonferroni).
         progress: show progress bars.
 
     Returns:
@@ -355,6 +357,12 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     names = list(LIBRARY) if effects is None else list(effects)
     if unknown := [n for n in names if n not in LIBRARY]:
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(LIBRARY)}")
+    with single_threaded_blas():  # many small products: threads only spin
+        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, progress)
+
+
+def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
+              max_steps: int, alpha: float, progress: bool) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
     samples = spat_samples(campaign, arm)
@@ -406,7 +414,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         new_cal = fit()
         new_lin = _Linearised(new_cal, samples)
         views = []
-        for t in new_terms[:4]:
+        for t in sorted(new_terms, key=lambda t: t.axes)[:4]:
             label, values = t.variable(samples)
             res_label, before = lin.view(t)
             views.append({"term": t.key, "variable": label, "x": values, "residual": res_label,
@@ -432,6 +440,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         candidates = [t for n in names if not LIBRARY[n].in_start
                       for t in LIBRARY[n].candidates(arm, samples)
                       if not _in_model(t, terms, map_axes, use_rtest)]
+        n_candidates.append(len(candidates))
         threshold = alpha / max(len(candidates), 1)
         still = [_mark(lin.score(t)[0], threshold) for t in candidates]
         missing = [s.to_dict() for s in sorted(still, key=lambda s: -s.heldout_gain) if s.significant]

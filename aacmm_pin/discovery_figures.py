@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -65,7 +66,8 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
     ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8, label="noise (sigma)")
     ax.set_xticks(x, labels, rotation=15, fontsize=8)
     ax.set_ylabel("um")
-    ax.set_yscale("log")
-    ax.set_title(f"gap per step; stopped: {result.stopped_because[:70]}", fontsize=8)
+    ax.set_ylim(0.0, None)
+    ax.set_title("gap per step (stopped: " + "\n".join(textwrap.wrap(result.stopped_because, 90))
+                 + ")", fontsize=7)
     ax.legend(fontsize=7)
     fig.savefig(path, dpi=DPI)

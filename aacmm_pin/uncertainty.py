@@ -85,15 +85,9 @@ def _trial_batch(cal: Calibration, base: np.ndarray, location: np.ndarray, use_r
     BLAS runs single-threaded here: a trial's small products gain nothing from threads, and
     spinning BLAS threads of several workers on few cores slow everything down many times.
     """
-    import contextlib
-    import threading
+    from aacmm_pin._blas import single_threaded_blas
 
-    from threadpoolctl import threadpool_limits
-
-    # the limit is process-wide: set it only from a main thread (serial, or a worker process),
-    # never from threads of a thread pool, which would undo each other's limits
-    main = threading.current_thread() is threading.main_thread()
-    with threadpool_limits(limits=1) if main else contextlib.nullcontext():
+    with single_threaded_blas():
         x, ok = _trials(cal, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
         lengths = None
         if campaign is not None and campaign.lengthbar is not None and campaign.bar:

@@ -1,0 +1,81 @@
+"""Discovery time: one `discover` against one `identify` of its start model on the same campaign.
+
+Run: ``python benchmarks/discover.py`` (a minute or two; writes its section of BENCHMARKS.md).
+Paper-sized campaigns (4 locations x 200 SPAT samples, 7 bar placements, seed 0): the proposed
+start on a campaign with gravity compliance added to the default effects, the DH start on the
+default effects (DH, encoder, R-Test). Median of 3 runs each, identify and discover alternating.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from aacmm_pin import discover, identify, load_arm, simulate_campaign  # noqa: E402
+from aacmm_pin.simulate import DEFAULT_EFFECTS, SimulationConfig  # noqa: E402
+from benchmarks._report import machine, write_section  # noqa: E402
+
+REPEAT = 3
+SPREAD = 1.5
+"""Max/min time ratio above which the section notes the spread (a busy machine)."""
+
+
+def timed(f):
+    """Return the wall time of one call and its result."""
+    tic = time.perf_counter()
+    out = f()
+    return time.perf_counter() - tic, out
+
+
+def main() -> None:
+    arm = load_arm()
+    cases = [("proposed", "default + compliance", (*DEFAULT_EFFECTS, "compliance")),
+             ("dh", "default (dh, encoder, rtest)", DEFAULT_EFFECTS)]
+    rows, spread = [], []
+    for start, label, effects in cases:
+        camp = simulate_campaign(arm, SimulationConfig(seed=0, effects=effects,
+                                                       samples_per_location=200)).campaign
+        identify(camp, arm, model=start)  # warm-up
+        t_id, t_disc, result = [], [], None
+        for _ in range(REPEAT):
+            dt, _cal = timed(lambda: identify(camp, arm, model=start))
+            t_id.append(dt)
+            dt, result = timed(lambda: discover(camp, arm, start=start))
+            t_disc.append(dt)
+        for name, times in (("identify", t_id), ("discover", t_disc)):
+            if max(times) / min(times) > SPREAD:
+                spread.append(f"{name} from `{start}`: {min(times):.2f} to {max(times):.2f} s")
+        named = ", ".join(f"{s.effect} ({', '.join(f'A{a}' for a in s.axes) or 'arm-wide'})"
+                          for s in result.steps) or "nothing"
+        med_id, med_disc = float(np.median(t_id)), float(np.median(t_disc))
+        rows.append(f"| `{start}` | {label} | {med_id:.2f} | {med_disc:.2f} | "
+                    f"{med_disc / med_id:.1f}x | {len(result.steps)} | "
+                    f"{sum(result.n_candidates)} ({' + '.join(map(str, result.n_candidates))}) | "
+                    f"{named} | {result.heldout_rms[0] * 1e6:.2f} -> "
+                    f"{result.heldout_rms[-1] * 1e6:.2f} |")
+    note = ("" if not spread else
+            "\n\nLarge spread between the runs (max/min > " + f"{SPREAD}" + "; the 2 cores may have "
+            "been shared with another process): " + "; ".join(spread) + ".")
+    table = "\n".join(rows)
+    body = f"""## Discovery (`python benchmarks/discover.py`)
+
+{machine()}. Simulated paper-sized campaigns (4 locations x 200 SPAT samples, 7 length-bar
+placements, seed 0). Baseline: one `identify` of the start model (`model=start`, with the R-Test)
+on the same campaign; `discover(campaign, arm, start=...)` fits the start model, scores every
+candidate term of the effect library on held-out data, refits with each named effect and stops
+when nothing is significant (times include the length-bar validation of every model). Median of
+{REPEAT} runs each.
+
+| start | simulated effects | identify (s) | discover (s) | discover / identify | steps | \
+candidates scored (per step) | named | held-out RMS (um) |
+|---|---|---|---|---|---|---|---|---|
+{table}{note}"""
+    write_section("discover", body)
+
+
+if __name__ == "__main__":
+    main()
