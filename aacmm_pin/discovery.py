@@ -41,6 +41,7 @@ from aacmm_pin.effects import LIBRARY, Samples, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identifiability import PLAUSIBLE
 from aacmm_pin.identify import Calibration, identify, spat_samples
+from aacmm_pin.identify import _check as check_campaign
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.unknowns import term_jacobian
 
@@ -89,6 +90,7 @@ class _Linearised:
     """
 
     def __init__(self, cal: Calibration, samples: Samples):
+        self.offset = np.zeros(0)
         problem = cal.problem
         assert problem is not None and cal.unknowns is not None
         z = problem.z(cal.x)
@@ -97,8 +99,15 @@ class _Linearised:
         self.jac = problem.jac(z, dense=True)
         self.n_data = 3 * len(cal.location)
         self.sigma = float(cal.sigma)
+        # prior of the plausible sizes on the arm directions (y = plausible-scaled null-space
+        # coordinates, z = R y), centred at the start values, not at this fit: a left-out
+        # location's refit must not keep what only that location determined; the nest offsets
+        # have their own prior rows in the residual already
         r_inv = np.linalg.lstsq(problem.t, problem.p, rcond=None)[0]
-        self.ridge = self.sigma ** 2 * (r_inv.T @ r_inv)
+        n_arm_y = problem.t.shape[1] - problem.n_loc
+        arm_rows = r_inv[:n_arm_y]
+        self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
+        self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
         rows_loc = np.repeat(cal.location, 3)
         self.groups = [np.flatnonzero(rows_loc == m) for m in np.unique(cal.location)]
         self.n_held = self.n_data - 3 * len(self.groups)  # each left-out SPAT less its mean
@@ -147,6 +156,7 @@ class _Linearised:
         g_prior, b_prior = gram(self.prior_rows, self._base_grams[-1])
         g_all = sum((g for g, _ in grams), g_prior)
         b_all = sum((b for _, b in grams), b_prior)
+        b_all[:p] += self.offset
 
         def solve(g: np.ndarray, b: np.ndarray) -> np.ndarray:
             return -sla.solve(g + ridge, b, assume_a="pos")
@@ -315,7 +325,10 @@ def _bar_rms(arm: Arm, cal: Calibration, campaign: Campaign) -> float | None:
 
     if campaign.lengthbar is None or not campaign.bar:
         return None
-    return validate(arm, cal.parameters, campaign).rms
+    try:
+        return validate(arm, cal.parameters, campaign).rms
+    except AacmmError:  # e.g. a thermal term and no temp_c in lengthbar.csv
+        return None
 
 
 def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: bool) -> bool:
@@ -365,6 +378,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
               max_steps: int, alpha: float, progress: bool) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
+    check_campaign(campaign, arm)
     samples = spat_samples(campaign, arm)
     map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
     terms: list[Term] = []
@@ -390,7 +404,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                       if not _in_model(t, terms, map_axes, use_rtest)]
         n_candidates.append(len(candidates))
         if not candidates:
-            stopped = "every effect of the library is in the model"
+            stopped = ("no candidate to try: every effect asked for is in the model or has no "
+                       "term these data can show")
             break
         threshold = alpha / len(candidates)
         scores = [lin.score(t)[0] for t in candidates]

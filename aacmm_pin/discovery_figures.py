@@ -22,7 +22,9 @@ def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, n
     edges = np.linspace(x.min(), x.max(), bins + 1)
     which = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
     keep = [b for b in range(bins) if np.sum(which == b) >= 3]
-    return (0.5 * (edges[keep] + edges[np.array(keep) + 1]),
+    if not keep:
+        return np.zeros(0), np.zeros(0)
+    return (0.5 * (edges[np.array(keep, dtype=int)] + edges[np.array(keep, dtype=int) + 1]),
             np.array([y[which == b].mean() for b in keep]))
 
 

@@ -74,32 +74,43 @@ class Samples:
 
     @property
     def gravity(self) -> np.ndarray:
-        """Gravity torque on every axis at the readouts, shape (N, n_axes), N m.
+        """Torque that gravity exerts on every axis at the readouts, shape (N, n_axes), N m.
 
-        Pinocchio's generalized gravity of the nominal runtime model (URDF inertias, gravity along
-        -z of the r-CS); the torque an axis' joint must hold, so a compliant joint deflects by
-        ``k * torque``.
+        Minus Pinocchio's generalized gravity (``dV/dq``, the torque the joint must hold) of the
+        nominal runtime model (URDF inertias, gravity along -z of the r-CS): a compliant joint
+        deflects by ``k * torque`` with k > 0, i.e. the arm sags.
         """
         if self._gravity is None:
             model = self.arm.runtime_model()
             data = model.createData()
-            self._gravity = np.array([pin.computeGeneralizedGravity(model, data, qi)[:self.arm.n_axes]
-                                      for qi in self.q]).reshape(self.n, self.arm.n_axes)
+            self._gravity = -np.array([pin.computeGeneralizedGravity(model, data, qi)[:self.arm.n_axes]
+                                       for qi in self.q]).reshape(self.n, self.arm.n_axes)
         return self._gravity
 
     @property
     def direction(self) -> np.ndarray:
-        """Sign of each axis' motion since the previous sample (time order), shape (N, n_axes).
+        """Direction each axis last moved in, at every sample (time order), shape (N, n_axes).
 
-        The first sample (and an axis at rest) gets 0.
+        +1 or -1: the sign of the last non-zero change of the readout, carried while the axis
+        rests (backlash keeps its side until the axis reverses); 0 before the axis first moves.
         """
         if self._direction is None:
             order = np.argsort(self.t, kind="stable") if self.t is not None else np.arange(self.n)
-            step = np.diff(self.q[order], axis=0, prepend=self.q[order][:1])
-            out = np.empty_like(step)
-            out[order] = np.sign(step)
+            out = np.empty_like(self.q)
+            out[order] = motion_direction(self.q[order])
             self._direction = out
         return self._direction
+
+
+def motion_direction(q: np.ndarray) -> np.ndarray:
+    """Return the direction each axis last moved in, row by row, shape (N, n_axes) (see above)."""
+    step = np.sign(np.diff(q, axis=0, prepend=q[:1]))
+    out = np.zeros_like(step)
+    last = np.zeros(q.shape[1])
+    for i, row in enumerate(step):
+        last = np.where(row != 0, row, last)
+        out[i] = last
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +140,9 @@ class Term:
     """Samples -> (label with unit, per-sample values) of the term's variable (figures)."""
     axes: tuple[int, ...] = ()
     """Axes the term acts on (empty for arm-wide terms); an angle term changes ``axes[0]``."""
+
+    def __post_init__(self) -> None:
+        _MADE[self.key] = self  # any term made in this process can be found by its key
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Term) and other.key == self.key
@@ -221,7 +235,7 @@ def encoder_map(axis: int) -> Term:
 
 def encoder_harmonic(axis: int, order: int = 3) -> Term:
     """Encoder error of one axis as harmonics 1..order of its angle (for sparse data)."""
-    key = f"encoder_harmonic[A{axis}]"
+    key = f"encoder_harmonic[A{axis}]" if order == 3 else f"encoder_harmonic{order}[A{axis}]"
     return Term(key, "encoder", "angle",
                 tuple(f"{key}.{f}{h}" for h in range(1, order + 1) for f in ("cos", "sin")),
                 (20 * ARCSEC,) * (2 * order),
@@ -325,6 +339,7 @@ def _rtest(arm: Arm, s: Samples) -> list[Term]:
     return [rtest()] if disp is not None and np.abs(disp).max(initial=0.0) > 0 else []
 
 
+_MADE: dict[str, Term] = {}
 LIBRARY: dict[str, Effect] = {}
 """Registered effects by name (built-ins first); :func:`register_effect` adds more."""
 _TERMS: dict[str, Callable[[str], Term | None]] = {}
@@ -350,12 +365,21 @@ def term_from_key(key: str) -> Term:
         term = parse(key)
         if term is not None:
             return term
+    if key in _MADE:  # a user's term, made in this process but not registered for files
+        return _MADE[key]
     raise KeyError(key)
 
 
 def _axis_key(key: str, prefix: str) -> int | None:
     match = re.fullmatch(rf"{re.escape(prefix)}\[A(\d+)\]", key)
     return int(match.group(1)) if match else None
+
+
+def _harmonic_parse(key: str) -> Term | None:
+    match = re.fullmatch(r"encoder_harmonic(\d*)\[A(\d+)\]", key)
+    if not match:
+        return None
+    return encoder_harmonic(int(match.group(2)), int(match.group(1) or 3))
 
 
 def _cross_parse(key: str) -> Term | None:
@@ -383,7 +407,7 @@ for _name, _description, _candidates in (
     register_effect(Effect(_name, _description, _candidates))
 register_effect(Effect("tool", "stylus/tool vector error (part of every start model)",
                        lambda arm, s: [], in_start=True))
-register_term(_axis_parser("encoder_harmonic", encoder_harmonic), "encoder_harmonic")
+register_term(_harmonic_parse, "encoder_harmonic")
 register_term(_axis_parser("compliance", compliance), "compliance")
 register_term(_axis_parser("backlash", backlash), "backlash")
 register_term(_cross_parse, "crosstalk")

@@ -454,7 +454,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     identifiable[np.flatnonzero(unknowns.free)] = obs.identifiable
     final_u = unknowns
     node_ok = {a: identifiable[final_u.map_slice(a)].copy() for a in final_u.map_axes}
-    success = all(r.success for r in results)
+    success = bool(res.success)  # the last round's: earlier ones only set the held directions
     message = res.message if success else f"did not converge: {res.message}"
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
                        x=x_full, covariance=covariance, sigma=sig,

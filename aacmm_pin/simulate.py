@@ -29,6 +29,7 @@ import pinocchio as pin
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign, LengthBarLog, SpatLog
+from aacmm_pin.effects import motion_direction
 from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
@@ -111,9 +112,9 @@ class TrueArm:
         cfg, out = self.config, np.zeros_like(q_readout)
         if "compliance" in cfg.effects:
             for i, q in enumerate(q_readout):
-                tau = pin.computeGeneralizedGravity(self._model, self._data, q)
+                tau = -pin.computeGeneralizedGravity(self._model, self._data, q)  # by gravity
                 for axis, k in cfg.compliance.items():
-                    out[i, axis - 1] += k * tau[axis - 1]
+                    out[i, axis - 1] += k * tau[axis - 1]  # the joint gives way: the arm sags
         if "backlash" in cfg.effects:
             if direction is None:
                 direction = motion_direction(q_readout)
@@ -195,11 +196,6 @@ class TrueArm:
                 return q
         raise AacmmError(f"IK found no posture within the joint limits for {todo.size} targets, "
                          f"e.g. {targets[todo[0]].round(4).tolist()} m")
-
-
-def motion_direction(q: np.ndarray) -> np.ndarray:
-    """Return the sign of each axis' motion since the previous row, shape (N, n_axes) (0 first)."""
-    return np.sign(np.diff(q, axis=0, prepend=q[:1]))
 
 
 def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -> Parameters:

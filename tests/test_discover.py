@@ -38,16 +38,17 @@ def _assert_stops_clean(result: object) -> None:
 
 
 def test_encoder_errors_named_first_from_dh(arm: ap.Arm) -> None:
-    sim = _campaign(arm, 0, ("dh", "encoder", "rtest"), n=200, bar=3)
+    sim = _campaign(arm, 0, ("dh", "encoder", "rtest"), n=200, bar=3,
+                    encoder_axes=(1, 2, 3, 4, 5, 6))  # A7 carries the stylus near its axis: unseen
     result = discover(sim.campaign, arm, "dh")
     assert [s.effect for s in result.steps] == ["encoder"]
     step = result.steps[0]
-    # every axis whose map the SPATs see (A7 carries the stylus near its axis: unseen) and no other
-    assert set(step.axes) <= set(sim.truth.encoder_maps)
-    assert set(step.axes) >= {1, 2, 3, 4, 5, 6}
-    # tens of um of encoder error before; after, near the R-Test noise (LOLO adds a little)
+    assert step.axes == [1, 2, 3, 4, 5, 6]
+    # tens of um of encoder error before; after, the held-out residual is what the other three
+    # locations cannot tell about map nodes only the left-out one visits (a few um), fit ~ noise
     assert step.heldout_rms_before > 10e-6
-    assert step.heldout_rms_after < 1.5 * SIGMA_RTEST
+    assert step.heldout_rms_after < 0.3 * step.heldout_rms_before
+    assert step.fit_rms_after < 1.1 * SIGMA_RTEST
     assert step.bar_rms_after < 0.3 * step.bar_rms_before
     _assert_stops_clean(result)
 
@@ -77,7 +78,10 @@ def test_thermal_expansion_named_with_temperature_column(arm: ap.Arm) -> None:
     result = discover(sim.campaign, arm, "proposed")
     assert result.named == [("thermal", [])]
     step = result.steps[0]
-    assert step.heldout_rms_after < 0.6 * step.heldout_rms_before
+    # the held-out RMS of a model with maps keeps a floor: map nodes only the left-out location
+    # visits (measured 8.1 -> 6.1 um here); the fit drops to the noise
+    assert step.heldout_rms_after < 0.9 * step.heldout_rms_before
+    assert step.fit_rms_after < 1.1 * SIGMA_RTEST
     cal = result.calibration
     alpha, std = cal.parameters.extensions["thermal"][0], cal.std["thermal.alpha"]
     assert abs(alpha - 11e-6) < 4 * std
@@ -88,6 +92,7 @@ def test_backlash_named_with_its_axis(arm: ap.Arm) -> None:
     sim = _campaign(arm, 3, ("dh", "encoder", "rtest", "backlash"))
     result = discover(sim.campaign, arm, "proposed")
     assert result.named == [("backlash", [2])]
+    assert result.steps[0].heldout_rms_after < 0.8 * result.steps[0].heldout_rms_before
     _assert_stops_clean(result)
 
 
@@ -96,6 +101,7 @@ def test_ignored_rtest_displacement_is_named(arm: ap.Arm) -> None:
     result = discover(sim.campaign, arm, "dh", use_rtest=False)
     assert result.named == [("rtest", [])]
     assert result.calibration.use_rtest
+    assert result.steps[0].heldout_rms_after < 0.8 * result.steps[0].heldout_rms_before
     _assert_stops_clean(result)
 
 
@@ -107,7 +113,7 @@ def test_no_false_discovery_from_dh(arm: ap.Arm, seed: int) -> None:
     _assert_stops_clean(result)
 
 
-@pytest.mark.parametrize("seed", [100, 101])
+@pytest.mark.parametrize("seed", [100, 101, 102, 103])
 def test_no_false_discovery_from_the_paper_model(arm: ap.Arm, seed: int) -> None:
     sim = _campaign(arm, seed, ("dh", "encoder", "rtest"))
     result = discover(sim.campaign, arm, "proposed")
@@ -144,6 +150,32 @@ def test_cli_writes_report_figures_and_a_caldir_predict_and_validate_use(arm: ap
     np.testing.assert_allclose(points, expected, atol=1e-11)
     no_thermal = ap.predict(arm, params.replace(extensions={}), q)
     assert np.abs(points - no_thermal).max() > 1e-6  # the scale is not lost on the way
+
+
+@pytest.mark.parametrize("model, seed, rtol", [("dh", 6, 1e-3), ("proposed", 4, 0.1)])
+def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, model: str, seed: int,
+                                                                 rtol: float) -> None:
+    """The held-out RMS that scores candidates against brute force: identify on the other
+    locations, predict the left-out SPAT less its mean. The DH model is nearly linear (agreement
+    to the linearisation error); with maps, the scoring's plausible-size prior and identify's
+    held directions treat what the others cannot see slightly differently (measured 0.4-3 %)."""
+    from aacmm_pin.discovery import _Linearised
+    from aacmm_pin.identify import measured_positions, spat_samples
+    from aacmm_pin.kinematics import stylus_positions
+
+    effects = ("dh", "encoder", "rtest") if model == "proposed" else ("dh", "rtest")
+    campaign = _campaign(arm, seed, effects, n=80 if model == "dh" else 150).campaign
+    lin = _Linearised(ap.identify(campaign, arm, model), spat_samples(campaign, arm))
+    ids, measured = sorted(campaign.locations), measured_positions(campaign)
+    ssr, count = 0.0, 0
+    for m in ids:
+        cal = ap.identify(campaign.select([k for k in ids if k != m]), arm, model)
+        sel = campaign.spat.location == m
+        e = stylus_positions(arm, cal.parameters, campaign.spat.q[sel], frame="mt") - measured[sel]
+        ssr += float(np.sum((e - e.mean(axis=0)) ** 2))
+        count += e.size - 3
+    brute = np.sqrt(ssr / count)
+    assert lin.heldout_rms == pytest.approx(brute, rel=rtol)
 
 
 def test_unknown_start_or_effect_is_a_message(arm: ap.Arm) -> None:

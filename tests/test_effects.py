@@ -119,6 +119,31 @@ def test_thermal_term_needs_a_temperature(arm: ap.Arm, sim: ap.Simulation) -> No
         ap.predict(arm, params, sim.campaign.spat.q)
 
 
+def test_positive_compliance_makes_the_arm_sag(arm: ap.Arm) -> None:
+    """Gravity pulls the arm down: a compliant joint (k > 0) gives way and the centre of mass of
+    the arm drops (Pinocchio's centre of mass: independent of the torque's sign convention)."""
+    import pinocchio as pin
+
+    model = arm.runtime_model()
+    data = model.createData()
+    rng = np.random.default_rng(5)
+    for q in rng.uniform(-1.5, 1.5, (5, arm.n_axes)):
+        samples = fx.Samples(arm, q[None, :])
+        for axis in (2, 3, 4):
+            if abs(samples.gravity[0, axis - 1]) < 0.5:  # N m: hardly loaded in this posture
+                continue
+            ext = {f"compliance[A{axis}]": np.array([1e-4])}
+            offsets, _ = fx.apply_terms(ext, samples, arm.n_axes)
+            z_before = pin.centerOfMass(model, data, q)[2]
+            z_after = pin.centerOfMass(model, data, q + offsets[0])[2]
+            assert z_after < z_before
+
+
+def test_backlash_side_is_kept_while_the_axis_rests(arm: ap.Arm) -> None:
+    q = np.zeros((6, 1)) + np.array([[0.0], [0.1], [0.1], [0.1], [0.05], [0.05]])
+    np.testing.assert_array_equal(fx.motion_direction(q)[:, 0], [0, 1, 1, 1, -1, -1])
+
+
 def test_direction_follows_time_stamps_not_row_order(arm: ap.Arm) -> None:
     rng = np.random.default_rng(0)
     q = rng.uniform(-1, 1, (30, arm.n_axes))
@@ -127,7 +152,18 @@ def test_direction_follows_time_stamps_not_row_order(arm: ap.Arm) -> None:
     ordered = fx.Samples(arm, q, t=t).direction
     shuffled = fx.Samples(arm, q[perm], t=t[perm]).direction
     np.testing.assert_array_equal(shuffled, ordered[perm])
-    np.testing.assert_array_equal(ordered[1:], np.sign(np.diff(q, axis=0)))
+    np.testing.assert_array_equal(ordered[1:], np.sign(np.diff(q, axis=0)))  # never at rest
+
+
+def test_user_term_without_a_parser_runs_and_harmonic_order_round_trips(arm: ap.Arm) -> None:
+    mine = fx.Term("mine[A3]", "mine", "angle", ("mine[A3].c",), (1e-5,), "a user's term",
+                   fx.partial(fx._gravity, 3), fx.partial(fx._gravity_variable, 3), (3,))
+    q = np.zeros((2, arm.n_axes)) + 0.4
+    params = ap.Parameters.nominal(arm).replace(extensions={mine.key: [1e-4]})
+    assert np.abs(ap.predict(arm, params, q) - ap.predict(arm, ap.Parameters.nominal(arm), q)
+                  ).max() > 1e-7
+    fifth = fx.encoder_harmonic(4, order=5)
+    assert fx.term_from_key(fifth.key).names == fifth.names
 
 
 def test_terms_pickle_and_parse_from_their_keys(arm: ap.Arm) -> None:
