@@ -90,7 +90,6 @@ class _Linearised:
     """
 
     def __init__(self, cal: Calibration, samples: Samples):
-        self.offset = np.zeros(0)
         problem = cal.problem
         assert problem is not None and cal.unknowns is not None
         z = problem.z(cal.x)
@@ -116,7 +115,6 @@ class _Linearised:
                                                         samples.q, frame="mt", samples=samples)
         self._base_grams: list[tuple[np.ndarray, np.ndarray]] | None = None
         self.base = self.evaluate(np.zeros((len(self.r), 0)))
-        self._given: tuple[np.ndarray, dict[str, float]] | None = None
 
     def columns(self, term: Term) -> np.ndarray:
         """Return the term's columns, scaled by the plausible sizes, shape (rows, k)."""
@@ -178,19 +176,15 @@ class _Linearised:
             k_eff = float(np.sum(eig / (eig + self.sigma ** 2)))
         return {"fit_ssr": fit_ssr, "held_ssr": held, "k_eff": k_eff}
 
-    def score(self, term: Term, given: np.ndarray | None = None) -> tuple[Score, np.ndarray]:
-        """Return the score of ``term`` (added to the model and the ``given`` columns)."""
-        base_cols = np.zeros((len(self.r), 0)) if given is None else given
-        if given is None:
-            base = self.base
-        elif self._given is not None and self._given[0] is given:
-            base = self._given[1]
-        else:
-            base = self.evaluate(base_cols)
-            self._given = (given, base)
+    def score(self, term: Term, given: tuple[np.ndarray, dict[str, float]] | None = None
+              ) -> Score:
+        """Return the score of ``term`` added to the model.
+
+        ``given``: columns already chosen (added to the model too) and their :meth:`evaluate`.
+        """
+        base_cols, base = given or (np.zeros((len(self.r), 0)), self.base)
         cols = self.columns(term)
-        both = np.hstack([base_cols, cols])
-        new = self.evaluate(both)
+        new = self.evaluate(np.hstack([base_cols, cols]))
         k_eff = max(new["k_eff"] - base["k_eff"], 1e-9)
         dof = max(self.n_data - self.jac.shape[1] - new["k_eff"], 1.0)
         var = new["fit_ssr"] / dof
@@ -202,7 +196,7 @@ class _Linearised:
                      heldout_rms=float(np.sqrt(new["held_ssr"] / n_held)),
                      heldout_gain=float((base["held_ssr"] - new["held_ssr"]) / var),
                      p_value=float(stats.f.sf(f_stat, k_eff, dof)),
-                     bic_gain=float(gain / var - k_eff * np.log(self.n_data))), both
+                     bic_gain=float(gain / var - k_eff * np.log(self.n_data)))
 
     @property
     def heldout_rms(self) -> float:
@@ -398,19 +392,21 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     n_candidates: list[int] = []
     stopped, missing = "", []
     bar = tqdm(total=max_steps, desc="discover", unit="step", disable=not progress, leave=False)
+    def candidates() -> list[Term]:
+        out = [t for n in names if not LIBRARY[n].in_start
+               for t in LIBRARY[n].candidates(arm, samples)
+               if not _in_model(t, terms, map_axes, use_rtest)]
+        n_candidates.append(len(out))
+        return out
+
     for _ in range(max_steps):
-        candidates = [t for n in names if not LIBRARY[n].in_start
-                      for t in LIBRARY[n].candidates(arm, samples)
-                      if not _in_model(t, terms, map_axes, use_rtest)]
-        n_candidates.append(len(candidates))
-        if not candidates:
+        terms_now = candidates()
+        if not terms_now:
             stopped = ("no candidate to try: every effect asked for is in the model or has no "
                        "term these data can show")
             break
-        threshold = alpha / len(candidates)
-        scores = [lin.score(t)[0] for t in candidates]
-        scores = [_mark(s, threshold) for s in scores]
-        scores.sort(key=lambda s: -s.heldout_gain)
+        threshold = alpha / len(terms_now)
+        scores = _scored(lin, terms_now, threshold)
         good = [s for s in scores if s.significant]
         if not good:
             best = scores[0]
@@ -420,7 +416,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                        f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
                        f"{best.bic_gain:.1f}")
             break
-        chosen = _forward(lin, good[0], [s.term for s in scores], threshold)
+        chosen = _forward(lin, good[0], terms_now, threshold)
         new_terms = [s.term for s in chosen]
         map_axes += [t.axis for t in new_terms if t.kind == "map"]
         terms = [t for t in terms if not (t.effect == "encoder" and t.axis in map_axes)]
@@ -452,13 +448,9 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         bars.append(step.bar_rms_after)
         bar.update(1)
     else:
-        candidates = [t for n in names if not LIBRARY[n].in_start
-                      for t in LIBRARY[n].candidates(arm, samples)
-                      if not _in_model(t, terms, map_axes, use_rtest)]
-        n_candidates.append(len(candidates))
-        threshold = alpha / max(len(candidates), 1)
-        still = [_mark(lin.score(t)[0], threshold) for t in candidates]
-        missing = [s.to_dict() for s in sorted(still, key=lambda s: -s.heldout_gain) if s.significant]
+        terms_now = candidates()
+        still = _scored(lin, terms_now, alpha / max(len(terms_now), 1))
+        missing = [s.to_dict() for s in still if s.significant]
         stopped = (f"reached max_steps = {max_steps}" + (
             f"; {len(missing)} candidates are still significant (see missing)" if missing else
             "; nothing else is significant"))
@@ -480,17 +472,24 @@ def _forward(lin: _Linearised, best: Score, candidates: list[Term], threshold: f
     chosen = [best]
     pool = [t for t in candidates if t.effect == best.term.effect and t != best.term]
     while True:
-        given = np.hstack([lin.columns(c.term) for c in chosen])
+        cols = np.hstack([lin.columns(c.term) for c in chosen])
         taken = {c.term.axes: c.term for c in chosen}
         pool = [t for t in pool if t.axes not in taken or (
             t.kind == "map" and taken[t.axes].kind != "map")]
-        rescored = [s for s in (_mark(lin.score(t, given)[0], threshold) for t in pool)
+        rescored = [s for s in _scored(lin, pool, threshold, (cols, lin.evaluate(cols)))
                     if s.significant]
         if not rescored:
             return chosen
         nxt = max(rescored, key=lambda s: s.heldout_gain)
         chosen = [c for c in chosen if c.term.axes != nxt.term.axes] + [nxt]
         pool = [t for t in pool if t != nxt.term]
+
+
+def _scored(lin: _Linearised, terms: list[Term], threshold: float,
+            given: tuple[np.ndarray, dict[str, float]] | None = None) -> list[Score]:
+    """Return every term's score, marked significant or not, best held-out gain first."""
+    scores = [_mark(lin.score(t, given), threshold) for t in terms]
+    return sorted(scores, key=lambda s: -s.heldout_gain)
 
 
 def _mark(score: Score, threshold: float) -> Score:

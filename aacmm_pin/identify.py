@@ -415,7 +415,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     n = len(q)
     scale = f_scale or 3 * sigma_class
     x_loc = np.zeros(3 * np.unique(spat.location).size)
-    nfev, results = 0, []
+    nfev = 0
     with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
               disable=not progress, leave=False) as bar:
         held = -1
@@ -432,7 +432,6 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                                x_start, x_now, sigma_class, sigma_location, bar)
             z0 = problem.z(x_now)
             res = problem.solve(z0, loss, scale, max_nfev, jac)
-            results.append(res)
             nfev += res.nfev
             x_full = problem.x(res.x)
             x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
