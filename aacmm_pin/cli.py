@@ -99,6 +99,8 @@ def _discover(args: argparse.Namespace) -> int:
         print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
               f"{step.heldout_rms_after * 1e6:.2f} um, fit RMS {step.fit_rms_before * 1e6:.2f} -> "
               f"{step.fit_rms_after * 1e6:.2f} um")
+        if step.bar_rms_before is not None:
+            print(f"  length bar: {step.bar_summary()}")
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")

@@ -9,15 +9,20 @@ The loop (:func:`discover`):
    plausible size, so terms the data cannot see are shrunk, not overfitted) and measure
    * the held-out RMS: leave one R-Test location out, refit on the others, predict the left-out
      SPAT (less its mean: its nest offset is unknown) and pool over the locations;
+   * the length-bar error, when the campaign has a bar: the candidate's linearised change of the bar
+     errors, normalised by their predicted covariance (:mod:`aacmm_pin.bar_linear`: what the SPATs
+     leave unknown, e.g. the nests' scale or map nodes only the bar visits, weighs little);
    * an F test of the fit improvement against the noise level (Bonferroni over the candidates) and
      the BIC change, with the term's effective number of parameters;
-3. the best term (largest held-out improvement) that is significant, improves the BIC and the
-   held-out RMS is named; further axes of the same effect join it while they stay significant
+3. the best term (largest held-out improvement: leave-one-location-out plus length bar, both in
+   chi-square units) that is significant, improves the BIC and the held-out score is named;
+   further axes of the same effect join it while they stay significant
    given the ones already in (forward selection); the model is refitted with them (nonlinear);
 4. stop when no candidate is significant: "nothing is missing".
 
-Held-out RMS after a step is measured on the refitted model, the length-bar error (when the campaign
-has one) by :func:`aacmm_pin.validate` with each model.
+Held-out RMS after a step is measured on the refitted model, and so are the length-bar errors (when
+the campaign has a bar): their RMS (as :func:`aacmm_pin.validate`), their RMS over the bar readouts
+inside the SPATs' coverage, and their normalised size (about 1 when the model explains the bar).
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from tqdm.auto import tqdm
 
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
+from aacmm_pin.bar_linear import LinearBar
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import LIBRARY, Samples, Term
 from aacmm_pin.errors import AacmmError
@@ -70,13 +76,24 @@ class Score:
     """F test of the fit improvement (per candidate, before the Bonferroni correction)."""
     bic_gain: float
     """BIC decrease (positive: the term pays for its parameters)."""
+    bar_gain: float = 0.0
+    """Normalised length-bar SSR decrease (chi-square units, linearised); 0 without a bar."""
+    bar_normalised: float | None = None
+    """Normalised length-bar error with the term (linearised), or None without a bar."""
     significant: bool = False
     """Whether it passes all tests of a step (set by the loop)."""
+
+    @property
+    def total_gain(self) -> float:
+        """Held-out gain on everything the fit did not use: left-out locations plus the bar."""
+        return self.heldout_gain + self.bar_gain
 
     def to_dict(self) -> dict[str, Any]:
         """Return the JSON form (um)."""
         return {"effect": self.term.effect, "axes": list(self.term.axes), "term": self.term.key,
-                "score": self.heldout_gain, "heldout_rms_um": self.heldout_rms * 1e6,
+                "score": self.total_gain, "heldout_gain": self.heldout_gain,
+                "bar_gain": self.bar_gain, "bar_normalised": self.bar_normalised,
+                "heldout_rms_um": self.heldout_rms * 1e6,
                 "fit_rms_um": self.fit_rms * 1e6, "p_value": self.p_value,
                 "bic_gain": self.bic_gain, "k_eff": self.k_eff, "significant": self.significant}
 
@@ -89,7 +106,7 @@ class _Linearised:
     rows): held-out refits are then well posed even where one location alone saw a direction.
     """
 
-    def __init__(self, cal: Calibration, samples: Samples):
+    def __init__(self, cal: Calibration, samples: Samples, bar: LinearBar | None = None):
         problem = cal.problem
         assert problem is not None and cal.unknowns is not None
         z = problem.z(cal.x)
@@ -114,10 +131,35 @@ class _Linearised:
         self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
                                                         samples.q, frame="mt", samples=samples)
         self._base_grams: list[tuple[np.ndarray, np.ndarray]] | None = None
-        self.base = self.evaluate(np.zeros((len(self.r), 0)))
+        self.bar = bar
+        self._bar_white: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.base = self.evaluate(self._empty())
+        if bar is not None and bar.n:
+            # bar errors whitened by their predicted covariance (posterior of this model + what
+            # the SPATs leave unknown): e^T C^-1 e = |L^-1 e|^2
+            assert self._base_grams is not None
+            info = sum(g for g, _ in self._base_grams) + self.ridge
+            posterior = self.sigma ** 2 * np.linalg.inv(info)
+            chol = np.linalg.cholesky(bar.covariance(posterior))
+            self._bar_white = (chol, sla.solve_triangular(chol, bar.errors, lower=True),
+                               sla.solve_triangular(chol, bar.jac_z, lower=True))
+            self.base = self.evaluate(self._empty())
+
+    def _empty(self) -> np.ndarray:
+        return np.zeros((len(self.r) + (0 if self.bar is None else self.bar.n), 0))
+
+    def bar_normalised(self, errors: np.ndarray) -> float | None:
+        """Return sqrt(e^T C^-1 e / n) for bar errors e (n,) with this model's bar covariance C."""
+        if self._bar_white is None:
+            return None
+        white = sla.solve_triangular(self._bar_white[0], errors, lower=True)
+        return float(np.sqrt(np.mean(white ** 2)))
 
     def columns(self, term: Term) -> np.ndarray:
-        """Return the term's columns, scaled by the plausible sizes, shape (rows, k)."""
+        """Return the term's columns, scaled by the plausible sizes, shape (rows, k).
+
+        Rows: the residual's (data, then prior), then the whitened bar errors (with a bar).
+        """
         if term.kind == "map":
             emap = self.cal.parameters.map(term.axis)
             weights = emap.weights(self.samples.q[:, term.axis - 1]).toarray()
@@ -127,14 +169,18 @@ class _Linearised:
         else:
             cols = term_jacobian(term, self.samples, self.stylus, self.cal.parameters)
             cols = cols * term.plausible
-        out = np.zeros((len(self.r), cols.shape[2]))
+        out = np.zeros((len(self._empty()), cols.shape[2]))
         out[:self.n_data] = cols.reshape(self.n_data, -1)
+        if self.bar is not None and self._bar_white is not None:
+            out[len(self.r):] = sla.solve_triangular(
+                self._bar_white[0], self.bar.columns(term, self.samples.q), lower=True)
         return out
 
     def evaluate(self, extra: np.ndarray) -> dict[str, float]:
         """Fit the residuals with the model's directions plus ``extra`` columns (prior sigma^2).
 
-        Returns fit SSR, held-out SSR and rows, the effective parameter count of ``extra``.
+        Returns fit SSR, held-out SSR, the effective parameter count of ``extra`` and the
+        normalised bar SSR (chi-square, NaN without a bar).
         """
         jac, r, k = self.jac, self.r, extra.shape[1]
         p = jac.shape[1]
@@ -168,13 +214,17 @@ class _Linearised:
         for rows, (g, b) in zip(self.groups, grams):
             e = residual(rows, solve(g_all - g, b_all - b)).reshape(-1, 3)
             held += float(np.sum((e - e.mean(axis=0)) ** 2))
+        bar_chi2 = float("nan")
+        if self._bar_white is not None:
+            _, e_bar, j_bar = self._bar_white
+            bar_chi2 = float(np.sum((e_bar + j_bar @ d_all[:p] + extra[len(r):] @ d_all[p:]) ** 2))
         k_eff = 0.0
         if k:
             schur = g_all[p:, p:] - g_all[p:, :p] @ sla.solve(g_all[:p, :p] + self.ridge,
                                                              g_all[:p, p:], assume_a="pos")
             eig = np.clip(np.linalg.eigvalsh(schur), 0.0, None)
             k_eff = float(np.sum(eig / (eig + self.sigma ** 2)))
-        return {"fit_ssr": fit_ssr, "held_ssr": held, "k_eff": k_eff}
+        return {"fit_ssr": fit_ssr, "held_ssr": held, "k_eff": k_eff, "bar_chi2": bar_chi2}
 
     def score(self, term: Term, given: tuple[np.ndarray, dict[str, float]] | None = None
               ) -> Score:
@@ -182,7 +232,7 @@ class _Linearised:
 
         ``given``: columns already chosen (added to the model too) and their :meth:`evaluate`.
         """
-        base_cols, base = given or (np.zeros((len(self.r), 0)), self.base)
+        base_cols, base = given or (self._empty(), self.base)
         cols = self.columns(term)
         new = self.evaluate(np.hstack([base_cols, cols]))
         k_eff = max(new["k_eff"] - base["k_eff"], 1e-9)
@@ -191,7 +241,11 @@ class _Linearised:
         gain = base["fit_ssr"] - new["fit_ssr"]
         f_stat = max(gain, 0.0) / k_eff / var
         n_held = self.n_held
+        bar = self._bar_white is not None
         return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff,
+                     bar_gain=float(base["bar_chi2"] - new["bar_chi2"]) if bar else 0.0,
+                     bar_normalised=float(np.sqrt(new["bar_chi2"] / self.bar.n))
+                     if bar and self.bar is not None else None,
                      fit_rms=float(np.sqrt(new["fit_ssr"] / self.n_data)),
                      heldout_rms=float(np.sqrt(new["held_ssr"] / n_held)),
                      heldout_gain=float((base["held_ssr"] - new["held_ssr"]) / var),
@@ -243,6 +297,27 @@ class Step:
     values: dict[str, float]
     views: list[dict[str, Any]] = field(default_factory=list, repr=False)
     """Per term: variable label and values, residual label, residuals before and after (figures)."""
+    bar_covered_rms_before: float | None = None
+    """Length-bar RMS from the bar readouts inside the SPATs' coverage, before, m."""
+    bar_covered_rms_after: float | None = None
+    bar_normalised_before: float | None = None
+    """Length-bar error normalised by its predicted covariance (of the model before the step)."""
+    bar_normalised_after: float | None = None
+
+    def bar_summary(self) -> str:
+        """Return the length-bar errors before -> after in one line (empty without a bar)."""
+        if self.bar_rms_before is None or self.bar_rms_after is None:
+            return ""
+
+        def arrow(before: float | None, after: float | None, unit: float, fmt: str) -> str:
+            if before is None or after is None:
+                return "-"
+            return f"{before * unit:{fmt}} -> {after * unit:{fmt}}"
+
+        return (f"RMS {arrow(self.bar_rms_before, self.bar_rms_after, 1e6, '.2f')} um, "
+                f"inside the SPAT coverage "
+                f"{arrow(self.bar_covered_rms_before, self.bar_covered_rms_after, 1e6, '.2f')} um, "
+                f"normalised {arrow(self.bar_normalised_before, self.bar_normalised_after, 1, '.2f')}")
 
     @property
     def axes(self) -> list[int]:
@@ -259,7 +334,7 @@ class Step:
             "fit_rms_after_um": self.fit_rms_after * 1e6,
             "heldout_rms_before_um": self.heldout_rms_before * 1e6,
             "heldout_rms_after_um": self.heldout_rms_after * 1e6,
-            "score": self.score.heldout_gain, "p_value": self.score.p_value,
+            "score": self.score.total_gain, "p_value": self.score.p_value,
             "bic_gain": self.score.bic_gain, "k_eff": self.score.k_eff,
             "runners_up": [s.to_dict() for s in self.runners_up],
             "values": self.values,
@@ -269,7 +344,15 @@ class Step:
         if self.bar_rms_before is not None:
             out["bar_rms_before_um"] = self.bar_rms_before * 1e6
             out["bar_rms_after_um"] = (self.bar_rms_after or 0.0) * 1e6
+            out["bar_covered_rms_before_um"] = _um(self.bar_covered_rms_before)
+            out["bar_covered_rms_after_um"] = _um(self.bar_covered_rms_after)
+            out["bar_normalised_before"] = self.bar_normalised_before
+            out["bar_normalised_after"] = self.bar_normalised_after
         return out
+
+
+def _um(value: float | None) -> float | None:
+    return None if value is None else value * 1e6
 
 
 @dataclass
@@ -287,6 +370,13 @@ class Discovery:
     """Held-out RMS of the start model and after every step, m."""
     fit_rms: list[float]
     bar_rms: list[float | None]
+    """Length-bar RMS of the start model and after every step, m (None without a bar)."""
+    bar_covered_rms: list[float | None]
+    """The same from the bar readouts inside the SPATs' coverage, m."""
+    bar_normalised: list[float | None]
+    """Length-bar errors of every model normalised by the final model's predicted covariance."""
+    bar_covered_fraction: float | None
+    """Share of the bar readouts inside the SPATs' coverage."""
     noise: float
     """Noise level (sigma per coordinate) of the final model, m."""
     n_candidates: list[int]
@@ -305,7 +395,10 @@ class Discovery:
             "missing": self.missing, "stopped_because": self.stopped_because,
             "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
                     "fit_rms_um": [v * 1e6 for v in self.fit_rms],
-                    "bar_rms_um": [None if v is None else v * 1e6 for v in self.bar_rms]},
+                    "bar_rms_um": [_um(v) for v in self.bar_rms],
+                    "bar_covered_rms_um": [_um(v) for v in self.bar_covered_rms],
+                    "bar_normalised": self.bar_normalised,
+                    "bar_covered_fraction": self.bar_covered_fraction},
             "final": {"extensions": sorted(cal.parameters.extensions),
                       "map_axes": list(cal.unknowns.map_axes) if cal.unknowns else [],
                       "noise_um": self.noise * 1e6},
@@ -314,15 +407,14 @@ class Discovery:
         }
 
 
-def _bar_rms(arm: Arm, cal: Calibration, campaign: Campaign) -> float | None:
-    from aacmm_pin.validate import validate
-
+def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
     if campaign.lengthbar is None or not campaign.bar:
         return None
     try:
-        return validate(arm, cal.parameters, campaign).rms
+        bar = LinearBar(cal, campaign, arm)
     except AacmmError:  # e.g. a thermal term and no temp_c in lengthbar.csv
         return None
+    return bar if bar.n else None
 
 
 def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: bool) -> bool:
@@ -343,7 +435,8 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
 
     Args:
         campaign: SPAT campaign (with ``temp_c`` / ``t_s`` columns where the effects need them;
-            a length bar, when present, is reported before and after every step).
+            a length bar, when present, joins the held-out score and is reported before and after
+            every step).
         arm: the arm (default: the embedded default arm).
         start: ``"dh"`` (DH errors, tool) or ``"proposed"`` (also every axis' encoder map).
         effects: names of library effects to try (default: all of :data:`aacmm_pin.effects.LIBRARY`).
@@ -386,12 +479,13 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         return cal
 
     cal = first = fit()
-    lin = _Linearised(cal, samples)
+    bar_now = _linear_bar(arm, cal, campaign)
+    lin = _Linearised(cal, samples, bar_now)
     steps: list[Step] = []
-    held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [_bar_rms(arm, cal, campaign)]
+    held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [bar_now]
     n_candidates: list[int] = []
     stopped, missing = "", []
-    bar = tqdm(total=max_steps, desc="discover", unit="step", disable=not progress, leave=False)
+    ticker = tqdm(total=max_steps, desc="discover", unit="step", disable=not progress, leave=False)
     def candidates() -> list[Term]:
         out = [t for n in names if not LIBRARY[n].in_start
                for t in LIBRARY[n].candidates(arm, samples)
@@ -423,7 +517,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         terms += [t for t in new_terms if t.kind != "map" and t.effect != "rtest"]
         use_rtest = use_rtest or any(t.effect == "rtest" for t in new_terms)
         new_cal = fit()
-        new_lin = _Linearised(new_cal, samples)
+        new_bar = _linear_bar(arm, new_cal, campaign)
+        new_lin = _Linearised(new_cal, samples, new_bar)
         views = []
         for t in sorted(new_terms, key=lambda t: t.axes)[:4]:
             label, values = t.variable(samples)
@@ -436,17 +531,22 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
             description="; ".join(t.describe() for t in new_terms),
             fit_rms_before=cal.fit_rms, fit_rms_after=new_cal.fit_rms,
             heldout_rms_before=lin.heldout_rms, heldout_rms_after=new_lin.heldout_rms,
-            bar_rms_before=bars[-1], bar_rms_after=_bar_rms(arm, new_cal, campaign),
+            bar_rms_before=None if bar_now is None else bar_now.rms,
+            bar_rms_after=None if new_bar is None else new_bar.rms,
             score=good[0], runners_up=[s for s in scores if s.term.effect != effect][:5],
             values={n: float(v) for t in new_terms if t.key in new_cal.parameters.extensions
                     for n, v in zip(t.names, new_cal.parameters.extensions[t.key])},
-            views=views)
+            views=views,
+            bar_covered_rms_before=None if bar_now is None else bar_now.covered_rms,
+            bar_covered_rms_after=None if new_bar is None else new_bar.covered_rms,
+            bar_normalised_before=None if bar_now is None else lin.bar_normalised(bar_now.errors),
+            bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors))
         steps.append(step)
-        cal, lin = new_cal, new_lin
+        cal, lin, bar_now = new_cal, new_lin, new_bar
         held.append(lin.heldout_rms)
         fits.append(cal.fit_rms)
-        bars.append(step.bar_rms_after)
-        bar.update(1)
+        bars.append(bar_now)
+        ticker.update(1)
     else:
         terms_now = candidates()
         still = _scored(lin, terms_now, alpha / max(len(terms_now), 1))
@@ -454,10 +554,14 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         stopped = (f"reached max_steps = {max_steps}" + (
             f"; {len(missing)} candidates are still significant (see missing)" if missing else
             "; nothing else is significant"))
-    bar.close()
+    ticker.close()
     return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
                      calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
-                     bar_rms=bars, noise=cal.sigma, n_candidates=n_candidates,
+                     bar_rms=[None if b is None else b.rms for b in bars],
+                     bar_covered_rms=[None if b is None else b.covered_rms for b in bars],
+                     bar_normalised=[None if b is None else lin.bar_normalised(b.errors) for b in bars],
+                     bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
+                     noise=cal.sigma, n_candidates=n_candidates,
                      runtime_s=time.perf_counter() - tic)
 
 
@@ -480,7 +584,7 @@ def _forward(lin: _Linearised, best: Score, candidates: list[Term], threshold: f
                     if s.significant]
         if not rescored:
             return chosen
-        nxt = max(rescored, key=lambda s: s.heldout_gain)
+        nxt = max(rescored, key=lambda s: s.total_gain)
         chosen = [c for c in chosen if c.term.axes != nxt.term.axes] + [nxt]
         pool = [t for t in pool if t != nxt.term]
 
@@ -489,12 +593,12 @@ def _scored(lin: _Linearised, terms: list[Term], threshold: float,
             given: tuple[np.ndarray, dict[str, float]] | None = None) -> list[Score]:
     """Return every term's score, marked significant or not, best held-out gain first."""
     scores = [_mark(lin.score(t, given), threshold) for t in terms]
-    return sorted(scores, key=lambda s: -s.heldout_gain)
+    return sorted(scores, key=lambda s: -s.total_gain)
 
 
 def _mark(score: Score, threshold: float) -> Score:
-    """Return the score marked significant when it passes the F test, the BIC and the held-out."""
-    ok = score.p_value < threshold and score.bic_gain > 0 and score.heldout_gain > 0
+    """Return the score marked significant: F test, BIC and held-out (locations plus bar) pass."""
+    ok = score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
     return dataclasses.replace(score, significant=bool(ok))
 
 

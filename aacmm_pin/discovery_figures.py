@@ -53,7 +53,7 @@ def step_figure(step: Step, k: int, path: str | Path) -> None:
 
 
 def gap_figure(result: Discovery, path: str | Path) -> None:
-    """Write the held-out RMS, fit RMS and length-bar RMS of the start model and every step."""
+    """Write the held-out RMS, fit RMS and length-bar errors of the start model and every step."""
     fig = _new_figure(6.4, 3.6)
     ax = fig.subplots()
     labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
@@ -62,14 +62,26 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
     ax.plot(x, np.array(result.heldout_rms) * 1e6, "-o", color=MODEL_COLOURS[2],
             label="held-out RMS (leave one location out)")
     ax.plot(x, np.array(result.fit_rms) * 1e6, "-s", color=MODEL_COLOURS[3], label="fit RMS")
+    handles: list[Any] = []
     if all(v is not None for v in result.bar_rms):
         ax.plot(x, np.array(result.bar_rms, dtype=float) * 1e6, "-^", color=MODEL_COLOURS[4],
                 label="length-bar RMS")
+    if all(v is not None for v in result.bar_covered_rms):
+        ax.plot(x, np.array(result.bar_covered_rms, dtype=float) * 1e6, "--^", mfc="none",
+                color=MODEL_COLOURS[4], label="length-bar RMS inside the SPAT coverage")
     ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8, label="noise (sigma)")
+    if all(v is not None for v in result.bar_normalised):
+        right = ax.twinx()
+        handles = right.plot(x, np.array(result.bar_normalised, dtype=float), "-D", ms=4,
+                             color=MODEL_COLOURS[1], label="length-bar error / its predicted "
+                             "uncertainty (right)")
+        right.set_ylabel("normalised length-bar error")
+        right.set_ylim(0.0, None)
     ax.set_xticks(x, labels, rotation=15, fontsize=8)
     ax.set_ylabel("um")
     ax.set_ylim(0.0, None)
     ax.set_title("gap per step (stopped: " + "\n".join(textwrap.wrap(result.stopped_because, 90))
                  + ")", fontsize=7)
-    ax.legend(fontsize=7)
+    lines, labels_ = ax.get_legend_handles_labels()
+    ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7)
     fig.savefig(path, dpi=DPI)

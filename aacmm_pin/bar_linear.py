@@ -1,0 +1,212 @@
+r"""The length bar linearised at a calibration: what a model change does to the bar errors.
+
+Discovery (:mod:`aacmm_pin.discovery`) scores candidate effects on data the fit did not use; the
+length bar is such data. Its errors are dominated by what the SPATs cannot pin down, not by the
+model: the R-Test nest positions (known to a few um) set the campaign's scale, and bar postures
+often visit encoder readouts no SPAT visited (map nodes held at their start value). A plain RMS of
+the bar errors can therefore grow when a correct term is added (a scale error that happened to
+cancel the missing effect is uncovered). This module gives the bar errors, their derivatives in the
+identification's reduced coordinates, and their predicted covariance
+
+.. math::  C = G \Sigma G^T + C_{unseen} + C_{socket},
+
+with :math:`\Sigma` the calibration's posterior covariance (data, nest prior, plausible-size prior),
+:math:`C_{unseen}` the plausible sizes of the map nodes and held directions the SPATs do not determine,
+and :math:`C_{socket}` the scatter of each socket's readouts about their mean. The bar error
+normalised by C (:math:`\sqrt{e^T C^{-1} e / n}`, about 1 when the model explains the bar) is the
+measure that shrinks when a missing effect is added, whatever the nests' scale error.
+
+Bar readouts whose every axis lies between map nodes some SPAT readout touched are "covered"
+(:func:`covered_readouts`); the RMS over covered readouts is reported alongside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aacmm_pin.arm import Arm
+from aacmm_pin.campaign import Campaign
+from aacmm_pin.effects import Samples, Term
+from aacmm_pin.encoder_map import EncoderMap, node_count
+from aacmm_pin.identifiability import PLAUSIBLE, plausible_sizes
+from aacmm_pin.identify import Calibration
+from aacmm_pin.kinematics import stylus_jacobians
+from aacmm_pin.unknowns import Unknowns, term_jacobian
+
+
+def touched_nodes(q: np.ndarray, step_deg: float) -> np.ndarray:
+    """Return which map nodes the readouts touch (interpolation weight > 0), shape (n_axes, nodes).
+
+    Args:
+        q: encoder readouts, shape (N, n_axes), rad.
+        step_deg: map node step, deg.
+    """
+    emap = EncoderMap(np.zeros(node_count(step_deg)), step_deg)
+    return np.array([np.asarray(abs(emap.weights(q[:, a])).sum(axis=0)).ravel() > 0
+                     for a in range(q.shape[1])])
+
+
+def covered_readouts(spat_q: np.ndarray, q: np.ndarray, step_deg: float) -> np.ndarray:
+    """Return which readouts use, on every axis, only map nodes that SPAT readouts touched.
+
+    Args:
+        spat_q: SPAT readouts, shape (N, n_axes), rad.
+        q: readouts to check (e.g. the length bar's), shape (M, n_axes), rad.
+        step_deg: map node step, deg.
+
+    Returns:
+        Mask, shape (M,).
+    """
+    seen = touched_nodes(spat_q, step_deg)
+    emap = EncoderMap(np.zeros(node_count(step_deg)), step_deg)
+    out = np.ones(len(q), dtype=bool)
+    for a in range(q.shape[1]):
+        lower, upper, frac = emap.neighbours(q[:, a])
+        out &= (seen[a, lower] | (frac == 1.0)) & (seen[a, upper] | (frac == 0.0))
+    return out
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """Which readouts form each bar error: (placement, pair) entries with both sockets measured."""
+
+    rows: list[tuple[np.ndarray, np.ndarray]]
+    """Per error: readout indices of the first and the second socket."""
+    length: np.ndarray
+    """Calibrated length of each error's pair, shape (n,), m."""
+
+
+def _pairs(campaign: Campaign, mask: np.ndarray | None = None) -> _Pairs:
+    log = campaign.lengthbar
+    assert log is not None
+    keep = np.ones(len(log.q), dtype=bool) if mask is None else mask
+    rows, length = [], []
+    for k in dict.fromkeys(int(v) for v in log.placement):
+        here = (log.placement == k) & keep
+        for (a, b), value in campaign.bar.items():
+            ra, rb = (np.flatnonzero(here & (log.socket == s)) for s in (a, b))
+            if ra.size and rb.size:
+                rows.append((ra, rb))
+                length.append(value)
+    return _Pairs(rows, np.array(length))
+
+
+def bar_errors(points: np.ndarray, pairs: _Pairs) -> tuple[np.ndarray, np.ndarray]:
+    """Return each pair's length error (n,) m and the unit vector between its sockets (n, 3)."""
+    d = np.array([points[rb].mean(axis=0) - points[ra].mean(axis=0) for ra, rb in pairs.rows])
+    dist = np.linalg.norm(d, axis=1)
+    return dist - pairs.length, d / dist[:, None]
+
+
+def _weights(pairs: _Pairs, unit: np.ndarray, n_readouts: int) -> np.ndarray:
+    """Return W, shape (n, 3M), with W @ d(points) = d(errors) (points flattened sample-major)."""
+    w = np.zeros((len(pairs.rows), 3 * n_readouts))
+    for i, ((ra, rb), u) in enumerate(zip(pairs.rows, unit)):
+        for sign, r in ((-1.0, ra), (1.0, rb)):
+            w[i, (3 * r[:, None] + np.arange(3)).ravel()] = sign * np.tile(u, r.size) / r.size
+    return w
+
+
+class LinearBar:
+    """The bar errors of a calibration, their Jacobian and predicted covariance.
+
+    Args:
+        cal: a calibration from :func:`aacmm_pin.identify` (its problem and layout).
+        campaign: the campaign, with length-bar readouts.
+        arm: the arm.
+
+    Attributes:
+        errors: bar errors at the calibration, shape (n,), m.
+        jac_z: d(errors)/d(reduced coordinates of ``cal.problem``), shape (n, n_z) (the nest
+            offsets' coordinates have zero columns).
+        unseen: covariance of the errors from what the SPATs leave at its start value (map nodes
+            no SPAT readout touches, held directions), shape (n, n), m^2.
+        socket: covariance from the scatter of each socket's readouts, shape (n, n), m^2.
+        covered: which bar readouts the SPATs cover (:func:`covered_readouts`), shape (M,).
+        covered_errors: bar errors from the covered readouts only (pairs whose sockets both keep
+            one), shape (n_covered,), m.
+    """
+
+    def __init__(self, cal: Calibration, campaign: Campaign, arm: Arm):
+        log = campaign.lengthbar
+        problem, u = cal.problem, cal.unknowns
+        assert log is not None and problem is not None and u is not None
+        self.cal, self.arm = cal, arm
+        self.samples = Samples(arm, log.q, log.temp, log.t)
+        self.pairs = _pairs(campaign)
+        full = Unknowns(arm, u.start, u.map_axes, np.ones_like(u.free), u.terms, self.samples)
+        points, jac = full.jacobian(full.full_vector(cal.parameters), log.q)
+        self.points = points
+        self.errors, unit = bar_errors(points, self.pairs)
+        assert cal.q is not None
+        self.covered = covered_readouts(cal.q, log.q, cal.parameters.step_deg)
+        inside = _pairs(campaign, self.covered)
+        self.covered_errors = bar_errors(points, inside)[0] if inside.rows else np.zeros(0)
+        self.w = _weights(self.pairs, unit, len(log.q))
+        g_full = np.vstack([jac.rmatmul(row) for row in self.w])  # (n, n_full)
+        g_free = g_full[:, u.free]
+        self.jac_z = g_free @ problem.p[:problem.n_arm]
+        # what the SPATs leave at the start value: unvisited nodes and held directions, each with
+        # its plausible size
+        fixed = ~u.free
+        self.unseen = (g_full[:, fixed] * PLAUSIBLE["node"]) @ (g_full[:, fixed] * PLAUSIBLE["node"]).T
+        if cal.constraints is not None and cal.constraints.shape[0]:
+            scale = plausible_sizes(u)[u.free]
+            _, sv, vt = np.linalg.svd(cal.constraints.toarray() * scale[None, :], full_matrices=False)
+            held = vt[sv > sv.max() * 1e-10]
+            g_held = (g_free * scale[None, :]) @ held.T
+            self.unseen += g_held @ g_held.T
+        # scatter of each socket's readouts about their mean (probing repeatability, posture)
+        var = np.zeros(len(self.errors))
+        for i, ((ra, rb), e) in enumerate(zip(self.pairs.rows, unit)):
+            for r in (ra, rb):
+                along = (points[r] - points[r].mean(axis=0)) @ e
+                var[i] += float(np.sum(along ** 2)) / max(r.size - 1, 1) / r.size
+        self.socket = np.diag(var)
+        self.stylus = stylus_jacobians(arm, cal.parameters, log.q, frame="mt", samples=self.samples)
+
+    @property
+    def n(self) -> int:
+        """Number of bar errors."""
+        return int(self.errors.size)
+
+    @property
+    def rms(self) -> float:
+        """RMS of the bar errors, m (as :func:`aacmm_pin.validate`)."""
+        return float(np.sqrt(np.mean(self.errors ** 2)))
+
+    @property
+    def covered_rms(self) -> float | None:
+        """RMS of the bar errors from covered readouts only, m, or None if no pair is left."""
+        if not self.covered_errors.size:
+            return None
+        return float(np.sqrt(np.mean(self.covered_errors ** 2)))
+
+    def covariance(self, posterior_z: np.ndarray) -> np.ndarray:
+        """Return the predicted covariance of the errors, shape (n, n), m^2.
+
+        Args:
+            posterior_z: posterior covariance of the reduced coordinates, shape (n_z, n_z).
+        """
+        return self.jac_z @ posterior_z @ self.jac_z.T + self.unseen + self.socket
+
+    def columns(self, term: Term, spat_q: np.ndarray) -> np.ndarray:
+        """Return d(errors)/d(term parameters scaled by their plausible sizes), shape (n, k).
+
+        Map terms: the nodes some SPAT readout touches (``spat_q``), in node order, as the SPAT
+        columns of discovery.
+        """
+        params = self.cal.parameters
+        if term.kind == "measurement":  # the bar has no R-Test displacement
+            return np.zeros((self.n, len(term.names)))
+        if term.kind == "map":
+            seen = np.abs(params.map(term.axis).weights(spat_q[:, term.axis - 1])).sum(axis=0)
+            weights = params.map(term.axis).weights(self.samples.q[:, term.axis - 1]).toarray()
+            weights = weights[:, np.asarray(seen).ravel() > 0]
+            cols = self.stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :]
+            cols = cols * PLAUSIBLE["node"]
+        else:
+            cols = term_jacobian(term, self.samples, self.stylus, params) * term.plausible
+        return self.w @ cols.reshape(3 * self.samples.n, -1)
