@@ -8,16 +8,19 @@ the bar errors can therefore grow when a correct term is added (a scale error th
 cancel the missing effect is uncovered). This module gives the bar errors, their derivatives in the
 identification's reduced coordinates, and their predicted covariance
 
-.. math::  C = G \Sigma G^T + C_{unseen} + C_{socket},
+.. math::  C = G \Sigma G^T + C_{unvisited} + C_{held} + C_{socket},
 
 with :math:`\Sigma` the calibration's posterior covariance (data, nest prior, plausible-size prior),
-:math:`C_{unseen}` the plausible sizes of the map nodes and held directions the SPATs do not determine,
-and :math:`C_{socket}` the scatter of each socket's readouts about their mean. The bar error
-normalised by C (:math:`\sqrt{e^T C^{-1} e / n}`, about 1 when the model explains the bar) is the
-measure that shrinks when a missing effect is added, whatever the nests' scale error.
+:math:`C_{unvisited}` the plausible sizes of the map nodes no SPAT readout touches,
+:math:`C_{held}` those of the directions the constraints hold, less what the fit compensates, and
+:math:`C_{socket}` the scatter of each socket's readouts about their mean. The bar error normalised
+by C (:math:`\sqrt{e^T C^{-1} e / n}`; at most about 1 when the model explains the bar, below 1
+since the plausible sizes are generous) is the measure that shrinks when a missing effect is added,
+whatever the nests' scale error.
 
-Bar readouts whose every axis lies between map nodes some SPAT readout touched are "covered"
-(:func:`covered_readouts`); the RMS over covered readouts is reported alongside.
+Bar readouts whose every axis uses only map nodes some SPAT readout touched are "covered"
+(:func:`covered_readouts`; on the node grid whether the model has maps or not: for a DH model it
+is the SPATs' angle range); the RMS over covered readouts is reported alongside.
 """
 
 from __future__ import annotations
@@ -95,6 +98,8 @@ def _pairs(campaign: Campaign, mask: np.ndarray | None = None) -> _Pairs:
 
 def bar_errors(points: np.ndarray, pairs: _Pairs) -> tuple[np.ndarray, np.ndarray]:
     """Return each pair's length error (n,) m and the unit vector between its sockets (n, 3)."""
+    if not pairs.rows:
+        return np.zeros(0), np.zeros((0, 3))
     d = np.array([points[rb].mean(axis=0) - points[ra].mean(axis=0) for ra, rb in pairs.rows])
     dist = np.linalg.norm(d, axis=1)
     return dist - pairs.length, d / dist[:, None]
@@ -109,6 +114,26 @@ def _weights(pairs: _Pairs, unit: np.ndarray, n_readouts: int) -> np.ndarray:
     return w
 
 
+def _socket_covariance(points: np.ndarray, w: np.ndarray, campaign: Campaign) -> np.ndarray:
+    """Return the errors' covariance from each socket's mean, shape (n, n), m^2.
+
+    Each socket mean's covariance is the scatter of its points over their count; the pairs that
+    share a socket (A-B and A-C) share it, so the matrix is not diagonal. Sockets with one
+    readout have no scatter to measure and add nothing.
+    """
+    log = campaign.lengthbar
+    assert log is not None
+    out = np.zeros((w.shape[0], w.shape[0]))
+    for k in np.unique(log.placement):
+        for name in np.unique(log.socket):
+            r = np.flatnonzero((log.placement == k) & (log.socket == name))
+            if r.size < 2:
+                continue
+            a = w[:, 3 * r[:, None] + np.arange(3)].sum(axis=1)  # (n, 3): d(errors)/d(mean)
+            out += a @ (np.cov(points[r].T) / r.size) @ a.T
+    return out
+
+
 class LinearBar:
     """The bar errors of a calibration, their Jacobian and predicted covariance.
 
@@ -118,12 +143,16 @@ class LinearBar:
         arm: the arm.
 
     Attributes:
-        errors: bar errors at the calibration, shape (n,), m.
-        jac_z: d(errors)/d(reduced coordinates of ``cal.problem``), shape (n, n_z) (the nest
-            offsets' coordinates have zero columns).
-        unseen: covariance of the errors from what the SPATs leave at its start value (map nodes
-            no SPAT readout touches, held directions), shape (n, n), m^2.
-        socket: covariance from the scatter of each socket's readouts, shape (n, n), m^2.
+        errors: bar errors at the calibration, shape (n,), m (n = 0 when no placement has both
+            sockets of a pair).
+        jac_z: d(errors)/d(reduced coordinates z of ``cal.problem``), shape (n, n_z). z mixes the
+            arm entries and the nest offsets (x = x_ref + P z), so the nests' scale reaches the
+            bar through these columns.
+        unvisited: covariance of the errors from the map nodes no SPAT readout touches (held at
+            their start value), each with its plausible size, shape (n, n), m^2.
+        socket: covariance from the scatter of each socket's modelled readouts about their mean
+            (probing repeatability, and posture-dependent model error counted once more), shape
+            (n, n), m^2.
         covered: which bar readouts the SPATs cover (:func:`covered_readouts`), shape (M,).
         covered_errors: bar errors from the covered readouts only (pairs whose sockets both keep
             one), shape (n_covered,), m.
@@ -132,7 +161,7 @@ class LinearBar:
     def __init__(self, cal: Calibration, campaign: Campaign, arm: Arm):
         log = campaign.lengthbar
         problem, u = cal.problem, cal.unknowns
-        assert log is not None and problem is not None and u is not None
+        assert log is not None and problem is not None and u is not None and cal.q is not None
         self.cal, self.arm = cal, arm
         self.samples = Samples(arm, log.q, log.temp, log.t)
         self.pairs = _pairs(campaign)
@@ -140,31 +169,28 @@ class LinearBar:
         points, jac = full.jacobian(full.full_vector(cal.parameters), log.q)
         self.points = points
         self.errors, unit = bar_errors(points, self.pairs)
-        assert cal.q is not None
         self.covered = covered_readouts(cal.q, log.q, cal.parameters.step_deg)
-        inside = _pairs(campaign, self.covered)
-        self.covered_errors = bar_errors(points, inside)[0] if inside.rows else np.zeros(0)
+        self.covered_errors = bar_errors(points, _pairs(campaign, self.covered))[0]
         self.w = _weights(self.pairs, unit, len(log.q))
-        g_full = np.vstack([jac.rmatmul(row) for row in self.w])  # (n, n_full)
+        g_full = (np.vstack([jac.rmatmul(row) for row in self.w]) if self.n
+                  else np.zeros((0, u.free.size)))
         g_free = g_full[:, u.free]
         self.jac_z = g_free @ problem.p[:problem.n_arm]
-        # what the SPATs leave at the start value: unvisited nodes and held directions, each with
-        # its plausible size
-        fixed = ~u.free
-        self.unseen = (g_full[:, fixed] * PLAUSIBLE["node"]) @ (g_full[:, fixed] * PLAUSIBLE["node"]).T
+        fixed = ~u.free  # map nodes no SPAT readout touches
+        g_fixed = g_full[:, fixed] * plausible_sizes(u)[fixed][None, :]
+        self.unvisited = g_fixed @ g_fixed.T
+        # directions the constraints hold (gauges, what the data cannot see), plausible-scaled:
+        # their effect on the bar and on the SPAT data (see covariance)
+        self._held_bar = np.zeros((self.n, 0))
+        self._held_data = np.zeros((3 * len(cal.q), 0))
         if cal.constraints is not None and cal.constraints.shape[0]:
             scale = plausible_sizes(u)[u.free]
             _, sv, vt = np.linalg.svd(cal.constraints.toarray() * scale[None, :], full_matrices=False)
-            held = vt[sv > sv.max() * 1e-10]
-            g_held = (g_free * scale[None, :]) @ held.T
-            self.unseen += g_held @ g_held.T
-        # scatter of each socket's readouts about their mean (probing repeatability, posture)
-        var = np.zeros(len(self.errors))
-        for i, ((ra, rb), e) in enumerate(zip(self.pairs.rows, unit)):
-            for r in (ra, rb):
-                along = (points[r] - points[r].mean(axis=0)) @ e
-                var[i] += float(np.sum(along ** 2)) / max(r.size - 1, 1) / r.size
-        self.socket = np.diag(var)
+            held = (vt[sv > sv.max() * 1e-10] * scale[None, :]).T  # (n_free, n_held), SI
+            _, spat_jac = u.jacobian(cal.x[:problem.n_arm], cal.q)
+            self._held_bar = g_free @ held
+            self._held_data = spat_jac.matmul(held)
+        self.socket = _socket_covariance(points, self.w, campaign)
         self.stylus = stylus_jacobians(arm, cal.parameters, log.q, frame="mt", samples=self.samples)
 
     @property
@@ -184,19 +210,38 @@ class LinearBar:
             return None
         return float(np.sqrt(np.mean(self.covered_errors ** 2)))
 
-    def covariance(self, posterior_z: np.ndarray) -> np.ndarray:
+    def covariance(self, info_z: np.ndarray, data_jac_z: np.ndarray, sigma: float) -> np.ndarray:
         """Return the predicted covariance of the errors, shape (n, n), m^2.
 
+        One posterior over z and the held directions' coefficients (prior: their plausible
+        size): what of a held direction the SPAT data see, the free directions may take over
+        (a map constant held by its gauge shows up as the axis offset), what they do not see
+        keeps its plausible size; the bar sees whatever the pair leaves.
+
         Args:
-            posterior_z: posterior covariance of the reduced coordinates, shape (n_z, n_z).
+            info_z: information matrix of z (inverse of its posterior covariance), (n_z, n_z).
+            data_jac_z: d(SPAT residuals)/dz, data rows only, shape (3N, n_z), m.
+            sigma: noise per SPAT coordinate, m.
         """
-        return self.jac_z @ posterior_z @ self.jac_z.T + self.unseen + self.socket
+        jac = np.hstack([self.jac_z, self._held_bar])
+        n_z, n_h = info_z.shape[0], self._held_bar.shape[1]
+        info = np.zeros((n_z + n_h, n_z + n_h))
+        info[:n_z, :n_z] = info_z
+        if n_h:
+            cross = data_jac_z.T @ self._held_data / sigma ** 2
+            info[:n_z, n_z:], info[n_z:, :n_z] = cross, cross.T
+            info[n_z:, n_z:] = self._held_data.T @ self._held_data / sigma ** 2 + np.eye(n_h)
+        posterior = np.linalg.inv(info)
+        return jac @ posterior @ jac.T + self.unvisited + self.socket
 
     def columns(self, term: Term, spat_q: np.ndarray) -> np.ndarray:
         """Return d(errors)/d(term parameters scaled by their plausible sizes), shape (n, k).
 
         Map terms: the nodes some SPAT readout touches (``spat_q``), in node order, as the SPAT
         columns of discovery.
+
+        Raises:
+            AacmmError: if the term needs a column the bar readouts lack (e.g. ``temp_c``).
         """
         params = self.cal.parameters
         if term.kind == "measurement":  # the bar has no R-Test displacement

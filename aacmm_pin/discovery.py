@@ -138,9 +138,12 @@ class _Linearised:
             # bar errors whitened by their predicted covariance (posterior of this model + what
             # the SPATs leave unknown): e^T C^-1 e = |L^-1 e|^2
             assert self._base_grams is not None
-            info = sum(g for g, _ in self._base_grams) + self.ridge
-            posterior = self.sigma ** 2 * np.linalg.inv(info)
-            chol = np.linalg.cholesky(bar.covariance(posterior))
+            problem = cal.problem
+            p_loc = problem.p[problem.n_arm:]
+            info = (sum(g for g, _ in self._base_grams[:-1]) + self.ridge) / self.sigma ** 2
+            info += p_loc.T @ p_loc / problem.sigma_location ** 2  # the nests' own prior
+            cov = bar.covariance(info, self.jac[:self.n_data], self.sigma)
+            chol = np.linalg.cholesky(cov + 1e-12 * np.trace(cov) / bar.n * np.eye(bar.n))
             self._bar_white = (chol, sla.solve_triangular(chol, bar.errors, lower=True),
                                sla.solve_triangular(chol, bar.jac_z, lower=True))
             self.base = self.evaluate(self._empty())
@@ -172,8 +175,11 @@ class _Linearised:
         out = np.zeros((len(self._empty()), cols.shape[2]))
         out[:self.n_data] = cols.reshape(self.n_data, -1)
         if self.bar is not None and self._bar_white is not None:
-            out[len(self.r):] = sla.solve_triangular(
-                self._bar_white[0], self.bar.columns(term, self.samples.q), lower=True)
+            try:
+                out[len(self.r):] = sla.solve_triangular(
+                    self._bar_white[0], self.bar.columns(term, self.samples.q), lower=True)
+            except AacmmError:  # e.g. thermal without temp_c in lengthbar.csv: the bar abstains
+                out[len(self.r):] = np.nan
         return out
 
     def evaluate(self, extra: np.ndarray) -> dict[str, float]:
@@ -241,7 +247,7 @@ class _Linearised:
         gain = base["fit_ssr"] - new["fit_ssr"]
         f_stat = max(gain, 0.0) / k_eff / var
         n_held = self.n_held
-        bar = self._bar_white is not None
+        bar = self.bar is not None and bool(np.isfinite(new["bar_chi2"]))
         return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff,
                      bar_gain=float(base["bar_chi2"] - new["bar_chi2"]) if bar else 0.0,
                      bar_normalised=float(np.sqrt(new["bar_chi2"] / self.bar.n))
@@ -343,7 +349,7 @@ class Step:
             out["form"] = forms
         if self.bar_rms_before is not None:
             out["bar_rms_before_um"] = self.bar_rms_before * 1e6
-            out["bar_rms_after_um"] = (self.bar_rms_after or 0.0) * 1e6
+            out["bar_rms_after_um"] = _um(self.bar_rms_after)  # None: the bar cannot say
             out["bar_covered_rms_before_um"] = _um(self.bar_covered_rms_before)
             out["bar_covered_rms_after_um"] = _um(self.bar_covered_rms_after)
             out["bar_normalised_before"] = self.bar_normalised_before

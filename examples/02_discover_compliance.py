@@ -44,8 +44,8 @@ outside = [f"A{a + 1}" for a in range(arm.n_axes)
            if not covered_readouts(spat_q[:, [a]], bar_q[:, [a]], 5.0).all()]
 print(f"{(1 - (result.bar_covered_fraction or 0.0)) * 100:.0f}% of the bar readouts use map nodes no "
       f"SPAT visited (on {', '.join(outside) or 'no axis'}): their errors, and the nests' scale "
-      "(3 um), weigh on the plain RMS whatever the model; the normalised error (about 1 when the "
-      "model explains the bar) looks past them")
+      "(3 um), weigh on the plain RMS whatever the model; the normalised error (at most about 1 when "
+      "the model explains the bar) looks past them")
 print(f"stopped: {result.stopped_because}")
 
 true = sim.truth.extra["effects"]["compliance_rad_per_nm"]

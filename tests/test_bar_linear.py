@@ -85,8 +85,12 @@ def test_predicted_covariance_covers_the_errors_of_a_right_model(arm: ap.Arm) ->
     """Nothing hidden beyond the proposed model: the normalised bar error is O(1).
 
     With a right covariance, the mean of the squared normalised error over 4 campaigns (~8 errors
-    each) is chi-square/32: below 1.5 with 96 % probability. Measured 0.30; without the map nodes
-    only the bar visits it is 2.6, with the posterior alone 5-15 per campaign: both would fail.
+    each) is chi-square/32: below 1.5 with 96 % probability. Without the map nodes only the bar
+    visits it was 2.6, with the posterior alone 5-15 per campaign: both fail. The stated node prior
+    (20.6 arcsec) is generous against the simulator's maps (about 12 arcsec RMS), so a right
+    covariance gives about (12 / 20.6)^2 = 0.35 where those nodes dominate (measured 0.39); below
+    0.15 it would be inflated beyond its priors (a held direction's compensation that went wrong
+    did that).
     """
     squares = []
     for seed in range(4):
@@ -98,7 +102,7 @@ def test_predicted_covariance_covers_the_errors_of_a_right_model(arm: ap.Arm) ->
         assert not bar.covered.all()  # the bar visits A4 below the SPATs' range
         lin = _Linearised(cal, spat_samples(campaign, arm), bar)
         squares.append((lin.bar_normalised(bar.errors) or 0.0) ** 2)
-    assert np.mean(squares) < 1.5
+    assert 0.15 < np.mean(squares) < 1.5
 
 
 def test_coverage_of_readouts_between_touched_nodes() -> None:
@@ -111,3 +115,19 @@ def test_coverage_of_readouts_between_touched_nodes() -> None:
     q = np.radians([[45.0, 0.0], [92.0, 0.0], [-3.0, 0.0], [45.0, 2.0], [90.0, 0.0]])
     # 92 deg: node 95 untouched; -3 deg: node -5 untouched; A2 at 2 deg: node 5 untouched
     np.testing.assert_array_equal(covered_readouts(spat, q, step), [True, False, False, False, True])
+
+
+def test_a_bar_with_no_complete_pair_gives_no_errors(arm: ap.Arm, sim: ap.Simulation,
+                                                     cal: ap.Calibration) -> None:
+    import dataclasses
+
+    log = sim.campaign.lengthbar
+    keep = log.socket == "A"
+    only_a = dataclasses.replace(log, placement=log.placement[keep], socket=log.socket[keep],
+                                 q=log.q[keep])
+    campaign = dataclasses.replace(sim.campaign, lengthbar=only_a)
+    bar = LinearBar(cal, campaign, arm)
+    assert bar.n == 0 and bar.covered_rms is None
+    n_z = bar.jac_z.shape[1]
+    assert bar.covariance(np.eye(n_z), np.zeros((3 * len(cal.q), n_z)), 2e-6).shape == (0, 0)
+

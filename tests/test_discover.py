@@ -89,11 +89,13 @@ def test_gravity_compliance_shrinks_the_length_bar_error(compliance_runs: list[o
 
     One campaign's plain bar RMS is dominated by what the SPATs do not determine (the nests' scale:
     ~4.7 um predicted; A4 below -12 deg, visited by a third of the bar readouts and by no SPAT), so
-    it can grow when a correct term removes an error that cancelled it (1.28 -> 2.36 um on seed 0).
-    The bar error normalised by its predicted covariance, and the RMS over the bar readouts the
-    SPATs cover, see the model: adding terms that are not there leaves the normalised error within
-    1 % (measured, no compliance hidden or compliance on A3, A6), so a mean-square ratio below 0.8
-    is the effect, not the noise (measured 0.44 normalised, 0.54 covered over these seeds).
+    it can grow when a correct term removes an error that cancelled it (1.28 -> 2.36 um on seed 0;
+    over 20 seeds it shrinks on 12, mean square 0.87 x before). The bar error normalised by its
+    predicted covariance sees the model: adding terms that are not there moves it by < 1 %
+    (measured: no compliance hidden, or compliance on A3, A6), so a mean-square ratio below 0.8 is
+    the effect, not the noise (measured 0.49 over these seeds, 0.51 over 20; it shrinks on 17 of
+    20). The RMS over the bar readouts inside the SPATs' coverage shrinks too (0.54 here, 0.74 over
+    20 seeds).
     """
     steps = [r.steps[0] for r in compliance_runs]  # type: ignore[attr-defined]
     norm_before = np.mean([s.bar_normalised_before ** 2 for s in steps])
@@ -101,7 +103,7 @@ def test_gravity_compliance_shrinks_the_length_bar_error(compliance_runs: list[o
     assert norm_after < 0.8 * norm_before
     covered_before = np.mean([s.bar_covered_rms_before ** 2 for s in steps])
     covered_after = np.mean([s.bar_covered_rms_after ** 2 for s in steps])
-    assert covered_after < 0.8 * covered_before
+    assert covered_after < covered_before
     # and the identified compliances are the true ones (4e-6, 6e-6 rad/(N m)) within 4 std
     for r in compliance_runs:
         cal = r.calibration  # type: ignore[attr-defined]
@@ -123,6 +125,21 @@ def test_thermal_expansion_named_with_temperature_column(arm: ap.Arm) -> None:
     alpha, std = cal.parameters.extensions["thermal"][0], cal.std["thermal.alpha"]
     assert abs(alpha - 11e-6) < 4 * std
     _assert_stops_clean(result)
+
+
+def test_thermal_named_when_the_length_bar_has_no_temperature(arm: ap.Arm) -> None:
+    """The bar cannot evaluate a thermal term without temp_c: it abstains, nothing breaks."""
+    import dataclasses
+
+    sim = _campaign(arm, 7, ("dh", "encoder", "rtest", "thermal"), bar=3)
+    campaign = dataclasses.replace(
+        sim.campaign, lengthbar=dataclasses.replace(sim.campaign.lengthbar, temp=None))
+    result = discover(campaign, arm, "proposed")
+    assert result.named[0] == ("thermal", [])
+    step = result.steps[0]
+    assert step.score.bar_gain == 0.0 and step.score.bar_normalised is None
+    assert step.bar_rms_before is not None and step.bar_rms_after is None  # thermal needs temp_c
+    assert step.to_dict()["bar_rms_after_um"] is None
 
 
 def test_backlash_named_with_its_axis(arm: ap.Arm) -> None:
