@@ -22,7 +22,8 @@ The loop (:func:`discover`):
 
 Held-out RMS after a step is measured on the refitted model, and so are the length-bar errors (when
 the campaign has a bar): their RMS (as :func:`aacmm_pin.validate`), their RMS over the bar readouts
-inside the SPATs' coverage, and their normalised size (about 1 when the model explains the bar).
+inside the SPATs' coverage, and their normalised size (at most about 1 when the model explains
+the bar).
 """
 
 from __future__ import annotations
