@@ -25,30 +25,18 @@ is the SPATs' angle range); the RMS over covered readouts is reported alongside.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import Samples, Term
-from aacmm_pin.encoder_map import EncoderMap, node_count
+from aacmm_pin.encoder_map import EncoderMap, node_count, touched_nodes
 from aacmm_pin.identifiability import PLAUSIBLE, plausible_sizes
 from aacmm_pin.identify import Calibration
-from aacmm_pin.kinematics import stylus_jacobians
+from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
+from aacmm_pin.parameters import Parameters
 from aacmm_pin.unknowns import Unknowns, term_jacobian
-
-
-def touched_nodes(q: np.ndarray, step_deg: float) -> np.ndarray:
-    """Return which map nodes the readouts touch (interpolation weight > 0), shape (n_axes, nodes).
-
-    Args:
-        q: encoder readouts, shape (N, n_axes), rad.
-        step_deg: map node step, deg.
-    """
-    emap = EncoderMap(np.zeros(node_count(step_deg)), step_deg)
-    return np.array([np.asarray(abs(emap.weights(q[:, a])).sum(axis=0)).ravel() > 0
-                     for a in range(q.shape[1])])
+from aacmm_pin.validate import bar_pairs, pair_errors, pair_weights
 
 
 def covered_readouts(spat_q: np.ndarray, q: np.ndarray, step_deg: float) -> np.ndarray:
@@ -69,49 +57,6 @@ def covered_readouts(spat_q: np.ndarray, q: np.ndarray, step_deg: float) -> np.n
         lower, upper, frac = emap.neighbours(q[:, a])
         out &= (seen[a, lower] | (frac == 1.0)) & (seen[a, upper] | (frac == 0.0))
     return out
-
-
-@dataclass(frozen=True)
-class _Pairs:
-    """Which readouts form each bar error: (placement, pair) entries with both sockets measured."""
-
-    rows: list[tuple[np.ndarray, np.ndarray]]
-    """Per error: readout indices of the first and the second socket."""
-    length: np.ndarray
-    """Calibrated length of each error's pair, shape (n,), m."""
-
-
-def _pairs(campaign: Campaign, mask: np.ndarray | None = None) -> _Pairs:
-    log = campaign.lengthbar
-    assert log is not None
-    keep = np.ones(len(log.q), dtype=bool) if mask is None else mask
-    rows, length = [], []
-    for k in dict.fromkeys(int(v) for v in log.placement):
-        here = (log.placement == k) & keep
-        for (a, b), value in campaign.bar.items():
-            ra, rb = (np.flatnonzero(here & (log.socket == s)) for s in (a, b))
-            if ra.size and rb.size:
-                rows.append((ra, rb))
-                length.append(value)
-    return _Pairs(rows, np.array(length))
-
-
-def bar_errors(points: np.ndarray, pairs: _Pairs) -> tuple[np.ndarray, np.ndarray]:
-    """Return each pair's length error (n,) m and the unit vector between its sockets (n, 3)."""
-    if not pairs.rows:
-        return np.zeros(0), np.zeros((0, 3))
-    d = np.array([points[rb].mean(axis=0) - points[ra].mean(axis=0) for ra, rb in pairs.rows])
-    dist = np.linalg.norm(d, axis=1)
-    return dist - pairs.length, d / dist[:, None]
-
-
-def _weights(pairs: _Pairs, unit: np.ndarray, n_readouts: int) -> np.ndarray:
-    """Return W, shape (n, 3M), with W @ d(points) = d(errors) (points flattened sample-major)."""
-    w = np.zeros((len(pairs.rows), 3 * n_readouts))
-    for i, ((ra, rb), u) in enumerate(zip(pairs.rows, unit)):
-        for sign, r in ((-1.0, ra), (1.0, rb)):
-            w[i, (3 * r[:, None] + np.arange(3)).ravel()] = sign * np.tile(u, r.size) / r.size
-    return w
 
 
 def _socket_covariance(points: np.ndarray, w: np.ndarray, campaign: Campaign) -> np.ndarray:
@@ -164,14 +109,14 @@ class LinearBar:
         assert log is not None and problem is not None and u is not None and cal.q is not None
         self.cal, self.arm = cal, arm
         self.samples = Samples(arm, log.q, log.temp, log.t)
-        self.pairs = _pairs(campaign)
+        self.pairs = bar_pairs(campaign)
         full = Unknowns(arm, u.start, u.map_axes, np.ones_like(u.free), u.terms, self.samples)
         points, jac = full.jacobian(full.full_vector(cal.parameters), log.q)
         self.points = points
-        self.errors, unit = bar_errors(points, self.pairs)
+        self.errors, unit = pair_errors(points, self.pairs)
         self.covered = covered_readouts(cal.q, log.q, cal.parameters.step_deg)
-        self.covered_errors = bar_errors(points, _pairs(campaign, self.covered))[0]
-        self.w = _weights(self.pairs, unit, len(log.q))
+        self.covered_errors = pair_errors(points, bar_pairs(campaign, self.covered))[0]
+        self.w = pair_weights(self.pairs, unit, len(log.q))
         g_full = (np.vstack([jac.rmatmul(row) for row in self.w]) if self.n
                   else np.zeros((0, u.free.size)))
         g_free = g_full[:, u.free]
@@ -234,24 +179,35 @@ class LinearBar:
         posterior = np.linalg.inv(info)
         return jac @ posterior @ jac.T + self.unvisited + self.socket
 
-    def columns(self, term: Term, spat_q: np.ndarray) -> np.ndarray:
+    def columns(self, term: Term, touched: np.ndarray) -> np.ndarray:
         """Return d(errors)/d(term parameters scaled by their plausible sizes), shape (n, k).
 
-        Map terms: the nodes some SPAT readout touches (``spat_q``), in node order, as the SPAT
-        columns of discovery.
+        ``touched``: the map nodes the SPAT readouts touch, shape (n_axes, n_nodes) (a map term's
+        parameters, as in discovery's SPAT columns).
 
         Raises:
             AacmmError: if the term needs a column the bar readouts lack (e.g. ``temp_c``).
         """
-        params = self.cal.parameters
         if term.kind == "measurement":  # the bar has no R-Test displacement
             return np.zeros((self.n, len(term.names)))
-        if term.kind == "map":
-            seen = np.abs(params.map(term.axis).weights(spat_q[:, term.axis - 1])).sum(axis=0)
-            weights = params.map(term.axis).weights(self.samples.q[:, term.axis - 1]).toarray()
-            weights = weights[:, np.asarray(seen).ravel() > 0]
-            cols = self.stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :]
-            cols = cols * PLAUSIBLE["node"]
-        else:
-            cols = term_jacobian(term, self.samples, self.stylus, params) * term.plausible
+        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, touched)
         return self.w @ cols.reshape(3 * self.samples.n, -1)
+
+
+def scaled_columns(term: Term, samples: Samples, stylus: StylusJacobians, params: Parameters,
+                   touched: np.ndarray) -> np.ndarray:
+    """Return d(points)/d(term parameters scaled by their plausible sizes), shape (N, 3, k), m.
+
+    Args:
+        term: a candidate term of the effect library.
+        samples: the readouts' samples (N).
+        stylus: stylus Jacobians at those readouts and ``params``.
+        params: the parameters the model is linearised at.
+        touched: map nodes the SPAT readouts touch, shape (n_axes, n_nodes): a map term's
+            parameters.
+    """
+    if term.kind == "map":
+        weights = params.map(term.axis).weights(samples.q[:, term.axis - 1]).toarray()
+        weights = weights[:, touched[term.axis - 1]]
+        return stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :] * PLAUSIBLE["node"]
+    return term_jacobian(term, samples, stylus, params) * term.plausible

@@ -42,15 +42,14 @@ from tqdm.auto import tqdm
 
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
-from aacmm_pin.bar_linear import LinearBar
+from aacmm_pin.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import LIBRARY, Samples, Term
+from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.identifiability import PLAUSIBLE
 from aacmm_pin.identify import Calibration, identify, spat_samples
 from aacmm_pin.identify import _check as check_campaign
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
-from aacmm_pin.unknowns import term_jacobian
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
@@ -131,15 +130,16 @@ class _Linearised:
         self.prior_rows = np.arange(self.n_data, len(self.r))
         self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
                                                         samples.q, frame="mt", samples=samples)
-        self._base_grams: list[tuple[np.ndarray, np.ndarray]] | None = None
+        self.touched = touched_nodes(samples.q, cal.parameters.step_deg)
+        # the model's own blocks per location and for the prior rows, shared by every candidate
+        jac, r = self.jac, self.r
+        self._base_grams = [(jac[g].T @ jac[g], jac[g].T @ r[g])
+                            for g in [*self.groups, self.prior_rows]]
         self.bar = bar
         self._bar_white: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self.base = self.evaluate(self._empty())
         if bar is not None and bar.n:
             # bar errors whitened by their predicted covariance (posterior of this model + what
             # the SPATs leave unknown): e^T C^-1 e = |L^-1 e|^2
-            assert self._base_grams is not None
-            problem = cal.problem
             p_loc = problem.p[problem.n_arm:]
             info = (sum(g for g, _ in self._base_grams[:-1]) + self.ridge) / self.sigma ** 2
             info += p_loc.T @ p_loc / problem.sigma_location ** 2  # the nests' own prior
@@ -147,7 +147,7 @@ class _Linearised:
             chol = np.linalg.cholesky(cov + 1e-12 * np.trace(cov) / bar.n * np.eye(bar.n))
             self._bar_white = (chol, sla.solve_triangular(chol, bar.errors, lower=True),
                                sla.solve_triangular(chol, bar.jac_z, lower=True))
-            self.base = self.evaluate(self._empty())
+        self.base = self.evaluate(self._empty())
 
     def _empty(self) -> np.ndarray:
         return np.zeros((len(self.r) + (0 if self.bar is None else self.bar.n), 0))
@@ -164,21 +164,13 @@ class _Linearised:
 
         Rows: the residual's (data, then prior), then the whitened bar errors (with a bar).
         """
-        if term.kind == "map":
-            emap = self.cal.parameters.map(term.axis)
-            weights = emap.weights(self.samples.q[:, term.axis - 1]).toarray()
-            weights = weights[:, np.abs(weights).sum(axis=0) > 0]
-            cols = self.stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :]
-            cols = cols * PLAUSIBLE["node"]
-        else:
-            cols = term_jacobian(term, self.samples, self.stylus, self.cal.parameters)
-            cols = cols * term.plausible
+        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, self.touched)
         out = np.zeros((len(self._empty()), cols.shape[2]))
         out[:self.n_data] = cols.reshape(self.n_data, -1)
         if self.bar is not None and self._bar_white is not None:
             try:
                 out[len(self.r):] = sla.solve_triangular(
-                    self._bar_white[0], self.bar.columns(term, self.samples.q), lower=True)
+                    self._bar_white[0], self.bar.columns(term, self.touched), lower=True)
             except AacmmError:  # e.g. thermal without temp_c in lengthbar.csv: the bar abstains
                 out[len(self.r):] = np.nan
         return out
@@ -192,10 +184,6 @@ class _Linearised:
         jac, r, k = self.jac, self.r, extra.shape[1]
         p = jac.shape[1]
         ridge = sla.block_diag(self.ridge, self.sigma ** 2 * np.eye(k))
-
-        if self._base_grams is None:  # the model's own blocks, shared by every candidate
-            self._base_grams = [(jac[g].T @ jac[g], jac[g].T @ r[g])
-                                for g in [*self.groups, self.prior_rows]]
 
         def gram(rows: np.ndarray, base: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
             e = extra[rows]

@@ -125,6 +125,18 @@ class EncoderMap:
         return readout + self(readout)
 
 
+def touched_nodes(q: np.ndarray, step_deg: float) -> np.ndarray:
+    """Return which map nodes the readouts touch (interpolation weight > 0), shape (n_axes, nodes).
+
+    Args:
+        q: encoder readouts, shape (N, n_axes), rad.
+        step_deg: map node step, deg.
+    """
+    emap = EncoderMap(np.zeros(node_count(step_deg)), step_deg)
+    return np.array([np.asarray(abs(emap.weights(q[:, a])).sum(axis=0)).ravel() > 0
+                     for a in range(q.shape[1])]).reshape(q.shape[1], emap.n_nodes)
+
+
 def correct_readouts(q: np.ndarray, maps: dict[int, EncoderMap]) -> np.ndarray:
     """Wrap joint configurations: readouts in, corrected configuration out.
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.unknowns import BlockJacobian, Unknowns
 
 ARCSEC = np.pi / 180 / 3600
@@ -54,10 +55,9 @@ def plausible_sizes(unknowns: Unknowns) -> np.ndarray:
 def unvisited_nodes(unknowns: Unknowns, q: np.ndarray) -> np.ndarray:
     """Return a full-layout mask of the map nodes that no readout touches."""
     mask = np.zeros(unknowns.free.size, dtype=bool)
+    touched = touched_nodes(q, unknowns.start.step_deg)
     for axis in unknowns.map_axes:
-        weights = unknowns.start.map(axis).weights(q[:, axis - 1])
-        touched = np.asarray(abs(weights).sum(axis=0)).ravel() > 0
-        mask[unknowns.map_slice(axis)] = ~touched
+        mask[unknowns.map_slice(axis)] = ~touched[axis - 1]
     return mask
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.identify import Calibration, measured_positions, refit
-from aacmm_pin.validate import validate
+from aacmm_pin.validate import as_table, bar_pairs, pair_errors, pair_weights, validate
 
 ARCSEC = np.pi / 180 / 3600
 AGREE = 0.2
@@ -123,26 +123,13 @@ def length_jacobian(cal: Calibration, campaign: Campaign) -> tuple[np.ndarray, n
     assert log is not None and cal.unknowns is not None
     n_arm = len(cal.unknowns.names)
     pos, jac = cal.unknowns.jacobian(cal.x[:n_arm], log.q)
-    placements = list(dict.fromkeys(int(k) for k in log.placement))
-    pairs = list(campaign.bar)
-    errors = np.zeros((len(placements), len(pairs)))
-    grads = np.zeros((len(placements), len(pairs), cal.x.size))
-    for i, k in enumerate(placements):
-        for j, (a, b) in enumerate(pairs):
-            sel = [(log.placement == k) & (log.socket == s) for s in (a, b)]
-            rows = [np.flatnonzero(m) for m in sel]
-            if rows[0].size == 0 or rows[1].size == 0:  # pair not measured here: no error
-                errors[i, j] = np.nan
-                continue
-            mean = [pos[r].mean(axis=0) for r in rows]
-            d = mean[1] - mean[0]
-            errors[i, j] = np.linalg.norm(d) - campaign.bar[(a, b)]
-            u = d / np.linalg.norm(d)
-            weights = np.zeros(3 * len(log.q))
-            for sign, r in ((-1.0, rows[0]), (1.0, rows[1])):
-                weights[(3 * r[:, None] + np.arange(3)).ravel()] = sign * np.tile(u, r.size) / r.size
-            grads[i, j, :n_arm] = jac.rmatmul(weights)
-    return errors, grads
+    pairs = bar_pairs(campaign)
+    errors, unit = pair_errors(pos, pairs)
+    grads = np.zeros((len(errors), cal.x.size))
+    for row, w in zip(grads, pair_weights(pairs, unit, len(log.q))):
+        row[:n_arm] = jac.rmatmul(w)
+    grads = as_table(pairs, grads)
+    return as_table(pairs, errors), np.nan_to_num(grads)  # pair not measured: no gradient
 
 
 def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:

@@ -53,6 +53,79 @@ class ValidationResult:
         return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class BarPairs:
+    """Which readouts form each length error: the (placement, pair) entries measured in full."""
+
+    index: list[tuple[int, int]]
+    """Per error: its row (placement) and column (pair) in :attr:`ValidationResult.errors`."""
+    rows: list[tuple[np.ndarray, np.ndarray]]
+    """Per error: indices of the readouts in the first and in the second socket."""
+    length: np.ndarray
+    """Calibrated length of each error's pair, shape (n,), m."""
+    placements: list[int]
+    """Bar placements, in file order of first appearance."""
+    pairs: list[tuple[str, str]]
+    """Calibrated socket pairs (from, to), as in bar.csv."""
+
+
+def bar_pairs(campaign: Campaign, mask: np.ndarray | None = None) -> BarPairs:
+    """Return the length errors a campaign's bar log measures (readouts in ``mask``, shape (M,)).
+
+    Raises:
+        AacmmError: if the campaign has no length-bar data.
+    """
+    log = campaign.lengthbar
+    if log is None or not campaign.bar:
+        raise AacmmError("the campaign has no length-bar data (lengthbar.csv and bar.csv)")
+    keep = np.ones(len(log.q), dtype=bool) if mask is None else mask
+    placements = list(dict.fromkeys(int(k) for k in log.placement))
+    pairs = list(campaign.bar)
+    index, rows, length = [], [], []
+    for i, k in enumerate(placements):
+        here = (log.placement == k) & keep
+        for j, (a, b) in enumerate(pairs):
+            ra, rb = (np.flatnonzero(here & (log.socket == s)) for s in (a, b))
+            if ra.size and rb.size:
+                index.append((i, j))
+                rows.append((ra, rb))
+                length.append(campaign.bar[(a, b)])
+    return BarPairs(index, rows, np.array(length), placements, pairs)
+
+
+def pair_errors(points: np.ndarray, pairs: BarPairs) -> tuple[np.ndarray, np.ndarray]:
+    """Return each length error (n,), m, and the unit vector between its sockets (n, 3).
+
+    An error is the distance of the mean socket points less the calibrated length.
+
+    Args:
+        points: modelled stylus centres of the bar readouts, shape (M, 3), m (any one frame).
+        pairs: from :func:`bar_pairs`.
+    """
+    if not pairs.rows:
+        return np.zeros(0), np.zeros((0, 3))
+    d = np.array([points[rb].mean(axis=0) - points[ra].mean(axis=0) for ra, rb in pairs.rows])
+    dist = np.linalg.norm(d, axis=1)
+    return dist - pairs.length, d / dist[:, None]
+
+
+def pair_weights(pairs: BarPairs, unit: np.ndarray, n_readouts: int) -> np.ndarray:
+    """Return W, shape (n, 3M), with W @ d(points) = d(errors) (points flattened sample-major)."""
+    w = np.zeros((len(pairs.rows), 3 * n_readouts))
+    for i, ((ra, rb), u) in enumerate(zip(pairs.rows, unit)):
+        for sign, r in ((-1.0, ra), (1.0, rb)):
+            w[i, (3 * r[:, None] + np.arange(3)).ravel()] = sign * np.tile(u, r.size) / r.size
+    return w
+
+
+def as_table(pairs: BarPairs, values: np.ndarray) -> np.ndarray:
+    """Return per-error values (n, ...) laid out as (n_placements, n_pairs, ...), NaN elsewhere."""
+    out = np.full((len(pairs.placements), len(pairs.pairs), *values.shape[1:]), np.nan)
+    for (i, j), v in zip(pairs.index, values):
+        out[i, j] = v
+    return out
+
+
 def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResult:
     """Compare the calibrated arm's mean socket distances with the calibrated bar.
 
@@ -62,18 +135,9 @@ def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResu
     Raises:
         AacmmError: if the campaign has no length-bar data.
     """
+    pairs = bar_pairs(campaign)
     log = campaign.lengthbar
-    if log is None or not campaign.bar:
-        raise AacmmError("the campaign has no length-bar data (lengthbar.csv and bar.csv)")
+    assert log is not None
     points = predict(arm, params, log.q, Samples(arm, log.q, log.temp, log.t))
-    placements = list(dict.fromkeys(int(k) for k in log.placement))
-    pairs = list(campaign.bar)
-    errors = np.full((len(placements), len(pairs)), np.nan)
-    for i, k in enumerate(placements):
-        here = log.placement == k
-        for j, (a, b) in enumerate(pairs):
-            sel_a, sel_b = here & (log.socket == a), here & (log.socket == b)
-            if sel_a.any() and sel_b.any():
-                dist = np.linalg.norm(points[sel_b].mean(axis=0) - points[sel_a].mean(axis=0))
-                errors[i, j] = dist - campaign.bar[(a, b)]
-    return ValidationResult(placements, pairs, errors)
+    return ValidationResult(pairs.placements, pairs.pairs,
+                            as_table(pairs, pair_errors(points, pairs)[0]))

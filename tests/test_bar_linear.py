@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.bar_linear import LinearBar, covered_readouts, touched_nodes
+from aacmm_pin.bar_linear import LinearBar, covered_readouts
 from aacmm_pin.discovery import _Linearised
 from aacmm_pin.effects import compliance
+from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.identify import spat_samples
 
 
