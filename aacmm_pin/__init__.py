@@ -21,13 +21,13 @@ from aacmm_pin.errors import (
     Problem,
 )
 from aacmm_pin.export import write_calibration
-from aacmm_pin.identify import Calibration, IdentificationError, identify, measured_positions
+from aacmm_pin.identification import Calibration, IdentificationError, identify, measured_positions
 from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
-from aacmm_pin.plan import Plan, plan
+from aacmm_pin.planning import Plan, plan
 from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
 from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
-from aacmm_pin.validate import ValidationResult, validate
+from aacmm_pin.validation import ValidationResult, validate
 from aacmm_pin.viewer import View, view
 
 __version__ = "0.1.0"

@@ -23,10 +23,10 @@ from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import Samples
 from aacmm_pin.encoder_map import correct_readouts
-from aacmm_pin.identify import measured_positions
+from aacmm_pin.identification import measured_positions
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
-from aacmm_pin.validate import ValidationResult, validate
+from aacmm_pin.validation import ValidationResult, validate
 
 ARM = "arm"
 """Scene path of the arm: ``/meshcat/arm/visuals/<URDF visual>``."""

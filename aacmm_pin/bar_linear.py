@@ -32,11 +32,11 @@ from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import Samples, Term
 from aacmm_pin.encoder_map import EncoderMap, node_count, touched_nodes
 from aacmm_pin.identifiability import PLAUSIBLE, plausible_sizes
-from aacmm_pin.identify import Calibration
+from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.unknowns import Unknowns, term_jacobian
-from aacmm_pin.validate import bar_pairs, pair_errors, pair_weights
+from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
 
 
 def covered_readouts(spat_q: np.ndarray, q: np.ndarray, step_deg: float) -> np.ndarray:

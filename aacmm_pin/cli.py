@@ -52,7 +52,7 @@ def _identify(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.export import write_calibration
-    from aacmm_pin.identify import identify
+    from aacmm_pin.identification import identify
 
     arm = load_arm(args.arm)
     cal = identify(read_campaign(args.campaign), arm, model=args.model,
@@ -65,7 +65,7 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _print_calibration(cal: object, out: Path) -> None:
-    from aacmm_pin.identify import Calibration
+    from aacmm_pin.identification import Calibration
 
     assert isinstance(cal, Calibration)
     state = "converged" if cal.success else "DID NOT CONVERGE"
@@ -115,7 +115,7 @@ def _validate(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.parameters import read_parameters
-    from aacmm_pin.validate import validate
+    from aacmm_pin.validation import validate
 
     params = read_parameters(args.caldir)
     result = validate(load_arm(params.arm), params, read_campaign(args.campaign))
@@ -131,7 +131,7 @@ def _uncertainty(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.export import write_calibration, write_maps_csv
-    from aacmm_pin.identify import identify
+    from aacmm_pin.identification import identify
     from aacmm_pin.plots import plot_encoder_maps
     from aacmm_pin.uncertainty import monte_carlo, uncertainty_report
 
@@ -172,8 +172,8 @@ def _plan(args: argparse.Namespace) -> int:
 
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.identify import identify
-    from aacmm_pin.plan import plan
+    from aacmm_pin.identification import identify
+    from aacmm_pin.planning import plan
 
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign)

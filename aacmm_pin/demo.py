@@ -14,9 +14,9 @@ from pathlib import Path
 from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import read_campaign
 from aacmm_pin.export import write_calibration
-from aacmm_pin.identify import identify
+from aacmm_pin.identification import identify
 from aacmm_pin.simulate import SimulationConfig, simulate_campaign, write_simulation
-from aacmm_pin.validate import ValidationResult, validate
+from aacmm_pin.validation import ValidationResult, validate
 
 MODELS = (("dh_rtest", "DH only, R-Test", "dh", True),
           ("proposed_no_rtest", "proposed, no R-Test", "proposed", False),

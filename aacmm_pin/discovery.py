@@ -47,8 +47,8 @@ from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import LIBRARY, Samples, Term
 from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.identify import Calibration, identify, spat_samples
-from aacmm_pin.identify import _check as check_campaign
+from aacmm_pin.identification import Calibration, identify, spat_samples
+from aacmm_pin.identification import _check as check_campaign
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 
 STARTS = ("dh", "proposed")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin.arm import Arm
-from aacmm_pin.identify import Calibration
+from aacmm_pin.identification import Calibration
 from aacmm_pin.parameters import write_parameters
 
 ARCSEC_PER_RAD = 180 / np.pi * 3600

@@ -45,7 +45,7 @@ spheres through 1 to 4 of the centres).
 measured point to point, :math:`E = L_{measured} - L_{cal}`, and E_UNI its largest absolute value
 over every test length and position. Here a test length is a calibrated socket distance of the
 length bar (``bar.csv``) in one placement, measured as the distance between the mean stylus
-centres of the readouts in its two sockets (as :func:`aacmm_pin.validate.validate`); the standard
+centres of the readouts in its two sockets (as :func:`aacmm_pin.validation.validate`); the standard
 measures each length with single points, several times, in several positions, which a campaign
 with one readout per socket and placement reproduces exactly.
 """
@@ -385,7 +385,7 @@ def length_errors(arm: Arm, params: Parameters, campaign: Campaign) -> LengthErr
     Raises:
         AacmmError: if the campaign has no length-bar data.
     """
-    from aacmm_pin.validate import validate
+    from aacmm_pin.validation import validate
 
     result = validate(arm, params, campaign)
     return LengthErrors(result.placements, result.pairs, result.errors, e_uni(result.errors))

@@ -2,7 +2,7 @@ r"""Uncertainty of an identified arm: Monte Carlo (paper Section 5) and linearis
 
 Monte Carlo: perturb the R-Test readings (sigma 2 um per coordinate and sample) and the R-Test
 zero positions (sigma 3 um per coordinate and location), re-identify with the nominal
-calibration's structure starting from its solution (:func:`aacmm_pin.identify.refit`), and take
+calibration's structure starting from its solution (:func:`aacmm_pin.identification.refit`), and take
 the standard deviation (k=1) of every parameter, map node and length error over the trials.
 Trials run through any :class:`concurrent.futures.Executor`: local processes by default, or e.g.
 a Dask cluster's ``client.get_executor()``.
@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.identify import Calibration, measured_positions, refit
-from aacmm_pin.validate import as_table, bar_pairs, pair_errors, pair_weights, validate
+from aacmm_pin.identification import Calibration, measured_positions, refit
+from aacmm_pin.validation import as_table, bar_pairs, pair_errors, pair_weights, validate
 
 ARCSEC = np.pi / 180 / 3600
 AGREE = 0.2
@@ -147,7 +147,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     """Monte Carlo standard uncertainties of a calibration (paper Section 5).
 
     Args:
-        cal: the nominal calibration (from :func:`aacmm_pin.identify.identify` on ``campaign``).
+        cal: the nominal calibration (from :func:`aacmm_pin.identification.identify` on ``campaign``).
         campaign: the campaign it was identified from.
         trials: number of trials.
         sigma_rtest: R-Test reading perturbation per coordinate and sample, m.

@@ -15,7 +15,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import Campaign, SpatLog, load_arm, simulate_campaign  # noqa: E402
-from aacmm_pin.identify import identify  # noqa: E402
+from aacmm_pin.identification import identify  # noqa: E402
 from aacmm_pin.simulate import SimulationConfig  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 

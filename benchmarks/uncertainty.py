@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/uncertainty.py`` (about a minute; writes its section of BENCHMARKS.md).
 Each trial perturbs the R-Test readings (2 um) and nest positions (3 um) of the paper-sized
-campaign (1,600 samples) and re-identifies from the nominal solution (`aacmm_pin.identify.refit`).
+campaign (1,600 samples) and re-identifies from the nominal solution (`aacmm_pin.identification.refit`).
 """
 
 from __future__ import annotations

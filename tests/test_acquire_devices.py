@@ -80,7 +80,7 @@ def recorded(fakes, tmp_path_factory):
 
 def test_acquired_campaign_is_identified(recorded):
     """fake-devices + acquire on ptys give a campaign that read_campaign and identify accept."""
-    from aacmm_pin.identify import identify
+    from aacmm_pin.identification import identify
 
     folder, summaries = recorded
     campaign = read_campaign(folder)

@@ -14,7 +14,7 @@ from aacmm_pin.bar_linear import LinearBar, covered_readouts
 from aacmm_pin.discovery import _Linearised
 from aacmm_pin.effects import compliance
 from aacmm_pin.encoder_map import touched_nodes
-from aacmm_pin.identify import spat_samples
+from aacmm_pin.identification import spat_samples
 
 
 @pytest.fixture(scope="module")

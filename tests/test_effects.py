@@ -10,7 +10,7 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin import effects as fx
-from aacmm_pin.identify import spat_samples
+from aacmm_pin.identification import spat_samples
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.unknowns import Unknowns
 

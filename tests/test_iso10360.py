@@ -143,7 +143,7 @@ def test_figures_on_the_sample_campaign_with_its_truth(tmp_path):
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.parameters import read_parameters
-    from aacmm_pin.validate import validate
+    from aacmm_pin.validation import validate
 
     arm, truth = load_arm(), read_parameters(SAMPLE / "truth.json")
     campaign = read_campaign(SAMPLE)

@@ -11,7 +11,7 @@ import pytest
 from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import write_campaign
 from aacmm_pin.cli import main
-from aacmm_pin.identify import identify
+from aacmm_pin.identification import identify
 from aacmm_pin.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.uncertainty import monte_carlo
 
@@ -125,7 +125,7 @@ def test_large_campaign_path_pickles_and_runs_monte_carlo(monkeypatch):
     import importlib
     import pickle
 
-    identify_module = importlib.import_module("aacmm_pin.identify")  # the module, not the function
+    identify_module = importlib.import_module("aacmm_pin.identification")  # the module, not the function
 
     arm = load_arm()
     sim = simulate_campaign(arm, SimulationConfig(seed=3, samples_per_location=80,

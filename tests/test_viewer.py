@@ -25,7 +25,7 @@ import pytest
 from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
 from aacmm_pin.export import write_calibration
-from aacmm_pin.identify import identify
+from aacmm_pin.identification import identify
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import read_parameters
 from aacmm_pin.simulate import SimulationConfig, simulate_campaign

@@ -10,8 +10,8 @@ import pytest
 from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import Campaign, SpatLog, write_campaign
 from aacmm_pin.cli import main
-from aacmm_pin.identify import identify
-from aacmm_pin.plan import Candidate, map_uncertainty, plan
+from aacmm_pin.identification import identify
+from aacmm_pin.planning import Candidate, map_uncertainty, plan
 from aacmm_pin.simulate import SimulationConfig, TrueArm, simulate_campaign, simulate_spat
 
 

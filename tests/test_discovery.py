@@ -214,7 +214,7 @@ def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, mod
     to the linearisation error); with maps, the scoring's plausible-size prior and identify's
     held directions treat what the others cannot see slightly differently (measured 0.4-3 %)."""
     from aacmm_pin.discovery import _Linearised
-    from aacmm_pin.identify import measured_positions, spat_samples
+    from aacmm_pin.identification import measured_positions, spat_samples
     from aacmm_pin.kinematics import stylus_positions
 
     effects = ("dh", "encoder", "rtest") if model == "proposed" else ("dh", "rtest")

@@ -13,11 +13,11 @@ from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
 from aacmm_pin.cli import main
 from aacmm_pin.export import write_calibration
-from aacmm_pin.identify import IdentificationError, identify
+from aacmm_pin.identification import IdentificationError, identify
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import read_parameters
 from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.validate import validate
+from aacmm_pin.validation import validate
 from tests.helpers import SAMPLE
 
 SEEDS = (0, 1, 2, 3)
