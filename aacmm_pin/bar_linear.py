@@ -106,7 +106,7 @@ class LinearBar:
     def __init__(self, cal: Calibration, campaign: Campaign, arm: Arm):
         log = campaign.lengthbar
         problem, u = cal.problem, cal.unknowns
-        assert log is not None and problem is not None and u is not None and cal.q is not None
+        assert log is not None
         self.cal, self.arm = cal, arm
         self.samples = Samples(arm, log.q, log.temp, log.t)
         self.pairs = bar_pairs(campaign)
@@ -126,15 +126,10 @@ class LinearBar:
         self.unvisited = g_fixed @ g_fixed.T
         # directions the constraints hold (gauges, what the data cannot see), plausible-scaled:
         # their effect on the bar and on the SPAT data (see covariance)
-        self._held_bar = np.zeros((self.n, 0))
-        self._held_data = np.zeros((3 * len(cal.q), 0))
-        if cal.constraints is not None and cal.constraints.shape[0]:
-            scale = plausible_sizes(u)[u.free]
-            _, sv, vt = np.linalg.svd(cal.constraints.toarray() * scale[None, :], full_matrices=False)
-            held = (vt[sv > sv.max() * 1e-10] * scale[None, :]).T  # (n_free, n_held), SI
-            _, spat_jac = u.jacobian(cal.x[:problem.n_arm], cal.q)
-            self._held_bar = g_free @ held
-            self._held_data = spat_jac.matmul(held)
+        held = problem.held  # (n_free, n_held), SI
+        _, spat_jac = u.jacobian(cal.x[:problem.n_arm], cal.q)
+        self._held_bar = g_free @ held
+        self._held_data = spat_jac.matmul(held)
         self.socket = _socket_covariance(points, self.w, campaign)
         self.stylus = stylus_jacobians(arm, cal.parameters, log.q, frame="mt", samples=self.samples)
 

@@ -108,20 +108,17 @@ class _Linearised:
 
     def __init__(self, cal: Calibration, samples: Samples, bar: LinearBar | None = None):
         problem = cal.problem
-        assert problem is not None and cal.unknowns is not None
         z = problem.z(cal.x)
         self.cal, self.samples = cal, samples
         self.r = problem.fun(z)
-        self.jac = problem.jac(z, dense=True)
+        self.jac = problem.jac(z)
         self.n_data = 3 * len(cal.location)
         self.sigma = float(cal.sigma)
         # prior of the plausible sizes on the arm directions (y = plausible-scaled null-space
         # coordinates, z = R y), centred at the start values, not at this fit: a left-out
         # location's refit must not keep what only that location determined; the nest offsets
         # have their own prior rows in the residual already
-        r_inv = np.linalg.lstsq(problem.t, problem.p, rcond=None)[0]
-        n_arm_y = problem.t.shape[1] - problem.n_loc
-        arm_rows = r_inv[:n_arm_y]
+        arm_rows = problem.r_inv[:problem.n_arm_y]
         self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
         self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
         rows_loc = np.repeat(cal.location, 3)
@@ -395,7 +392,7 @@ class Discovery:
                     "bar_normalised": self.bar_normalised,
                     "bar_covered_fraction": self.bar_covered_fraction},
             "final": {"extensions": sorted(cal.parameters.extensions),
-                      "map_axes": list(cal.unknowns.map_axes) if cal.unknowns else [],
+                      "map_axes": list(cal.unknowns.map_axes),
                       "noise_um": self.noise * 1e6},
             "candidates_scored": self.n_candidates, "runtime_s": self.runtime_s,
             "library": {name: e.description for name, e in LIBRARY.items()},

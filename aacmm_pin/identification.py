@@ -14,15 +14,13 @@ data cannot determine.
 
 from __future__ import annotations
 
-import copy
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import OptimizeResult, least_squares
-from scipy.sparse.linalg import LinearOperator
+from scipy.optimize import OptimizeResult
 from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
@@ -32,11 +30,10 @@ from aacmm_pin.effects import Samples, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.solver import Factor, Problem, SolverSettings
 from aacmm_pin.unknowns import Unknowns
 
 MODELS = ("dh", "proposed")
-DENSE_LIMIT = 2e7
-"""Above this many Jacobian entries (residuals x unknowns) the solver uses LSMR on an operator."""
 DEFAULT_SIGMA = 2e-6
 """Assumed R-Test noise (m) for the first, prior-regularised fit."""
 
@@ -81,19 +78,19 @@ class Calibration:
     """Axis -> mask of identified map nodes, shape (n_nodes,)."""
     runtime_s: float
     """Wall-clock time of the identification, s."""
-    raw: OptimizeResult | None = field(default=None, repr=False)
+    raw: OptimizeResult = field(repr=False)
     """The final raw scipy result."""
-    unknowns: Unknowns | None = field(default=None, repr=False)
+    unknowns: Unknowns = field(repr=False)
     """The final layout (free entries, start values)."""
-    constraints: sp.csr_matrix | None = field(default=None, repr=False)
+    constraints: sp.csr_matrix = field(repr=False)
     """Rows C over the free arm entries held as ``C @ (x - x_start) = 0`` (gauges, held directions)."""
-    identifiable: np.ndarray | None = field(default=None, repr=False)
+    identifiable: np.ndarray = field(repr=False)
     """Per free arm entry (``unknowns.names``): whether the data determines it."""
-    q: np.ndarray | None = field(default=None, repr=False)
+    q: np.ndarray = field(repr=False)
     """The SPAT readouts used, shape (N, n_axes), rad."""
-    problem: Any = field(default=None, repr=False)
+    problem: Problem = field(repr=False)
     """The solved least-squares problem (structure and preconditioner), for :func:`refit`."""
-    settings: dict[str, Any] = field(default_factory=dict, repr=False)
+    settings: SolverSettings = field(repr=False)
     """Solver settings (loss, f_scale, max_nfev) for :func:`refit`."""
 
     def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
@@ -102,10 +99,8 @@ class Calibration:
         See :func:`aacmm_pin.identifiability.equivalent_vector`. Returns the parameters and the RMS
         change of the predictions on the campaign's postures (m).
         """
-        assert self.unknowns is not None and self.q is not None
         full = self.unknowns.with_free(np.ones_like(self.unknowns.free))
         _, jac = full.jacobian(full.full_vector(self.parameters), self.q)
-        assert self.constraints is not None
         vec, rms = ident.equivalent_vector(self.unknowns, jac.sparse(), self.constraints,
                                            full.full_vector(other))
         return full.parameters(vec), rms
@@ -126,9 +121,7 @@ class Calibration:
     @property
     def n_determined(self) -> int:
         """Number of arm parameter directions the data determines (unknowns less held rows)."""
-        n_arm = len(self.unknowns.names) if self.unknowns is not None else len(self.x)
-        n_held = 0 if self.constraints is None else self.constraints.shape[0]
-        return int(n_arm - n_held)
+        return int(len(self.unknowns.names) - self.constraints.shape[0])
 
     @property
     def fit_rms(self) -> float:
@@ -226,134 +219,6 @@ def _initial_frame(arm: Arm, start: Parameters, campaign: Campaign) -> Parameter
                          translation=p_mt.mean(axis=0) - rot @ p_r.mean(axis=0))
 
 
-class _Problem:
-    """The least-squares problem in reduced, preconditioned coordinates.
-
-    The full vector is ``[arm unknowns, nest offsets]``: every R-Test location's zero position has an
-    unknown error (3 per location) with the stated prior ``sigma_location``, so the location
-    uncertainty enters the estimate and its covariance (generalised least squares).
-
-    Constraints ``C (x_arm - x_start) = 0`` (gauges, held directions) are met exactly by moving only
-    in their null space: ``x = x_ref + P z`` with ``P = T R^-1``, T a basis of the null space
-    (scaled by the plausible sizes) and R the Cholesky factor of T^T J^T J T at the reference. The
-    columns of J P are then nearly orthonormal, which makes the dense and the iterative (LSMR) trust
-    region solvers converge in a few steps at any campaign size.
-    """
-
-    def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
-                 location: np.ndarray, constraints: sp.csr_matrix, scale: np.ndarray,
-                 x_ref: np.ndarray, x_lin: np.ndarray, sigma: float, sigma_location: float,
-                 progress: Any = None):
-        self.u, self.q, self.measured, self.progress = unknowns, q, measured, progress
-        ids, index = np.unique(location, return_inverse=True)
-        n = len(q)
-        self.n_arm = int(unknowns.free.sum())
-        self.n_loc = 3 * ids.size
-        rows = np.arange(3 * n)
-        cols = 3 * np.repeat(index, 3) + np.tile(np.arange(3), n)
-        # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
-        self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
-        self.prior = sigma / sigma_location
-        self.sigma_location = sigma_location
-        self.x_ref = x_ref
-        cons = constraints.toarray() * scale[None, :]
-        basis = np.eye(self.n_arm)
-        if cons.shape[0]:
-            _, sv, vt = np.linalg.svd(cons, full_matrices=True)
-            basis = vt[int(np.sum(sv > sv.max() * 1e-10)):].T
-        t = np.zeros((self.n_arm + self.n_loc, basis.shape[1] + self.n_loc))
-        t[:self.n_arm, :basis.shape[1]] = scale[:, None] * basis
-        t[self.n_arm:, basis.shape[1]:] = np.eye(self.n_loc) * sigma_location
-        info = t.T @ self.normal_matrix(x_lin) @ t  # any nearby point preconditions well
-        self.t = t
-        self.p = t @ np.linalg.inv(np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info)
-                                                      * np.eye(len(info))).T)
-
-    def normal_matrix(self, x: np.ndarray) -> np.ndarray:
-        """Return J^T J of the data and prior rows at x, shape (P, P)."""
-        _, jac = self.u.jacobian(x[:self.n_arm], self.q)
-        na = self.n_arm
-        info = np.empty((na + self.n_loc, na + self.n_loc))
-        info[:na, :na] = jac.normal()
-        cross = np.column_stack([jac.rmatmul(self.nest[:, j].toarray().ravel())
-                                 for j in range(self.n_loc)])
-        info[:na, na:] = cross
-        info[na:, :na] = cross.T
-        info[na:, na:] = (self.nest.T @ self.nest).toarray() + self.prior ** 2 * np.eye(self.n_loc)
-        return info
-
-    def factor(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return (and cache) the reduced QR factors of the Jacobian at z."""
-        if getattr(self, "_factor", None) is None:
-            self._factor = np.linalg.qr(self.jac(z, dense=True))
-        return self._factor
-
-    def detached(self) -> _Problem:
-        """Return a copy without the progress bar (picklable)."""
-        out = copy.copy(self)
-        out.progress = None
-        return out
-
-    def z(self, x: np.ndarray) -> np.ndarray:
-        """Return the reduced coordinates of a full vector in the constraints' null space."""
-        return np.linalg.lstsq(self.p, x - self.x_ref, rcond=None)[0]
-
-    def x(self, z: np.ndarray) -> np.ndarray:
-        """Return the full vector for reduced coordinates z."""
-        return self.x_ref + self.p @ z
-
-    def fun(self, z: np.ndarray) -> np.ndarray:
-        x = self.x(z)
-        pred = self.u.positions(x[:self.n_arm], self.q).reshape(-1)
-        data = pred - self.measured.reshape(-1) + self.nest @ x[self.n_arm:]
-        if self.progress is not None:
-            self.progress.update(1)
-        return np.concatenate([data, self.prior * x[self.n_arm:]])
-
-    def jac(self, z: np.ndarray, dense: bool) -> Any:
-        x = self.x(z)
-        _, jac = self.u.jacobian(x[:self.n_arm], self.q)
-        na, nest, prior = self.n_arm, self.nest, self.prior
-        p_arm, p_loc = self.p[:na], self.p[na:]
-        if dense:
-            return np.vstack([jac.matmul(p_arm) + nest @ p_loc, prior * p_loc])
-        n_data = nest.shape[0]
-
-        def matvec(v: np.ndarray) -> np.ndarray:
-            return np.concatenate([jac.matmul(p_arm @ v) + nest @ (p_loc @ v), prior * (p_loc @ v)])
-
-        def rmatvec(u: np.ndarray) -> np.ndarray:
-            data, rest = u[:n_data], u[n_data:]
-            return p_arm.T @ jac.rmatmul(data) + p_loc.T @ (nest.T @ data + prior * rest)
-
-        return LinearOperator(shape=(n_data + self.n_loc, self.p.shape[1]), dtype=float,
-                              matvec=matvec, rmatvec=rmatvec)
-
-    def covariance(self, x: np.ndarray, sigma: float) -> np.ndarray:
-        """Return the linearised covariance of the full vector at x for data noise sigma (m).
-
-        ``T^T (J^T J / sigma^2 + blockdiag(0, I / sigma_location^2)) T``, inverted: the data rows
-        with this sigma, the nest offsets' prior with its own sigma whatever the data's.
-        """
-        info = self.normal_matrix(x)
-        na = self.n_arm
-        info[na:, na:] -= self.prior ** 2 * np.eye(self.n_loc)  # the solve's weighting, removed
-        info /= sigma ** 2
-        info[na:, na:] += np.eye(self.n_loc) / self.sigma_location ** 2
-        info = self.t.T @ info @ self.t
-        cov_y = np.linalg.pinv(info, rcond=1e-14, hermitian=True)
-        return self.t @ cov_y @ self.t.T
-
-    def solve(self, z0: np.ndarray, loss: str, f_scale: float, max_nfev: int,
-              jac: str = "analytic") -> OptimizeResult:
-        dense = jac != "analytic" or z0.size * self.q.shape[0] * 3 < DENSE_LIMIT
-        jac_fun: Any = (lambda z: self.jac(z, dense)) if jac == "analytic" else jac
-        return least_squares(self.fun, z0, jac=jac_fun, method="trf",
-                             tr_solver="exact" if dense else "lsmr", loss=loss,
-                             f_scale=f_scale, max_nfev=max_nfev, ftol=1e-12, xtol=1e-12,
-                             gtol=1e-12)
-
-
 def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed",
              use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = 5.0,
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
@@ -416,6 +281,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     scale = f_scale or 3 * sigma_class
     x_loc = np.zeros(3 * np.unique(spat.location).size)
     nfev = 0
+    settings = SolverSettings(loss=loss, f_scale=scale, max_nfev=max_nfev)
     with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
               disable=not progress, leave=False) as bar:
         held = -1
@@ -428,10 +294,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
             x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
             x_now = np.concatenate([x_arm, x_loc])
-            problem = _Problem(unknowns, q, measured, spat.location, constraints, obs.scale,
-                               x_start, x_now, sigma_class, sigma_location, bar)
+            problem = Problem(unknowns, q, measured, spat.location, constraints, obs.scale,
+                              x_start, x_now, sigma_class, sigma_location)
             z0 = problem.z(x_now)
-            res = problem.solve(z0, loss, scale, max_nfev, jac)
+            res = problem.solve(z0, settings, jac, on_evaluation=bar.update)
             nfev += res.nfev
             x_full = problem.x(res.x)
             x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
@@ -464,8 +330,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                        raw=OptimizeResult({k: v for k, v in res.items() if k != "jac"}),
                        unknowns=final_u,
                        constraints=constraints, identifiable=obs.identifiable, q=q,
-                       problem=problem.detached(),
-                       settings={"loss": loss, "f_scale": scale, "max_nfev": max_nfev})
+                       problem=problem, settings=settings)
 
 
 def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> float:
@@ -476,12 +341,14 @@ def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> fl
     return float(np.sqrt(np.sum(data_residuals ** 2) / dof))
 
 
-def refit(cal: Calibration, measured: np.ndarray, iterations: int = 10) -> tuple[np.ndarray, bool]:
+def refit(cal: Calibration, measured: np.ndarray, iterations: int = 10,
+          factor: Factor | None = None) -> tuple[np.ndarray, bool]:
     """Re-identify with other measured sphere centres, keeping the calibration's structure.
 
     The unknowns, gauges, held directions and preconditioner of ``cal`` are kept and the solve
     starts from its solution: what a Monte Carlo trial needs. Gauss-Newton steps on the nonlinear
-    residual with the Jacobian at the calibration's solution (factored once) until the step is
+    residual with the Jacobian at the calibration's solution (factored once: pass ``factor`` from
+    ``cal.problem.factor(cal.problem.z(cal.x))`` to share it between trials) until the step is
     below 1e-12 of the reduced scale; ``least_squares`` takes over where that does not converge
     (or for a robust loss).
 
@@ -489,21 +356,18 @@ def refit(cal: Calibration, measured: np.ndarray, iterations: int = 10) -> tuple
         cal: a calibration from :func:`identify`.
         measured: measured sphere centres in the MT-CS, shape (N, 3), m (e.g. perturbed).
         iterations: most Gauss-Newton steps.
+        factor: the factored Jacobian at the calibration's solution (computed when None).
 
     Returns:
         The full solution vector (arm entries then nest offsets, as ``cal.x``) and whether it
         converged.
     """
-    problem = copy.copy(cal.problem)
-    problem.measured = np.asarray(measured, dtype=float)
+    problem = cal.problem.with_measured(measured)
     z = problem.z(cal.x)
-    small = z.size * problem.q.shape[0] * 3 < DENSE_LIMIT
-    if cal.settings["loss"] == "linear" and small:
-        q_factor, r_factor = cal.problem.factor(z)
-        for _ in range(iterations):
-            step = np.linalg.solve(r_factor, q_factor.T @ problem.fun(z))
-            z = z - step
-            if np.linalg.norm(step) < 1e-12 * max(1.0, float(np.linalg.norm(z))):
-                return problem.x(z), True
-    res = problem.solve(z, cal.settings["loss"], cal.settings["f_scale"], cal.settings["max_nfev"])
+    if cal.settings.loss == "linear" and problem.dense(z.size):
+        z_gn, ok = problem.gauss_newton(z, cal.problem.factor(z) if factor is None else factor, iterations)
+        if ok:
+            return problem.x(z_gn), True
+        z = z_gn
+    res = problem.solve(z, cal.settings)
     return problem.x(res.x), bool(res.success)

@@ -124,7 +124,7 @@ def _map_std(info_inv_diag: np.ndarray, u: Unknowns) -> dict[int, np.ndarray]:
 def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = None,
                     sigma_location: float = 3e-6) -> tuple[_Information, np.ndarray]:
     """Return the information model and the present information matrix of a calibration."""
-    assert cal.unknowns is not None and campaign.spat is not None
+    assert campaign.spat is not None
     model = _Information(cal.unknowns.arm, cal.parameters, cal.unknowns.map_axes,
                          sigma or cal.sigma, sigma_location)
     info = model.prior.copy()
@@ -174,7 +174,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
     """
     from aacmm_pin.simulate import SimulationConfig, TrueArm
 
-    if cal.unknowns is None or not cal.unknowns.map_axes:
+    if not cal.unknowns.map_axes:
         raise ValueError("cal: plan needs a calibration of the proposed model (with maps)")
     model, info = information_now(cal, campaign, sigma_location=sigma_location)
     u = model.u

@@ -21,6 +21,7 @@ import numpy as np
 
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.identification import Calibration, measured_positions, refit
+from aacmm_pin.solver import Factor
 from aacmm_pin.validation import as_table, bar_pairs, pair_errors, pair_weights, validate
 
 ARCSEC = np.pi / 180 / 3600
@@ -74,8 +75,8 @@ class MonteCarloResult:
         return np.array([lookup.get(f"map{axis}[{d:g}]", np.nan) for d in nodes_deg])
 
 
-def _trial_batch(cal: Calibration, base: np.ndarray, location: np.ndarray, use_rtest: bool,
-                 sigma_rtest: float, sigma_location: float, seeds: list[int],
+def _trial_batch(cal: Calibration, factor: Factor, base: np.ndarray, location: np.ndarray,
+                 use_rtest: bool, sigma_rtest: float, sigma_location: float, seeds: list[int],
                  campaign: Campaign | None = None) -> tuple[np.ndarray, int, np.ndarray | None]:
     """Run trials with these seeds.
 
@@ -88,19 +89,18 @@ def _trial_batch(cal: Calibration, base: np.ndarray, location: np.ndarray, use_r
     from aacmm_pin._blas import single_threaded_blas
 
     with single_threaded_blas():
-        x, ok = _trials(cal, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
+        x, ok = _trials(cal, factor, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
         lengths = None
         if campaign is not None and campaign.lengthbar is not None and campaign.bar:
             u = cal.unknowns
-            assert u is not None
             n_arm = len(u.names)
             lengths = np.array([validate(u.arm, u.parameters(xi[:n_arm]), campaign).errors
                                 for xi in x])
         return x, ok, lengths
 
 
-def _trials(cal: Calibration, base: np.ndarray, location: np.ndarray, use_rtest: bool,
-            sigma_rtest: float, sigma_location: float, seeds: list[int]
+def _trials(cal: Calibration, factor: Factor, base: np.ndarray, location: np.ndarray,
+            use_rtest: bool, sigma_rtest: float, sigma_location: float, seeds: list[int]
             ) -> tuple[np.ndarray, int]:
     out, ok = [], 0
     ids, index = np.unique(location, return_inverse=True)
@@ -111,7 +111,7 @@ def _trials(cal: Calibration, base: np.ndarray, location: np.ndarray, use_rtest:
             for m in range(ids.size):
                 noise[index == m] = noise[index == m].mean(axis=0)
         nest = rng.normal(0.0, sigma_location, (ids.size, 3))[index]
-        x, good = refit(cal, base + noise + nest)
+        x, good = refit(cal, base + noise + nest, factor=factor)
         out.append(x)
         ok += good
     return np.array(out), ok
@@ -120,7 +120,7 @@ def _trials(cal: Calibration, base: np.ndarray, location: np.ndarray, use_rtest:
 def length_jacobian(cal: Calibration, campaign: Campaign) -> tuple[np.ndarray, np.ndarray]:
     """Return the length errors (n_pl, n_pairs) and their Jacobian w.r.t. ``cal.x`` (.., n)."""
     log = campaign.lengthbar
-    assert log is not None and cal.unknowns is not None
+    assert log is not None
     n_arm = len(cal.unknowns.names)
     pos, jac = cal.unknowns.jacobian(cal.x[:n_arm], log.q)
     pairs = bar_pairs(campaign)
@@ -172,8 +172,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     n_batches = 2 * workers if parallel else max(1, trials // 10)
     chunk = max(1, -(-trials // n_batches))
     batches = [seeds[i:i + chunk] for i in range(0, trials, chunk)]
-    assert cal.problem is not None
-    cal.problem.factor(cal.problem.z(cal.x))
+    factor = cal.problem.factor(cal.problem.z(cal.x))
     has_bar = campaign.lengthbar is not None and bool(campaign.bar)
     bar_only = Campaign(spat=None, locations={}, lengthbar=campaign.lengthbar,
                         bar=campaign.bar) if has_bar else None
@@ -183,12 +182,12 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     with tqdm(total=trials, desc="Monte Carlo", unit="trial", disable=not progress) as bar:
         if pool is None:
             for batch in batches:
-                results.append(_trial_batch(cal, base, spat.location, cal.use_rtest, sigma_rtest,
+                results.append(_trial_batch(cal, factor, base, spat.location, cal.use_rtest, sigma_rtest,
                                             sigma_location, batch, bar_only))
                 bar.update(len(batch))
         else:
             try:
-                futures = [pool.submit(_trial_batch, cal, base, spat.location, cal.use_rtest,
+                futures = [pool.submit(_trial_batch, cal, factor, base, spat.location, cal.use_rtest,
                                        sigma_rtest, sigma_location, batch, bar_only)
                            for batch in batches]
                 for future, batch in zip(futures, batches):
@@ -200,8 +199,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     samples = np.concatenate([r[0] for r in results])
     converged = int(sum(r[1] for r in results))
     identifiable = np.ones(samples.shape[1], dtype=bool)
-    if cal.identifiable is not None:
-        identifiable[:cal.identifiable.size] = cal.identifiable
+    identifiable[:cal.identifiable.size] = cal.identifiable
     length_std = length_lin = None
     if has_bar:
         length_std = np.concatenate([r[2] for r in results]).std(axis=0, ddof=1)
