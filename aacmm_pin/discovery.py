@@ -26,377 +26,26 @@ inside the SPATs' coverage, and their normalised size (at most about 1 when the 
 the bar).
 """
 
-from __future__ import annotations
-
 import dataclasses
-import json
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
 
 import numpy as np
-import scipy.linalg as sla
-from scipy import stats
 from tqdm.auto import tqdm
 
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
-from aacmm_pin.bar_linear import LinearBar, scaled_columns
+from aacmm_pin.bar_linear import LinearBar
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.effects import LIBRARY, Samples, Term
-from aacmm_pin.encoder_map import touched_nodes
+from aacmm_pin.discovery_results import Discovery, Score, Step
+from aacmm_pin.effects import LIBRARY, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identification import Calibration, identify, spat_samples
 from aacmm_pin.identification import _check as check_campaign
-from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
+from aacmm_pin.linear_scorer import LinearScorer
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
 """Family-wise error rate of one step's F tests (Bonferroni over the candidates)."""
-
-
-@dataclass(frozen=True)
-class Score:
-    """How much one candidate term (given the model) explains of the residuals."""
-
-    term: Term
-    """The candidate."""
-    n_parameters: int
-    """Number of parameters of the term."""
-    k_eff: float
-    """Effective number of parameters the data determines (trace of the term's hat matrix)."""
-    fit_rms: float
-    """Fit RMS with the term, m (linearised)."""
-    heldout_rms: float
-    """Leave-one-location-out RMS with the term, m (linearised)."""
-    heldout_gain: float
-    """Held-out SSR decrease over the noise variance (chi-square units); > 0 is better."""
-    p_value: float
-    """F test of the fit improvement (per candidate, before the Bonferroni correction)."""
-    bic_gain: float
-    """BIC decrease (positive: the term pays for its parameters)."""
-    bar_gain: float = 0.0
-    """Normalised length-bar SSR decrease (chi-square units, linearised); 0 without a bar."""
-    bar_normalised: float | None = None
-    """Normalised length-bar error with the term (linearised), or None without a bar."""
-    significant: bool = False
-    """Whether it passes all tests of a step (set by the loop)."""
-
-    @property
-    def total_gain(self) -> float:
-        """Held-out gain on everything the fit did not use: left-out locations plus the bar."""
-        return self.heldout_gain + self.bar_gain
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form (um)."""
-        return {"effect": self.term.effect, "axes": list(self.term.axes), "term": self.term.key,
-                "score": self.total_gain, "heldout_gain": self.heldout_gain,
-                "bar_gain": self.bar_gain, "bar_normalised": self.bar_normalised,
-                "heldout_rms_um": self.heldout_rms * 1e6,
-                "fit_rms_um": self.fit_rms * 1e6, "p_value": self.p_value,
-                "bic_gain": self.bic_gain, "k_eff": self.k_eff, "significant": self.significant}
-
-
-class _Linearised:
-    """A calibration linearised at its solution, for scoring candidate terms on the residuals.
-
-    All in the identification's reduced coordinates (constraints met, columns preconditioned) with
-    a Gaussian prior of the plausible sizes on the arm directions (and the nest offsets' own prior
-    rows): held-out refits are then well posed even where one location alone saw a direction.
-    """
-
-    def __init__(self, cal: Calibration, samples: Samples, bar: LinearBar | None = None):
-        problem = cal.problem
-        z = problem.z(cal.x)
-        self.cal, self.samples = cal, samples
-        self.r = problem.fun(z)
-        self.jac = problem.jac(z)
-        self.n_data = 3 * len(cal.location)
-        self.sigma = float(cal.sigma)
-        # prior of the plausible sizes on the arm directions (y = plausible-scaled null-space
-        # coordinates, z = R y), centred at the start values, not at this fit: a left-out
-        # location's refit must not keep what only that location determined; the nest offsets
-        # have their own prior rows in the residual already
-        arm_rows = problem.r_inv[:problem.n_arm_y]
-        self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
-        self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
-        rows_loc = np.repeat(cal.location, 3)
-        self.groups = [np.flatnonzero(rows_loc == m) for m in np.unique(cal.location)]
-        self.n_held = self.n_data - 3 * len(self.groups)  # each left-out SPAT less its mean
-        self.prior_rows = np.arange(self.n_data, len(self.r))
-        self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
-                                                        samples.q, frame="mt", samples=samples)
-        self.touched = touched_nodes(samples.q, cal.parameters.step_deg)
-        # the model's own blocks per location and for the prior rows, shared by every candidate
-        jac, r = self.jac, self.r
-        self._base_grams = [(jac[g].T @ jac[g], jac[g].T @ r[g])
-                            for g in [*self.groups, self.prior_rows]]
-        self.bar = bar
-        self._bar_white: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        if bar is not None and bar.n:
-            # bar errors whitened by their predicted covariance (posterior of this model + what
-            # the SPATs leave unknown): e^T C^-1 e = |L^-1 e|^2
-            p_loc = problem.p[problem.n_arm:]
-            info = (sum(g for g, _ in self._base_grams[:-1]) + self.ridge) / self.sigma ** 2
-            info += p_loc.T @ p_loc / problem.sigma_location ** 2  # the nests' own prior
-            cov = bar.covariance(info, self.jac[:self.n_data], self.sigma)
-            chol = np.linalg.cholesky(cov + 1e-12 * np.trace(cov) / bar.n * np.eye(bar.n))
-            self._bar_white = (chol, sla.solve_triangular(chol, bar.errors, lower=True),
-                               sla.solve_triangular(chol, bar.jac_z, lower=True))
-        self.base = self.evaluate(self._empty())
-
-    def _empty(self) -> np.ndarray:
-        return np.zeros((len(self.r) + (0 if self.bar is None else self.bar.n), 0))
-
-    def bar_normalised(self, errors: np.ndarray) -> float | None:
-        """Return sqrt(e^T C^-1 e / n) for bar errors e (n,) with this model's bar covariance C."""
-        if self._bar_white is None:
-            return None
-        white = sla.solve_triangular(self._bar_white[0], errors, lower=True)
-        return float(np.sqrt(np.mean(white ** 2)))
-
-    def columns(self, term: Term) -> np.ndarray:
-        """Return the term's columns, scaled by the plausible sizes, shape (rows, k).
-
-        Rows: the residual's (data, then prior), then the whitened bar errors (with a bar).
-        """
-        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, self.touched)
-        out = np.zeros((len(self._empty()), cols.shape[2]))
-        out[:self.n_data] = cols.reshape(self.n_data, -1)
-        if self.bar is not None and self._bar_white is not None:
-            try:
-                out[len(self.r):] = sla.solve_triangular(
-                    self._bar_white[0], self.bar.columns(term, self.touched), lower=True)
-            except AacmmError:  # e.g. thermal without temp_c in lengthbar.csv: the bar abstains
-                out[len(self.r):] = np.nan
-        return out
-
-    def evaluate(self, extra: np.ndarray) -> dict[str, float]:
-        """Fit the residuals with the model's directions plus ``extra`` columns (prior sigma^2).
-
-        Returns fit SSR, held-out SSR, the effective parameter count of ``extra`` and the
-        normalised bar SSR (chi-square, NaN without a bar).
-        """
-        jac, r, k = self.jac, self.r, extra.shape[1]
-        p = jac.shape[1]
-        ridge = sla.block_diag(self.ridge, self.sigma ** 2 * np.eye(k))
-
-        def gram(rows: np.ndarray, base: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-            e = extra[rows]
-            cross = jac[rows].T @ e
-            return (np.block([[base[0], cross], [cross.T, e.T @ e]]),
-                    np.concatenate([base[1], e.T @ r[rows]]))
-
-        grams = [gram(g, b) for g, b in zip(self.groups, self._base_grams)]
-        g_prior, b_prior = gram(self.prior_rows, self._base_grams[-1])
-        g_all = sum((g for g, _ in grams), g_prior)
-        b_all = sum((b for _, b in grams), b_prior)
-        b_all[:p] += self.offset
-
-        def solve(g: np.ndarray, b: np.ndarray) -> np.ndarray:
-            return -sla.solve(g + ridge, b, assume_a="pos")
-
-        def residual(rows: np.ndarray, d: np.ndarray) -> np.ndarray:
-            return r[rows] + jac[rows] @ d[:p] + extra[rows] @ d[p:]
-
-        d_all = solve(g_all, b_all)
-        fit_ssr = float(np.sum(residual(np.arange(self.n_data), d_all) ** 2))
-        held = 0.0
-        for rows, (g, b) in zip(self.groups, grams):
-            e = residual(rows, solve(g_all - g, b_all - b)).reshape(-1, 3)
-            held += float(np.sum((e - e.mean(axis=0)) ** 2))
-        bar_chi2 = float("nan")
-        if self._bar_white is not None:
-            _, e_bar, j_bar = self._bar_white
-            bar_chi2 = float(np.sum((e_bar + j_bar @ d_all[:p] + extra[len(r):] @ d_all[p:]) ** 2))
-        k_eff = 0.0
-        if k:
-            schur = g_all[p:, p:] - g_all[p:, :p] @ sla.solve(g_all[:p, :p] + self.ridge,
-                                                             g_all[:p, p:], assume_a="pos")
-            eig = np.clip(np.linalg.eigvalsh(schur), 0.0, None)
-            k_eff = float(np.sum(eig / (eig + self.sigma ** 2)))
-        return {"fit_ssr": fit_ssr, "held_ssr": held, "k_eff": k_eff, "bar_chi2": bar_chi2}
-
-    def score(self, term: Term, given: tuple[np.ndarray, dict[str, float]] | None = None
-              ) -> Score:
-        """Return the score of ``term`` added to the model.
-
-        ``given``: columns already chosen (added to the model too) and their :meth:`evaluate`.
-        """
-        base_cols, base = given or (self._empty(), self.base)
-        cols = self.columns(term)
-        new = self.evaluate(np.hstack([base_cols, cols]))
-        k_eff = max(new["k_eff"] - base["k_eff"], 1e-9)
-        dof = max(self.n_data - self.jac.shape[1] - new["k_eff"], 1.0)
-        var = new["fit_ssr"] / dof
-        gain = base["fit_ssr"] - new["fit_ssr"]
-        f_stat = max(gain, 0.0) / k_eff / var
-        n_held = self.n_held
-        bar = self.bar is not None and bool(np.isfinite(new["bar_chi2"]))
-        return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff,
-                     bar_gain=float(base["bar_chi2"] - new["bar_chi2"]) if bar else 0.0,
-                     bar_normalised=float(np.sqrt(new["bar_chi2"] / self.bar.n))
-                     if bar and self.bar is not None else None,
-                     fit_rms=float(np.sqrt(new["fit_ssr"] / self.n_data)),
-                     heldout_rms=float(np.sqrt(new["held_ssr"] / n_held)),
-                     heldout_gain=float((base["held_ssr"] - new["held_ssr"]) / var),
-                     p_value=float(stats.f.sf(f_stat, k_eff, dof)),
-                     bic_gain=float(gain / var - k_eff * np.log(self.n_data)))
-
-    @property
-    def heldout_rms(self) -> float:
-        """Leave-one-location-out RMS of the model itself, m."""
-        return float(np.sqrt(self.base["held_ssr"] / self.n_held))
-
-    def view(self, term: Term) -> tuple[str, np.ndarray]:
-        """Return a label and the residual of every sample seen along the term's direction.
-
-        Angle terms: the residual as an angle error of the term's axis (arcsec, least squares on
-        d(position)/d(angle)); scale terms: along the r-CS radius (um); measurement terms: along the
-        R-Test displacement (um).
-        """
-        res = self.cal.fun
-        if term.kind in ("angle", "map"):
-            j = self.stylus.angles[:, :, term.axis - 1]
-            angle = np.sum(j * res, axis=1) / np.maximum(np.sum(j * j, axis=1), 1e-30)
-            return f"A{term.axis} angle residual (arcsec)", np.degrees(angle) * 3600
-        if term.kind == "scale":
-            radial = self.stylus.position - self.cal.parameters.translation
-            radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-            return "radial residual (um)", np.sum(res * radial, axis=1) * 1e6
-        disp = self.samples.displacement
-        unit = np.zeros_like(res) if disp is None else disp / np.maximum(
-            np.linalg.norm(disp, axis=1, keepdims=True), 1e-12)
-        return "residual along the displacement (um)", np.sum(res * unit, axis=1) * 1e6
-
-
-@dataclass
-class Step:
-    """One named effect: what was added and how the gap changed."""
-
-    effect: str
-    terms: list[Term]
-    description: str
-    fit_rms_before: float
-    fit_rms_after: float
-    heldout_rms_before: float
-    heldout_rms_after: float
-    bar_rms_before: float | None
-    bar_rms_after: float | None
-    score: Score
-    runners_up: list[Score]
-    values: dict[str, float]
-    views: list[dict[str, Any]] = field(default_factory=list, repr=False)
-    """Per term: variable label and values, residual label, residuals before and after (figures)."""
-    bar_covered_rms_before: float | None = None
-    """Length-bar RMS from the bar readouts inside the SPATs' coverage, before, m."""
-    bar_covered_rms_after: float | None = None
-    bar_normalised_before: float | None = None
-    """Length-bar error normalised by its predicted covariance (of the model before the step)."""
-    bar_normalised_after: float | None = None
-
-    def bar_summary(self) -> str:
-        """Return the length-bar errors before -> after in one line (empty without a bar)."""
-        if self.bar_rms_before is None or self.bar_rms_after is None:
-            return ""
-
-        def arrow(before: float | None, after: float | None, unit: float, fmt: str) -> str:
-            if before is None or after is None:
-                return "-"
-            return f"{before * unit:{fmt}} -> {after * unit:{fmt}}"
-
-        return (f"RMS {arrow(self.bar_rms_before, self.bar_rms_after, 1e6, '.2f')} um, "
-                f"inside the SPAT coverage "
-                f"{arrow(self.bar_covered_rms_before, self.bar_covered_rms_after, 1e6, '.2f')} um, "
-                f"normalised {arrow(self.bar_normalised_before, self.bar_normalised_after, 1, '.2f')}")
-
-    @property
-    def axes(self) -> list[int]:
-        """Axes named (sorted), empty for arm-wide effects."""
-        return sorted({a for t in self.terms for a in t.axes})
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the step as in ``discovery.json`` (um)."""
-        forms = sorted({"map" if t.kind == "map" else "harmonic" for t in self.terms})
-        out: dict[str, Any] = {
-            "effect": self.effect, "axes": self.axes, "terms": [t.key for t in self.terms],
-            "description": self.description,
-            "fit_rms_before_um": self.fit_rms_before * 1e6,
-            "fit_rms_after_um": self.fit_rms_after * 1e6,
-            "heldout_rms_before_um": self.heldout_rms_before * 1e6,
-            "heldout_rms_after_um": self.heldout_rms_after * 1e6,
-            "score": self.score.total_gain, "p_value": self.score.p_value,
-            "bic_gain": self.score.bic_gain, "k_eff": self.score.k_eff,
-            "runners_up": [s.to_dict() for s in self.runners_up],
-            "values": self.values,
-        }
-        if self.effect == "encoder":
-            out["form"] = forms
-        if self.bar_rms_before is not None:
-            out["bar_rms_before_um"] = self.bar_rms_before * 1e6
-            out["bar_rms_after_um"] = _um(self.bar_rms_after)  # None: the bar cannot say
-            out["bar_covered_rms_before_um"] = _um(self.bar_covered_rms_before)
-            out["bar_covered_rms_after_um"] = _um(self.bar_covered_rms_after)
-            out["bar_normalised_before"] = self.bar_normalised_before
-            out["bar_normalised_after"] = self.bar_normalised_after
-        return out
-
-
-def _um(value: float | None) -> float | None:
-    return None if value is None else value * 1e6
-
-
-@dataclass
-class Discovery:
-    """Result of :func:`discover`."""
-
-    start: str
-    steps: list[Step]
-    missing: list[dict[str, Any]]
-    stopped_because: str
-    calibration: Calibration
-    """The final model's calibration (write it with :func:`aacmm_pin.write_calibration`)."""
-    start_calibration: Calibration
-    heldout_rms: list[float]
-    """Held-out RMS of the start model and after every step, m."""
-    fit_rms: list[float]
-    bar_rms: list[float | None]
-    """Length-bar RMS of the start model and after every step, m (None without a bar)."""
-    bar_covered_rms: list[float | None]
-    """The same from the bar readouts inside the SPATs' coverage, m."""
-    bar_normalised: list[float | None]
-    """Length-bar errors of every model normalised by the final model's predicted covariance."""
-    bar_covered_fraction: float | None
-    """Share of the bar readouts inside the SPATs' coverage."""
-    noise: float
-    """Noise level (sigma per coordinate) of the final model, m."""
-    n_candidates: list[int]
-    runtime_s: float
-
-    @property
-    def named(self) -> list[tuple[str, list[int]]]:
-        """(effect, axes) of every step, in order."""
-        return [(s.effect, s.axes) for s in self.steps]
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return the ``discovery.json`` content."""
-        cal = self.calibration
-        return {
-            "start": self.start, "steps": [s.to_dict() for s in self.steps],
-            "missing": self.missing, "stopped_because": self.stopped_because,
-            "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
-                    "fit_rms_um": [v * 1e6 for v in self.fit_rms],
-                    "bar_rms_um": [_um(v) for v in self.bar_rms],
-                    "bar_covered_rms_um": [_um(v) for v in self.bar_covered_rms],
-                    "bar_normalised": self.bar_normalised,
-                    "bar_covered_fraction": self.bar_covered_fraction},
-            "final": {"extensions": sorted(cal.parameters.extensions),
-                      "map_axes": list(cal.unknowns.map_axes),
-                      "noise_um": self.noise * 1e6},
-            "candidates_scored": self.n_candidates, "runtime_s": self.runtime_s,
-            "library": {name: e.description for name, e in LIBRARY.items()},
-        }
 
 
 def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
@@ -472,7 +121,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
 
     cal = first = fit()
     bar_now = _linear_bar(arm, cal, campaign)
-    lin = _Linearised(cal, samples, bar_now)
+    lin = LinearScorer(cal, samples, bar_now)
     steps: list[Step] = []
     held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [bar_now]
     n_candidates: list[int] = []
@@ -510,7 +159,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         use_rtest = use_rtest or any(t.effect == "rtest" for t in new_terms)
         new_cal = fit()
         new_bar = _linear_bar(arm, new_cal, campaign)
-        new_lin = _Linearised(new_cal, samples, new_bar)
+        new_lin = LinearScorer(new_cal, samples, new_bar)
         views = []
         for t in sorted(new_terms, key=lambda t: t.axes)[:4]:
             label, values = t.variable(samples)
@@ -557,7 +206,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      runtime_s=time.perf_counter() - tic)
 
 
-def _forward(lin: _Linearised, best: Score, candidates: list[Term], threshold: float
+def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float
              ) -> list[Score]:
     """Return the best term and the further axes of its effect that are significant given it.
 
@@ -581,7 +230,7 @@ def _forward(lin: _Linearised, best: Score, candidates: list[Term], threshold: f
         pool = [t for t in pool if t != nxt.term]
 
 
-def _scored(lin: _Linearised, terms: list[Term], threshold: float,
+def _scored(lin: LinearScorer, terms: list[Term], threshold: float,
             given: tuple[np.ndarray, dict[str, float]] | None = None) -> list[Score]:
     """Return every term's score, marked significant or not, best held-out gain first."""
     scores = [_mark(lin.score(t, given), threshold) for t in terms]
@@ -592,22 +241,3 @@ def _mark(score: Score, threshold: float) -> Score:
     """Return the score marked significant: F test, BIC and held-out (locations plus bar) pass."""
     ok = score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
     return dataclasses.replace(score, significant=bool(ok))
-
-
-def write_discovery(result: Discovery, arm: Arm, folder: str | Path) -> Path:
-    """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
-
-    Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
-    the named effect's variable before and after), and the CALDIR files of
-    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...).
-    """
-    from aacmm_pin.discovery_figures import gap_figure, step_figure
-    from aacmm_pin.export import write_calibration
-
-    folder = Path(folder)
-    write_calibration(result.calibration, arm, folder)
-    (folder / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
-    gap_figure(result, folder / "discovery_gap.png")
-    for k, step in enumerate(result.steps, start=1):
-        step_figure(step, k, folder / f"discovery_step{k}.png")
-    return folder

@@ -1,17 +1,22 @@
-"""Figures of a discovery run: residuals against a named effect's variable, and the gap per step."""
+"""What a discovery run writes: ``discovery.json``, its figures and the final model as a CALDIR.
+
+Figures: residuals against a named effect's variable before and after each step, and the gap per
+step.
+"""
 
 from __future__ import annotations
 
+import json
 import textwrap
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from aacmm_pin.arm import Arm
+from aacmm_pin.discovery_results import Discovery, Step
+from aacmm_pin.export import write_calibration
 from aacmm_pin.plots import DPI, MODEL_COLOURS, _new_figure
-
-if TYPE_CHECKING:
-    from aacmm_pin.discovery import Discovery, Step
 
 
 def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, np.ndarray]:
@@ -85,3 +90,19 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
     lines, labels_ = ax.get_legend_handles_labels()
     ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7)
     fig.savefig(path, dpi=DPI)
+
+
+def write_discovery(result: Discovery, arm: Arm, folder: str | Path) -> Path:
+    """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
+
+    Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
+    the named effect's variable before and after), and the CALDIR files of
+    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...).
+    """
+    folder = Path(folder)
+    write_calibration(result.calibration, arm, folder)
+    (folder / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    gap_figure(result, folder / "discovery_gap.png")
+    for k, step in enumerate(result.steps, start=1):
+        step_figure(step, k, folder / f"discovery_step{k}.png")
+    return folder
