@@ -10,7 +10,8 @@ from aacmm_pin.campaign import (
     write_campaign,
     write_points,
 )
-from aacmm_pin.discovery import Discovery, discover, write_discovery
+from aacmm_pin.discovery import Discovery, discover
+from aacmm_pin.discovery_figures import write_discovery
 from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles
 from aacmm_pin.errors import (
     AacmmError,

@@ -82,7 +82,8 @@ def _print_calibration(cal: object, out: Path) -> None:
 def _discover(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.discovery import discover, write_discovery
+    from aacmm_pin.discovery import discover
+    from aacmm_pin.discovery_figures import write_discovery
 
     arm = load_arm(args.arm)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
