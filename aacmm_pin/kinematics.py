@@ -9,6 +9,7 @@ with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -18,6 +19,7 @@ import scipy.sparse as sp
 from aacmm_pin.arm import Arm
 from aacmm_pin.effects import Samples, apply_terms
 from aacmm_pin.encoder_map import correct_readouts
+from aacmm_pin.errors import AacmmError
 from aacmm_pin.parameters import Parameters
 
 _WORLD = pin.LOCAL_WORLD_ALIGNED
@@ -205,3 +207,73 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
         pin.forwardKinematics(model, data, qi)
         out[i] = pin.updateFramePlacement(model, data, fid).translation
     return out * scale[:, None]
+
+
+PositionJacobian = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""``(q, rows) -> (positions (M, 3), d(positions)/d(q) (M, 3, n_axes))`` for readouts q (M, n_axes)
+of the targets ``rows`` (M,) (so that per-target inputs such as temperature can be selected)."""
+
+
+def solve_ik(position_jacobian: PositionJacobian, targets: np.ndarray, limits: np.ndarray,
+             rng: np.random.Generator, iterations: int = 25, starts: np.ndarray | None = None,
+             q_init: np.ndarray | None = None) -> np.ndarray:
+    """Return readouts (N, n_axes) putting the modelled point on each target (N, 3).
+
+    Random starts within the joint limits (or within ``starts``, to favour a posture family),
+    damped Newton steps projected on the limits, and restarts for the targets not reached to
+    1e-12 m.
+
+    Args:
+        position_jacobian: the model's positions and their Jacobian (see :data:`PositionJacobian`).
+        targets: target points in the model's frame, shape (N, 3), m.
+        limits: joint limits, shape (n_axes, 2), rad.
+        rng: random generator of the starts.
+        iterations: most Newton steps per start.
+        starts: box of the random starts, shape (n_axes, 2), rad (clipped to the limits).
+        q_init: readouts for the first start, shape (N, n_axes), rad.
+
+    Raises:
+        AacmmError: if some target is not reached from 100 starts.
+    """
+    box = limits if starts is None else np.clip(starts, limits[:, :1], limits[:, 1:])
+    n_axes = limits.shape[0]
+    q = np.empty((targets.shape[0], n_axes))
+    todo = np.arange(targets.shape[0])
+    for attempt in range(100):
+        qs = rng.uniform(box[:, 0], box[:, 1], size=(todo.size, n_axes))
+        if attempt == 0 and q_init is not None:
+            qs = q_init.copy()
+        active = np.arange(todo.size)
+        for _ in range(iterations):
+            sel = todo[active]
+            pos, jac = position_jacobian(qs[active], sel)
+            err = targets[sel] - pos
+            moving = np.linalg.norm(err, axis=1) > 1e-12
+            active, err, jac = active[moving], err[moving], jac[moving]
+            if active.size == 0:
+                break
+            jjt = jac @ jac.transpose(0, 2, 1) + 1e-8 * np.eye(3)
+            step = (jac.transpose(0, 2, 1) @ np.linalg.solve(jjt, err[:, :, None]))[:, :, 0]
+            scale = np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))
+            qs[active] = np.clip(qs[active] + scale[:, None] * step, limits[:, 0], limits[:, 1])
+        ok = np.ones(todo.size, dtype=bool)
+        ok[active] = False
+        q[todo[ok]] = qs[ok]
+        todo = todo[~ok]
+        if todo.size == 0:
+            return q
+    raise AacmmError(f"IK found no posture within the joint limits for {todo.size} targets, "
+                     f"e.g. {targets[todo[0]].round(4).tolist()} m")
+
+
+def stylus_ik(arm: Arm, params: Parameters, targets: np.ndarray, rng: np.random.Generator,
+              starts: np.ndarray | None = None, iterations: int = 25) -> np.ndarray:
+    """Return readouts (N, n_axes) putting the stylus centre of ``params`` on targets in the r-CS.
+
+    See :func:`solve_ik` (the same arguments); targets shape (N, 3), m.
+    """
+    def position_jacobian(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        jac = stylus_jacobians(arm, params, q, frame="r")
+        return jac.position, jac.readouts
+
+    return solve_ik(position_jacobian, targets, arm.joint_limits, rng, iterations, starts)

@@ -21,8 +21,10 @@ from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.identifiability import GAUGE_WEIGHT, plausible_sizes
 from aacmm_pin.identification import Calibration
+from aacmm_pin.kinematics import stylus_ik
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.unknowns import Unknowns
+from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
 
 ARCSEC = np.pi / 180 / 3600
 
@@ -172,8 +174,6 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
         seed: seed of the IK starts.
         sigma_location: prior std of a nest position per coordinate, m.
     """
-    from aacmm_pin.simulate import SimulationConfig, TrueArm
-
     if not cal.unknowns.map_axes:
         raise ValueError("cal: plan needs a calibration of the proposed model (with maps)")
     model, info = information_now(cal, campaign, sigma_location=sigma_location)
@@ -211,7 +211,6 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
                     continue
                 box[axis - 1] = np.radians([lo, hi])
                 fams.append((f"A{axis} in [{lo:g}, {hi:g}] deg", box))
-    true_arm = TrueArm(arm, cal.parameters, SimulationConfig(effects=()))
     rng = np.random.default_rng(seed)
     rot, t = cal.parameters.rotation(), cal.parameters.translation
     out = []
@@ -219,7 +218,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
         target = np.tile(rot.T @ (p_mt - t), (n_postures, 1))
         for name, box in fams:
             try:
-                q = true_arm.solve_ik(target, rng, None, starts=box)
+                q = stylus_ik(arm, cal.parameters, target, rng, starts=box)
             except Exception:  # unreachable with this family: not a candidate
                 continue
             new_info = model.add(info, q)
@@ -237,18 +236,10 @@ def _length_grads(cal: Calibration, campaign: Campaign, u: Unknowns) -> np.ndarr
     log = campaign.lengthbar
     if log is None or not campaign.bar:
         return None
+    pairs = bar_pairs(campaign)
     pos, jac = u.jacobian(u.full_vector(cal.parameters), log.q)
-    dense = jac.matmul(np.eye(jac.shape[1])).reshape(len(log.q), 3, -1)
-    grads = []
-    for k in dict.fromkeys(int(p) for p in log.placement):
-        for a, b in campaign.bar:
-            sel = [(log.placement == k) & (log.socket == s) for s in (a, b)]
-            if not (sel[0].any() and sel[1].any()):
-                continue
-            d = pos[sel[1]].mean(axis=0) - pos[sel[0]].mean(axis=0)
-            grads.append((d / np.linalg.norm(d)) @ (dense[sel[1]].mean(axis=0)
-                                                     - dense[sel[0]].mean(axis=0)))
-    return np.array(grads)
+    _, unit = pair_errors(pos, pairs)
+    return np.array([jac.rmatmul(w) for w in pair_weights(pairs, unit, len(log.q))])
 
 
 def _length_rms(grads: np.ndarray | None, cov: np.ndarray) -> float | None:

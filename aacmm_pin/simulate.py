@@ -31,8 +31,7 @@ from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign, LengthBarLog, SpatLog
 from aacmm_pin.effects import motion_direction
 from aacmm_pin.encoder_map import EncoderMap, node_angles
-from aacmm_pin.errors import AacmmError
-from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
+from aacmm_pin.kinematics import solve_ik, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
 
 EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
@@ -166,36 +165,12 @@ class TrueArm:
     def _solve_ik(self, targets: np.ndarray, rng: np.random.Generator, temp: np.ndarray | None,
                   iterations: int, starts: np.ndarray | None, direction: np.ndarray | None,
                   q_init: np.ndarray | None) -> np.ndarray:
-        lim = self.arm.joint_limits
-        box = lim if starts is None else np.clip(starts, lim[:, :1], lim[:, 1:])
-        q = np.empty((targets.shape[0], self.arm.n_axes))
-        todo = np.arange(targets.shape[0])
-        for attempt in range(100):
-            qs = rng.uniform(box[:, 0], box[:, 1], size=(todo.size, self.arm.n_axes))
-            if attempt == 0 and q_init is not None:
-                qs = q_init.copy()
-            active = np.arange(todo.size)
-            for _ in range(iterations):
-                sel = todo[active]
-                pos, jac = self._position_jacobian(qs[active], None if temp is None else temp[sel],
-                                                   None if direction is None else direction[sel])
-                err = targets[sel] - pos
-                moving = np.linalg.norm(err, axis=1) > 1e-12
-                active, err, jac = active[moving], err[moving], jac[moving]
-                if active.size == 0:
-                    break
-                jjt = jac @ jac.transpose(0, 2, 1) + 1e-8 * np.eye(3)
-                step = (jac.transpose(0, 2, 1) @ np.linalg.solve(jjt, err[:, :, None]))[:, :, 0]
-                scale = np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))
-                qs[active] = np.clip(qs[active] + scale[:, None] * step, lim[:, 0], lim[:, 1])
-            ok = np.ones(todo.size, dtype=bool)
-            ok[active] = False
-            q[todo[ok]] = qs[ok]
-            todo = todo[~ok]
-            if todo.size == 0:
-                return q
-        raise AacmmError(f"IK found no posture within the joint limits for {todo.size} targets, "
-                         f"e.g. {targets[todo[0]].round(4).tolist()} m")
+        def position_jacobian(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return self._position_jacobian(q, None if temp is None else temp[rows],
+                                           None if direction is None else direction[rows])
+
+        return solve_ik(position_jacobian, targets, self.arm.joint_limits, rng, iterations,
+                        starts, q_init)
 
 
 def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -> Parameters:
