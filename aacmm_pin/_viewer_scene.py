@@ -21,11 +21,11 @@ import pinocchio as pin
 
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.effects import Samples
 from aacmm_pin.encoder_map import correct_readouts
 from aacmm_pin.identification import measured_positions
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
+from aacmm_pin.samples import Samples
 from aacmm_pin.validation import ValidationResult, validate
 
 ARM = "arm"
@@ -117,12 +117,12 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
     else:
         nest = (np.array([campaign.locations[int(m)] for m in spat.location]) - trans) @ rot
         measured = (measured_positions(campaign) - trans) @ rot
-        predicted = predict(arm, params, spat.q, Samples(arm, spat.q, spat.temp, spat.t))
+        predicted = predict(arm, params, spat.q, Samples.of_log(arm, spat))
     validation, sockets = None, {}
     bar = campaign.lengthbar
     if bar is not None and campaign.bar:
         validation = validate(arm, params, campaign)
-        points = predict(arm, params, bar.q, Samples(arm, bar.q, bar.temp, bar.t))
+        points = predict(arm, params, bar.q, Samples.of_log(arm, bar))
         for k, s in dict.fromkeys(zip(bar.placement.tolist(), bar.socket.tolist())):
             sockets[(int(k), str(s))] = points[(bar.placement == k) & (bar.socket == s)].mean(axis=0)
     name = re.sub(r"[^A-Za-z0-9_.+-]", "_", label or default_label)

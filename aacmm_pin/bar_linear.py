@@ -29,12 +29,13 @@ import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.effects import Samples, Term
+from aacmm_pin.effects import Term
 from aacmm_pin.encoder_map import EncoderMap, node_count, touched_nodes
 from aacmm_pin.identifiability import PLAUSIBLE, plausible_sizes
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import Samples
 from aacmm_pin.unknowns import Unknowns, term_jacobian
 from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
 
@@ -108,7 +109,7 @@ class LinearBar:
         problem, u = cal.problem, cal.unknowns
         assert log is not None
         self.cal, self.arm = cal, arm
-        self.samples = Samples(arm, log.q, log.temp, log.t)
+        self.samples = Samples.of_log(arm, log)
         self.pairs = bar_pairs(campaign)
         full = Unknowns(arm, u.start, u.map_axes, np.ones_like(u.free), u.terms, self.samples)
         points, jac = full.jacobian(full.full_vector(cal.parameters), log.q)

@@ -39,9 +39,9 @@ from aacmm_pin.campaign import Campaign
 from aacmm_pin.discovery_results import Discovery, Score, Step
 from aacmm_pin.effects import LIBRARY, Term
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.identification import Calibration, identify, spat_samples
-from aacmm_pin.identification import _check as check_campaign
+from aacmm_pin.identification import Calibration, check_campaign, identify
 from aacmm_pin.linear_scorer import LinearScorer
+from aacmm_pin.samples import Samples
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
@@ -106,8 +106,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
               max_steps: int, alpha: float, progress: bool) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
-    check_campaign(campaign, arm)
-    samples = spat_samples(campaign, arm)
+    samples = Samples.of_spat(arm, check_campaign(campaign, arm))
     map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
     terms: list[Term] = []
 

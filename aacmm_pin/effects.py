@@ -32,85 +32,14 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.errors import AacmmError
+from aacmm_pin.samples import Samples
 
 ARCSEC = np.pi / 180 / 3600
 REFERENCE_TEMPERATURE_C = 20.0
 """ISO 1 reference temperature, deg C: the thermal term is zero there."""
-
-
-class Samples:
-    """What effects may depend on, per sample: readouts, temperature, time, motion, gravity.
-
-    Args:
-        arm: the arm (its URDF inertias give the gravity torques).
-        q: encoder readouts, shape (N, n_axes), rad.
-        temp: arm temperature, shape (N,), deg C, or None.
-        t: time stamps, shape (N,), s, or None (row order is then the time order).
-        displacement: R-Test displacement less its location's mean, shape (N, 3), m, or None.
-    """
-
-    def __init__(self, arm: Arm, q: np.ndarray, temp: np.ndarray | None = None,
-                 t: np.ndarray | None = None, displacement: np.ndarray | None = None):
-        self.arm = arm
-        self.q = np.atleast_2d(np.asarray(q, dtype=float))
-        self.temp = None if temp is None else np.asarray(temp, dtype=float)
-        self.t = None if t is None else np.asarray(t, dtype=float)
-        self.displacement = displacement
-        self._gravity: np.ndarray | None = None
-        self._direction: np.ndarray | None = None
-
-    @property
-    def n(self) -> int:
-        """Number of samples."""
-        return int(self.q.shape[0])
-
-    def matches(self, q: np.ndarray) -> bool:
-        """Whether these samples describe readouts ``q`` (same array or same values)."""
-        return q is self.q or (q.shape == self.q.shape and bool(np.array_equal(q, self.q)))
-
-    @property
-    def gravity(self) -> np.ndarray:
-        """Torque that gravity exerts on every axis at the readouts, shape (N, n_axes), N m.
-
-        Minus Pinocchio's generalized gravity (``dV/dq``, the torque the joint must hold) of the
-        nominal runtime model (URDF inertias, gravity along -z of the r-CS): a compliant joint
-        deflects by ``k * torque`` with k > 0, i.e. the arm sags.
-        """
-        if self._gravity is None:
-            model = self.arm.runtime_model()
-            data = model.createData()
-            self._gravity = -np.array([pin.computeGeneralizedGravity(model, data, qi)[:self.arm.n_axes]
-                                       for qi in self.q]).reshape(self.n, self.arm.n_axes)
-        return self._gravity
-
-    @property
-    def direction(self) -> np.ndarray:
-        """Direction each axis last moved in, at every sample (time order), shape (N, n_axes).
-
-        +1 or -1: the sign of the last non-zero change of the readout, carried while the axis
-        rests (backlash keeps its side until the axis reverses); 0 before the axis first moves.
-        """
-        if self._direction is None:
-            order = np.argsort(self.t, kind="stable") if self.t is not None else np.arange(self.n)
-            out = np.empty_like(self.q)
-            out[order] = motion_direction(self.q[order])
-            self._direction = out
-        return self._direction
-
-
-def motion_direction(q: np.ndarray) -> np.ndarray:
-    """Return the direction each axis last moved in, row by row, shape (N, n_axes) (see above)."""
-    step = np.sign(np.diff(q, axis=0, prepend=q[:1]))
-    out = np.zeros_like(step)
-    last = np.zeros(q.shape[1])
-    for i, row in enumerate(step):
-        last = np.where(row != 0, row, last)
-        out[i] = last
-    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -25,11 +25,12 @@ from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
 from aacmm_pin.arm import Arm, load_arm
-from aacmm_pin.campaign import Campaign
-from aacmm_pin.effects import Samples, Term
+from aacmm_pin.campaign import Campaign, SpatLog
+from aacmm_pin.effects import Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import Samples
 from aacmm_pin.solver import Factor, Problem, SolverSettings
 from aacmm_pin.unknowns import Unknowns
 
@@ -148,17 +149,6 @@ class Calibration:
         }
 
 
-def spat_samples(campaign: Campaign, arm: Arm) -> Samples:
-    """Return the SPAT samples' temperature, motion and R-Test displacement (less location mean)."""
-    spat = campaign.spat
-    assert spat is not None
-    dev = spat.displacement.copy()
-    for m in np.unique(spat.location):
-        sel = spat.location == m
-        dev[sel] -= dev[sel].mean(axis=0)
-    return Samples(arm, spat.q, spat.temp, spat.t, dev)
-
-
 def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray:
     """Return the measured sphere centres in the MT-CS (Eq. 3), shape (N, 3), m."""
     spat = campaign.spat
@@ -171,8 +161,8 @@ def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray
     return np.array([campaign.locations[int(m)] for m in spat.location]) + disp
 
 
-def _check(campaign: Campaign, arm: Arm) -> None:
-    """Raise IdentificationError for campaigns that cannot be identified."""
+def check_campaign(campaign: Campaign, arm: Arm) -> SpatLog:
+    """Return the campaign's SPAT log, or raise IdentificationError if it cannot be identified."""
     spat = campaign.spat
     if spat is None or len(spat.location) == 0:
         raise IdentificationError("the campaign has no SPAT samples (spat.csv)")
@@ -196,6 +186,7 @@ def _check(campaign: Campaign, arm: Arm) -> None:
             raise IdentificationError(
                 f"all {len(q)} postures at location {m} are identical: a SPAT needs the arm moved "
                 "through many postures with the stylus in the nest")
+    return spat
 
 
 def _initial_frame(arm: Arm, start: Parameters, campaign: Campaign) -> Parameters:
@@ -261,15 +252,13 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
     tic = time.perf_counter()
     arm = arm or load_arm()
-    _check(campaign, arm)
-    spat = campaign.spat
-    assert spat is not None
+    spat = check_campaign(campaign, arm)
     q, measured = spat.q, measured_positions(campaign, use_rtest)
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), campaign)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
                              tuple(t for t in extensions if t.kind != "map"),
-                             spat_samples(campaign, arm))
+                             Samples.of_spat(arm, spat))
     unvisited = ident.unvisited_nodes(unknowns, q)
     unknowns = unknowns.with_fixed(unvisited)
     x_arm = unknowns.vector(start)

@@ -62,10 +62,10 @@ from scipy.optimize import least_squares
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign, read_readouts
-from aacmm_pin.effects import Samples
 from aacmm_pin.errors import AacmmError, FileFormatError, Problem
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import Samples
 
 MAX_ENCLOSED = 30
 """Most points :func:`min_enclosing_sphere` accepts (it enumerates their subsets)."""
@@ -209,7 +209,7 @@ def spat_centres(arm: Arm, params: Parameters, campaign: Campaign,
     if spat is None:
         raise AacmmError("the campaign has no SPAT (spat.csv and locations.csv)")
     points = stylus_positions(arm, params, spat.q, frame="mt",
-                              samples=Samples(arm, spat.q, spat.temp, spat.t))
+                              samples=Samples.of_log(arm, spat))
     if use_rtest:
         points = points - spat.displacement
     return {int(m): points[spat.location == m] for m in campaign.location_ids}

@@ -17,10 +17,11 @@ import pinocchio as pin
 import scipy.sparse as sp
 
 from aacmm_pin.arm import Arm
-from aacmm_pin.effects import Samples, apply_terms
+from aacmm_pin.effects import apply_terms
 from aacmm_pin.encoder_map import correct_readouts
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import Samples
 
 _WORLD = pin.LOCAL_WORLD_ALIGNED
 

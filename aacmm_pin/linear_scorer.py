@@ -16,11 +16,12 @@ from scipy import stats
 
 from aacmm_pin.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.discovery_results import Score
-from aacmm_pin.effects import Samples, Term
+from aacmm_pin.effects import Term
 from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
+from aacmm_pin.samples import Samples
 
 
 class LinearScorer:

@@ -29,10 +29,10 @@ import pinocchio as pin
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign, LengthBarLog, SpatLog
-from aacmm_pin.effects import motion_direction
 from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.kinematics import solve_ik, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import motion_direction
 
 EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
 DEFAULT_EFFECTS = ("dh", "encoder", "rtest")

@@ -16,10 +16,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from aacmm_pin.arm import Arm
-from aacmm_pin.effects import Samples, Term
+from aacmm_pin.effects import Term
 from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import Samples
 
 BASE_NAMES = ("alpha0", "beta0", "gamma0", "mt_x", "mt_y", "mt_z")
 TOOL_NAMES = ("tool_x", "tool_y", "tool_z")

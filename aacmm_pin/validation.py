@@ -9,10 +9,10 @@ import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.effects import Samples
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.samples import Samples
 
 
 @dataclass(frozen=True)
@@ -138,6 +138,6 @@ def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResu
     pairs = bar_pairs(campaign)
     log = campaign.lengthbar
     assert log is not None
-    points = predict(arm, params, log.q, Samples(arm, log.q, log.temp, log.t))
+    points = predict(arm, params, log.q, Samples.of_log(arm, log))
     return ValidationResult(pairs.placements, pairs.pairs,
                             as_table(pairs, pair_errors(points, pairs)[0]))

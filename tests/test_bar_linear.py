@@ -13,8 +13,8 @@ import aacmm_pin as ap
 from aacmm_pin.bar_linear import LinearBar, covered_readouts
 from aacmm_pin.effects import compliance
 from aacmm_pin.encoder_map import touched_nodes
-from aacmm_pin.identification import spat_samples
 from aacmm_pin.linear_scorer import LinearScorer
+from aacmm_pin.samples import Samples
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +70,7 @@ def test_linearised_term_change_matches_a_refit(arm: ap.Arm, sim: ap.Simulation,
     directions, which the refit does not have (measured 3-7 % on the change).
     """
     bar = LinearBar(cal, sim.campaign, arm)
-    lin = LinearScorer(cal, spat_samples(sim.campaign, arm), bar)
+    lin = LinearScorer(cal, Samples.of_spat(arm, sim.campaign.spat), bar)
     terms = (compliance(2), compliance(4))
     predicted = lin.evaluate(np.hstack([lin.columns(t) for t in terms]))["bar_chi2"]
     refit = ap.identify(sim.campaign, arm, "proposed", extensions=terms)
@@ -101,7 +101,7 @@ def test_predicted_covariance_covers_the_errors_of_a_right_model(arm: ap.Arm) ->
         cal = ap.identify(campaign, arm, "proposed")
         bar = LinearBar(cal, campaign, arm)
         assert not bar.covered.all()  # the bar visits A4 below the SPATs' range
-        lin = LinearScorer(cal, spat_samples(campaign, arm), bar)
+        lin = LinearScorer(cal, Samples.of_spat(arm, campaign.spat), bar)
         squares.append((lin.bar_normalised(bar.errors) or 0.0) ** 2)
     assert 0.15 < np.mean(squares) < 1.5
 

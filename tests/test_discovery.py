@@ -15,7 +15,7 @@ import pytest
 import aacmm_pin as ap
 from aacmm_pin.cli import main
 from aacmm_pin.discovery import discover
-from aacmm_pin.effects import Samples
+from aacmm_pin.samples import Samples
 
 SIGMA_RTEST = 2e-6
 
@@ -213,13 +213,13 @@ def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, mod
     locations, predict the left-out SPAT less its mean. The DH model is nearly linear (agreement
     to the linearisation error); with maps, the scoring's plausible-size prior and identify's
     held directions treat what the others cannot see slightly differently (measured 0.4-3 %)."""
-    from aacmm_pin.identification import measured_positions, spat_samples
+    from aacmm_pin.identification import measured_positions
     from aacmm_pin.kinematics import stylus_positions
     from aacmm_pin.linear_scorer import LinearScorer
 
     effects = ("dh", "encoder", "rtest") if model == "proposed" else ("dh", "rtest")
     campaign = _campaign(arm, seed, effects, n=80 if model == "dh" else 150).campaign
-    lin = LinearScorer(ap.identify(campaign, arm, model), spat_samples(campaign, arm))
+    lin = LinearScorer(ap.identify(campaign, arm, model), Samples.of_spat(arm, campaign.spat))
     ids, measured = sorted(campaign.locations), measured_positions(campaign)
     ssr, count = 0.0, 0
     for m in ids:

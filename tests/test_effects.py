@@ -10,8 +10,8 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin import effects as fx
-from aacmm_pin.identification import spat_samples
 from aacmm_pin.kinematics import stylus_positions
+from aacmm_pin.samples import Samples, motion_direction
 from aacmm_pin.unknowns import Unknowns
 
 TERMS = (fx.compliance(2), fx.compliance(4), fx.thermal(), fx.backlash(3), fx.crosstalk(2, 3),
@@ -38,7 +38,7 @@ def _with_extensions(params: ap.Parameters, rng: np.random.Generator) -> ap.Para
 
 def test_term_columns_equal_central_differences(arm: ap.Arm, sim: ap.Simulation) -> None:
     params = _with_extensions(sim.truth, np.random.default_rng(0))
-    samples = spat_samples(sim.campaign, arm)
+    samples = Samples.of_spat(arm, sim.campaign.spat)
     q = samples.q
     u = Unknowns.full(arm, params, (), TERMS, samples)
     x = u.vector(params)
@@ -60,7 +60,7 @@ def test_term_columns_equal_central_differences(arm: ap.Arm, sim: ap.Simulation)
 def test_runtime_and_identification_models_agree_with_extensions(arm: ap.Arm,
                                                                   sim: ap.Simulation) -> None:
     params = _with_extensions(sim.truth, np.random.default_rng(1))
-    samples = spat_samples(sim.campaign, arm)
+    samples = Samples.of_spat(arm, sim.campaign.spat)
     runtime = ap.predict(arm, params, samples.q, samples)
     ident = stylus_positions(arm, params, samples.q, frame="r", samples=samples)
     np.testing.assert_allclose(runtime, ident, atol=1e-12)
@@ -76,7 +76,7 @@ def test_compliance_and_thermal_terms_reproduce_the_simulated_arm(arm: ap.Arm,
     ext = {f"compliance[A{a}]": [k] for a, k in truth["compliance_rad_per_nm"].items()}
     ext["thermal"] = [truth["thermal_alpha_per_k"]]
     params = sim.truth.replace(extensions=ext)
-    samples = spat_samples(sim.campaign, arm)
+    samples = Samples.of_spat(arm, sim.campaign.spat)
     model = stylus_positions(arm, params, samples.q, frame="mt", samples=samples)
     assert np.abs(model - sim.sphere_mt).max() < 1e-7
     bare = stylus_positions(arm, sim.truth, samples.q, frame="mt")
@@ -128,7 +128,7 @@ def test_positive_compliance_makes_the_arm_sag(arm: ap.Arm) -> None:
     data = model.createData()
     rng = np.random.default_rng(5)
     for q in rng.uniform(-1.5, 1.5, (5, arm.n_axes)):
-        samples = fx.Samples(arm, q[None, :])
+        samples = Samples(arm, q[None, :])
         for axis in (2, 3, 4):
             if abs(samples.gravity[0, axis - 1]) < 0.5:  # N m: hardly loaded in this posture
                 continue
@@ -141,7 +141,7 @@ def test_positive_compliance_makes_the_arm_sag(arm: ap.Arm) -> None:
 
 def test_backlash_side_is_kept_while_the_axis_rests(arm: ap.Arm) -> None:
     q = np.zeros((6, 1)) + np.array([[0.0], [0.1], [0.1], [0.1], [0.05], [0.05]])
-    np.testing.assert_array_equal(fx.motion_direction(q)[:, 0], [0, 1, 1, 1, -1, -1])
+    np.testing.assert_array_equal(motion_direction(q)[:, 0], [0, 1, 1, 1, -1, -1])
 
 
 def test_direction_follows_time_stamps_not_row_order(arm: ap.Arm) -> None:
@@ -149,8 +149,8 @@ def test_direction_follows_time_stamps_not_row_order(arm: ap.Arm) -> None:
     q = rng.uniform(-1, 1, (30, arm.n_axes))
     t = np.arange(30.0)
     perm = rng.permutation(30)
-    ordered = fx.Samples(arm, q, t=t).direction
-    shuffled = fx.Samples(arm, q[perm], t=t[perm]).direction
+    ordered = Samples(arm, q, t=t).direction
+    shuffled = Samples(arm, q[perm], t=t[perm]).direction
     np.testing.assert_array_equal(shuffled, ordered[perm])
     np.testing.assert_array_equal(ordered[1:], np.sign(np.diff(q, axis=0)))  # never at rest
 
@@ -167,7 +167,7 @@ def test_user_term_without_a_parser_runs_and_harmonic_order_round_trips(arm: ap.
 
 
 def test_terms_pickle_and_parse_from_their_keys(arm: ap.Arm) -> None:
-    samples = fx.Samples(arm, np.zeros((3, arm.n_axes)) + 0.3)
+    samples = Samples(arm, np.zeros((3, arm.n_axes)) + 0.3)
     for term in TERMS:
         back = pickle.loads(pickle.dumps(term))
         assert back == term == fx.term_from_key(term.key)
