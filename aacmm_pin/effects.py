@@ -36,10 +36,7 @@ import numpy as np
 from aacmm_pin.arm import Arm
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.samples import Samples
-
-ARCSEC = np.pi / 180 / 3600
-REFERENCE_TEMPERATURE_C = 20.0
-"""ISO 1 reference temperature, deg C: the thermal term is zero there."""
+from aacmm_pin.units import ARCSEC, REFERENCE_TEMPERATURE_C
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,8 +15,7 @@ import numpy as np
 from aacmm_pin.arm import Arm
 from aacmm_pin.identification import Calibration
 from aacmm_pin.parameters import write_parameters
-
-ARCSEC_PER_RAD = 180 / np.pi * 3600
+from aacmm_pin.units import ARCSEC
 
 
 def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray] | None = None
@@ -34,8 +33,8 @@ def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray
         emap = cal.parameters.map(axis)
         node_std = std[axis] if std is not None else cal.node_std(axis)
         for node, value, good, s in zip(np.degrees(emap.nodes), emap.values, ok, node_std):
-            s_text = f"{s * ARCSEC_PER_RAD:.4f}" if good and np.isfinite(s) else ""
-            rows.append(f"{axis},{node:g},{value * ARCSEC_PER_RAD:.4f},{int(good)},{s_text}")
+            s_text = f"{s / ARCSEC:.4f}" if good and np.isfinite(s) else ""
+            rows.append(f"{axis},{node:g},{value / ARCSEC:.4f},{int(good)},{s_text}")
     Path(path).write_text("\n".join(rows) + "\n")
 
 

@@ -27,9 +27,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from aacmm_pin.encoder_map import touched_nodes
-from aacmm_pin.unknowns import BlockJacobian, Unknowns
+from aacmm_pin.unknowns import BlockJacobian, NodeKey, UnknownKey, Unknowns
 
-ARCSEC = np.pi / 180 / 3600
 PLAUSIBLE = {"angle": 3.5e-4, "length": 1e-4, "node": 1e-4, "base_angle": 1e-2,
              "base_length": 1e-2}
 """Plausible sizes (rad or m) that scale the Jacobian's columns: DH angles (0.02 deg), DH lengths
@@ -135,8 +134,9 @@ def observability(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, 
 
 def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> list[str]:
     """Return plain-language lines on what is not identifiable and how it was handled."""
-    names = np.array(unknowns.full_names)
-    free_names = names[unknowns.free]
+    keys = unknowns.full_keys
+    free_keys = [k for k, f in zip(keys, unknowns.free) if f]
+    weak_keys = {k for k, ok in zip(free_keys, obs.identifiable) if not ok}
     lines = []
     for axis in unknowns.map_axes:
         sl = unknowns.map_slice(axis)
@@ -145,30 +145,30 @@ def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> l
         if held.any():
             lines.append(f"A{axis} map: {held.sum()} of {held.size} nodes ({_ranges(nodes[held])} "
                          "deg) not identifiable: no posture visits them; held at zero")
-        weak = np.array([n in set(free_names[~obs.identifiable]) for n in names[sl]])
+        weak = np.array([k in weak_keys for k in keys[sl]], dtype=bool)
         if weak.any():
             lines.append(f"A{axis} map: {weak.sum()} of {weak.size} nodes ({_ranges(nodes[weak])} "
                          "deg) not identifiable: a plausible error there moves the stylus by less "
                          "than the noise in these postures; held near zero")
-    for name in free_names[~obs.identifiable]:
-        if not name.startswith("map"):
-            lines.append(f"{name}: not identifiable from these SPATs (other parameters can imitate "
+    for key in free_keys:
+        if key in weak_keys and not isinstance(key, NodeKey):
+            lines.append(f"{key}: not identifiable from these SPATs (other parameters can imitate "
                          "it in these postures); held near its start value")
     groups: dict[str, int] = {}
     for row in obs.hold:
-        key = ", ".join(_main_groups(free_names, row))
-        groups[key] = groups.get(key, 0) + 1
-    for key, count in groups.items():
-        lines.append(f"{count} undetermined direction{'s' if count > 1 else ''} mixing {key}: "
+        mix = ", ".join(_main_groups(free_keys, row))
+        groups[mix] = groups.get(mix, 0) + 1
+    for mix, count in groups.items():
+        lines.append(f"{count} undetermined direction{'s' if count > 1 else ''} mixing {mix}: "
                      "held at the start values (truncated SVD)")
     return lines
 
 
-def _main_groups(names: np.ndarray, row: np.ndarray, share: float = 0.1) -> list[str]:
+def _main_groups(keys: list[UnknownKey], row: np.ndarray, share: float = 0.1) -> list[str]:
     """Return the parameter groups (a DH name or 'A<n> map') holding > share of a direction."""
     weight: dict[str, float] = {}
-    for name, v in zip(names, row):
-        group = f"A{name[3:name.index('[')]} map" if name.startswith("map") else str(name)
+    for key, v in zip(keys, row):
+        group = f"A{key.axis} map" if isinstance(key, NodeKey) else str(key)
         weight[group] = weight.get(group, 0.0) + float(v) ** 2
     return sorted((g for g, w in weight.items() if w > share), key=lambda g: -weight[g])
 

@@ -32,11 +32,10 @@ from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
 from aacmm_pin.solver import Factor, Problem, SolverSettings
-from aacmm_pin.unknowns import Unknowns
+from aacmm_pin.units import SIGMA_LOCATION, SIGMA_RTEST, STEP_DEG
+from aacmm_pin.unknowns import NestKey, NodeKey, UnknownKey, Unknowns
 
 MODELS = ("dh", "proposed")
-DEFAULT_SIGMA = 2e-6
-"""Assumed R-Test noise (m) for the first, prior-regularised fit."""
 
 
 class IdentificationError(AacmmError):
@@ -107,17 +106,20 @@ class Calibration:
         return full.parameters(vec), rms
 
     @property
+    def keys(self) -> list[UnknownKey]:
+        """What each entry of ``x`` is (typed; ``names`` are their strings), in order."""
+        return [*self.unknowns.keys, *nest_keys(self.location)]
+
+    @property
     def std(self) -> dict[str, float]:
-        """Standard uncertainty (k=1) of every estimated entry, SI."""
+        """Standard uncertainty (k=1) of every estimated entry by name, SI."""
         return dict(zip(self.names, np.sqrt(np.clip(np.diag(self.covariance), 0, None))))
 
     def node_std(self, axis: int) -> np.ndarray:
         """Standard uncertainty of each node of a map (rad), NaN where not identified."""
-        out = np.full(self.parameters.map(axis).n_nodes, np.nan)
-        std = self.std
-        for k, node in enumerate(np.degrees(self.parameters.map(axis).nodes)):
-            out[k] = std.get(f"map{axis}[{node:g}]", np.nan)
-        return out
+        std = dict(zip(self.keys, np.sqrt(np.clip(np.diag(self.covariance), 0, None))))
+        return np.array([std.get(NodeKey.at(axis, node), np.nan)
+                         for node in np.degrees(self.parameters.map(axis).nodes)])
 
     @property
     def n_determined(self) -> int:
@@ -147,6 +149,11 @@ class Calibration:
             "unidentifiable": list(self.unidentifiable),
             "std": {n: float(s) for n, s in self.std.items()},
         }
+
+
+def nest_keys(location: np.ndarray) -> list[NestKey]:
+    """Return the keys of the nest offsets (3 per R-Test location, in location order)."""
+    return [NestKey(int(m), c) for m in np.unique(location) for c in "xyz"]
 
 
 def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray:
@@ -211,10 +218,10 @@ def _initial_frame(arm: Arm, start: Parameters, campaign: Campaign) -> Parameter
 
 
 def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed",
-             use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = 5.0,
+             use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = STEP_DEG,
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
-             sigma_location: float = 3e-6, max_nfev: int = 30, jac: str = "analytic",
+             sigma_location: float = SIGMA_LOCATION, max_nfev: int = 30, jac: str = "analytic",
              progress: bool = False, extensions: tuple[Term, ...] = ()) -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
@@ -265,7 +272,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     _, jac_now = unknowns.jacobian(x_arm, q)
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
-    sigma_class = sigma or DEFAULT_SIGMA
+    sigma_class = sigma or SIGMA_RTEST
     n = len(q)
     scale = f_scale or 3 * sigma_class
     x_loc = np.zeros(3 * np.unique(spat.location).size)
@@ -296,7 +303,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     data_res = res.fun[:3 * n]
     sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
     covariance = problem.covariance(x_full, sig)
-    names = unknowns.names + [f"location{m}_d{c}" for m in np.unique(spat.location) for c in "xyz"]
+    names = unknowns.names + [str(k) for k in nest_keys(spat.location)]
     params = unknowns.parameters(x_arm)
     lines = ident.describe(unknowns, unvisited, obs)
     if gauges:

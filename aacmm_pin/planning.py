@@ -23,10 +23,9 @@ from aacmm_pin.identifiability import GAUGE_WEIGHT, plausible_sizes
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import stylus_ik
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.units import ARCSEC, SIGMA_LOCATION
 from aacmm_pin.unknowns import Unknowns
 from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
-
-ARCSEC = np.pi / 180 / 3600
 
 
 @dataclass(frozen=True)
@@ -124,7 +123,7 @@ def _map_std(info_inv_diag: np.ndarray, u: Unknowns) -> dict[int, np.ndarray]:
 
 
 def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = None,
-                    sigma_location: float = 3e-6) -> tuple[_Information, np.ndarray]:
+                    sigma_location: float = SIGMA_LOCATION) -> tuple[_Information, np.ndarray]:
     """Return the information model and the present information matrix of a calibration."""
     assert campaign.spat is not None
     model = _Information(cal.unknowns.arm, cal.parameters, cal.unknowns.map_axes,
@@ -160,7 +159,7 @@ def _worst_ranges(std: np.ndarray, nodes_deg: np.ndarray, top: int = 2
 
 def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None,
          n_postures: int = 40, families: str = "auto", seed: int = 0,
-         sigma_location: float = 3e-6) -> Plan:
+         sigma_location: float = SIGMA_LOCATION) -> Plan:
     """Rank candidate SPATs by how much they would shrink the worst-axis map uncertainty.
 
     Args:

@@ -17,12 +17,12 @@ import numpy as np
 
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.encoder_map import node_count
+from aacmm_pin.units import ARCSEC
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 UM_PER_M = 1e6
-ARCSEC_PER_RAD = 180.0 / math.pi * 3600.0
 DPI = 150
 # Colour-blind-safe model colours (grey, then Okabe-Ito orange, vermillion, blue, green, purple, sky).
 MODEL_COLOURS = ("#8c8c8c", "#e69f00", "#d55e00", "#0072b2", "#009e73", "#cc79a7", "#56b4e9")
@@ -217,11 +217,11 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     for ax in grid[len(shown):]:
         ax.remove()
     for ax, axis in zip(grid, shown):
-        y = values[axis] * ARCSEC_PER_RAD
+        y = values[axis] / ARCSEC
         ok = flags.get(axis, np.ones(n, dtype=bool))
-        err = sigma[axis][ok] * ARCSEC_PER_RAD if axis in sigma else None
+        err = sigma[axis][ok] / ARCSEC if axis in sigma else None
         if axis in true:
-            ax.plot(np.append(x_deg, 180.0), np.append(true[axis], true[axis][0]) * ARCSEC_PER_RAD,
+            ax.plot(np.append(x_deg, 180.0), np.append(true[axis], true[axis][0]) / ARCSEC,
                     color="black", lw=0.8, zorder=2)
         ax.errorbar(x_deg[ok], y[ok], yerr=err, fmt="o", ms=3.5, color="#0072b2", ecolor="#0072b2",
                     elinewidth=0.8, capsize=0, zorder=3)

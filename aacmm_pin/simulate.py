@@ -33,10 +33,10 @@ from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.kinematics import solve_ik, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import motion_direction
+from aacmm_pin.units import ARCSEC, REFERENCE_TEMPERATURE_C, SIGMA_LOCATION, SIGMA_RTEST, STEP_DEG
 
 EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
 DEFAULT_EFFECTS = ("dh", "encoder", "rtest")
-ARCSEC = np.pi / 180 / 3600
 BAR_LENGTHS = {("A", "B"): 0.361775, ("A", "C"): 0.711211}
 """The paper's bar: calibrated socket distances A-B and A-C, in m."""
 
@@ -70,13 +70,13 @@ class SimulationConfig:
     """Largest harmonic amplitude of the encoder errors."""
     encoder_axes: tuple[int, ...] | None = None
     """Axes with encoder errors (None: all)."""
-    step_deg: float = 5.0
+    step_deg: float = STEP_DEG
     """Node step of the maps."""
     rtest_max: float = 15e-6
     """Largest sphere displacement in its seat."""
-    sigma_rtest: float = 2e-6
+    sigma_rtest: float = SIGMA_RTEST
     """R-Test reading noise (per coordinate)."""
-    sigma_location: float = 3e-6
+    sigma_location: float = SIGMA_LOCATION
     """Error of the measured R-Test zero positions (per coordinate)."""
     compliance: dict[int, float] = field(default_factory=lambda: {2: 4e-6, 4: 6e-6})
     """Axis -> joint compliance in rad/(N m) (used with ``compliance``)."""
@@ -129,7 +129,7 @@ class TrueArm:
         jac = stylus_jacobians(self.arm, self.truth, q_readout + offsets, frame="r")
         pos = jac.position
         if "thermal" in self.config.effects and temp is not None:
-            pos = pos * (1.0 + self.config.thermal_alpha * (temp - 20.0))[:, None]
+            pos = pos * (1.0 + self.config.thermal_alpha * (temp - REFERENCE_TEMPERATURE_C))[:, None]
         return pos, jac.readouts
 
     def positions(self, q_readout: np.ndarray, temp: np.ndarray | None, frame: str = "r"
@@ -138,7 +138,7 @@ class TrueArm:
         offsets = self.angle_offsets(q_readout)
         p_r = stylus_positions(self.arm, self.truth, q_readout + offsets, frame="r")
         if "thermal" in self.config.effects and temp is not None:
-            p_r = p_r * (1.0 + self.config.thermal_alpha * (temp - 20.0))[:, None]
+            p_r = p_r * (1.0 + self.config.thermal_alpha * (temp - REFERENCE_TEMPERATURE_C))[:, None]
         if frame == "r":
             return p_r
         return p_r @ self.truth.rotation().T + self.truth.translation
@@ -325,7 +325,7 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
         effects["compliance_rad_per_nm"] = {str(a): k for a, k in config.compliance.items()}
     if "thermal" in config.effects:
         effects["thermal_alpha_per_k"] = config.thermal_alpha
-        effects["thermal_reference_c"] = 20.0
+        effects["thermal_reference_c"] = REFERENCE_TEMPERATURE_C
     if "backlash" in config.effects:
         effects["backlash_half_rad"] = {str(a): b for a, b in config.backlash.items()}
     truth = truth.replace(extra={"effects": effects})

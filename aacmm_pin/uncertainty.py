@@ -22,9 +22,10 @@ import numpy as np
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.identification import Calibration, measured_positions, refit
 from aacmm_pin.solver import Factor
+from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
+from aacmm_pin.unknowns import NodeKey, UnknownKey
 from aacmm_pin.validation import as_table, bar_pairs, pair_errors, pair_weights, validate
 
-ARCSEC = np.pi / 180 / 3600
 AGREE = 0.2
 """Relative difference of Monte Carlo and linearised standard uncertainty still called agreement."""
 
@@ -33,8 +34,8 @@ AGREE = 0.2
 class MonteCarloResult:
     """Standard uncertainties (k=1) from Monte Carlo, beside the linearised ones."""
 
-    names: list[str]
-    """Names of the estimated entries (as ``Calibration.names``)."""
+    keys: list[UnknownKey]
+    """What the estimated entries are (as ``Calibration.keys``)."""
     samples: np.ndarray
     """Solution of every trial, shape (trials, n), SI."""
     std: np.ndarray
@@ -55,6 +56,11 @@ class MonteCarloResult:
     """R-Test zero position perturbation, m."""
 
     @property
+    def names(self) -> list[str]:
+        """Names of the estimated entries (as ``Calibration.names``)."""
+        return [str(k) for k in self.keys]
+
+    @property
     def trials(self) -> int:
         """Number of trials."""
         return int(self.samples.shape[0])
@@ -71,8 +77,8 @@ class MonteCarloResult:
 
     def node_std(self, axis: int, nodes_deg: np.ndarray, linear: bool = False) -> np.ndarray:
         """Return the std of each node of a map, rad (NaN where not estimated)."""
-        lookup = dict(zip(self.names, self.linear_std if linear else self.std))
-        return np.array([lookup.get(f"map{axis}[{d:g}]", np.nan) for d in nodes_deg])
+        lookup = dict(zip(self.keys, self.linear_std if linear else self.std))
+        return np.array([lookup.get(NodeKey.at(axis, d), np.nan) for d in nodes_deg])
 
 
 def _trial_batch(cal: Calibration, factor: Factor, base: np.ndarray, location: np.ndarray,
@@ -141,7 +147,7 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
 
 
 def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
-                sigma_rtest: float = 2e-6, sigma_location: float = 3e-6, seed: int = 0,
+                sigma_rtest: float = SIGMA_RTEST, sigma_location: float = SIGMA_LOCATION, seed: int = 0,
                 executor: Executor | None = None, workers: int | None = None,
                 progress: bool = False) -> MonteCarloResult:
     """Monte Carlo standard uncertainties of a calibration (paper Section 5).
@@ -204,7 +210,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     if has_bar:
         length_std = np.concatenate([r[2] for r in results]).std(axis=0, ddof=1)
         length_lin = length_linear_std(cal, campaign)
-    return MonteCarloResult(names=list(cal.names), samples=samples,
+    return MonteCarloResult(keys=cal.keys, samples=samples,
                             std=samples.std(axis=0, ddof=1),
                             linear_std=np.sqrt(np.clip(np.diag(cal.covariance), 0, None)),
                             length_std=length_std, length_linear_std=length_lin,
@@ -216,19 +222,19 @@ def uncertainty_report(cal: Calibration, mc: MonteCarloResult) -> dict[str, Any]
     """Return the ``uncertainty.json`` content (SI, plus arcsec for map nodes and um for lengths)."""
     params = {}
     maps: dict[str, dict[str, list]] = {}
-    for name, value, s_mc, s_lin, ok in zip(mc.names, cal.x, mc.std, mc.linear_std,
-                                            mc.identifiable):
-        if name.startswith("map"):
-            axis = name[3:name.index("[")]
-            entry = maps.setdefault(axis, {"node_deg": [], "error_arcsec": [], "std_mc_arcsec": [],
-                                           "std_linear_arcsec": [], "identifiable": []})
-            entry["node_deg"].append(float(name[name.index("[") + 1:-1]))
+    for key, value, s_mc, s_lin, ok in zip(mc.keys, cal.x, mc.std, mc.linear_std,
+                                           mc.identifiable):
+        if isinstance(key, NodeKey):
+            entry = maps.setdefault(str(key.axis), {"node_deg": [], "error_arcsec": [],
+                                                    "std_mc_arcsec": [], "std_linear_arcsec": [],
+                                                    "identifiable": []})
+            entry["node_deg"].append(key.node_deg)
             entry["error_arcsec"].append(float(value / ARCSEC))
             entry["std_mc_arcsec"].append(float(s_mc / ARCSEC))
             entry["std_linear_arcsec"].append(float(s_lin / ARCSEC))
             entry["identifiable"].append(bool(ok))
         else:
-            params[name] = {"value": float(value), "std_mc": float(s_mc),
+            params[str(key)] = {"value": float(value), "std_mc": float(s_mc),
                             "std_linear": float(s_lin), "identifiable": bool(ok)}
     out: dict[str, Any] = {
         "trials": mc.trials, "converged": mc.converged, "sigma_rtest_um": mc.sigma_rtest * 1e6,

@@ -10,7 +10,7 @@ held fixed at its start value. Extension terms come from the effect library
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple, TypeAlias
 
 import numpy as np
 import scipy.sparse as sp
@@ -26,9 +26,38 @@ BASE_NAMES = ("alpha0", "beta0", "gamma0", "mt_x", "mt_y", "mt_z")
 TOOL_NAMES = ("tool_x", "tool_y", "tool_z")
 
 
-def node_name(axis: int, node_deg: float) -> str:
-    """Return the name of a map node, e.g. ``map3[-175]`` (node angle in degrees)."""
-    return f"map{axis}[{node_deg:g}]"
+class NodeKey(NamedTuple):
+    """One encoder map node among the unknowns; ``str()`` gives its name, e.g. ``map3[-175]``."""
+
+    axis: int
+    """Axis of the map, 1-based."""
+    node_deg: float
+    """Node angle, deg (rounded to 1e-9 deg, so that keys built from radians compare equal)."""
+
+    @classmethod
+    def at(cls, axis: int, node_deg: float) -> NodeKey:
+        """Return the key of the node of ``axis`` at ``node_deg`` (deg)."""
+        return cls(int(axis), round(float(node_deg), 9))
+
+    def __str__(self) -> str:
+        return f"map{self.axis}[{self.node_deg:g}]"
+
+
+class NestKey(NamedTuple):
+    """One coordinate of an R-Test nest's offset; ``str()`` gives its name, e.g. ``location2_dx``."""
+
+    location: int
+    """R-Test location."""
+    coordinate: str
+    """``"x"``, ``"y"`` or ``"z"`` (MT-CS)."""
+
+    def __str__(self) -> str:
+        return f"location{self.location}_d{self.coordinate}"
+
+
+UnknownKey: TypeAlias = "str | NodeKey | NestKey"
+"""What an estimated entry is: a named parameter (``dx21``, ``tool_x``, a term's parameter), a
+map node or a nest offset coordinate. ``str(key)`` is its name in files and reports."""
 
 
 @dataclass(frozen=True)
@@ -83,18 +112,28 @@ class Unknowns:
         raise KeyError(axis)
 
     @property
+    def full_keys(self) -> list[UnknownKey]:
+        """Keys of every entry of the full layout."""
+        keys: list[UnknownKey] = [*BASE_NAMES, *self.arm.error_names, *TOOL_NAMES]
+        keys += [n for t in self.terms for n in t.names]
+        for a in self.map_axes:
+            keys += [NodeKey.at(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
+        return keys
+
+    @property
+    def keys(self) -> list[UnknownKey]:
+        """Keys of the free entries, in vector order."""
+        return [k for k, f in zip(self.full_keys, self.free) if f]
+
+    @property
     def full_names(self) -> list[str]:
         """Names of every entry of the full layout."""
-        names = [*BASE_NAMES, *self.arm.error_names, *TOOL_NAMES]
-        names += [n for t in self.terms for n in t.names]
-        for a in self.map_axes:
-            names += [node_name(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
-        return names
+        return [str(k) for k in self.full_keys]
 
     @property
     def names(self) -> list[str]:
         """Names of the free entries, in vector order."""
-        return [n for n, f in zip(self.full_names, self.free) if f]
+        return [str(k) for k in self.keys]
 
     def with_fixed(self, fixed: np.ndarray) -> Unknowns:
         """Return a layout in which the entries of the full-layout mask ``fixed`` are held."""

@@ -1,0 +1,26 @@
+"""Units and defaults, in one place: SI inside the package, these factors at its boundaries.
+
+Multiply a value in the named unit by the factor to get SI (``5 * UM`` is 5e-6 m); divide an SI
+value by it to display it (``error / ARCSEC``). The defaults are the paper's stated uncertainties
+(Ibaraki & Saito 2023, Section 5) and the map node step it uses.
+"""
+
+from __future__ import annotations
+
+import math
+
+MM = 1e-3
+"""One millimetre, m."""
+UM = 1e-6
+"""One micrometre, m."""
+ARCSEC = math.pi / 180 / 3600
+"""One arc second, rad."""
+
+SIGMA_RTEST = 2e-6
+"""Standard uncertainty of an R-Test reading per coordinate, m (paper Section 5: 2 um)."""
+SIGMA_LOCATION = 3e-6
+"""Standard uncertainty of an R-Test nest (zero) position per coordinate, m (paper: 3 um)."""
+STEP_DEG = 5.0
+"""Encoder map node step, deg (nodes at -180, -175, ..., 175 deg)."""
+REFERENCE_TEMPERATURE_C = 20.0
+"""ISO 1 reference temperature, deg C: thermal terms are zero there."""
