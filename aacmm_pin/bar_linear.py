@@ -29,14 +29,14 @@ import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.effects import Term
+from aacmm_pin.effects import Kind, Term, term_columns
 from aacmm_pin.encoder_map import EncoderMap, node_count, touched_nodes
 from aacmm_pin.identifiability import PLAUSIBLE, plausible_sizes
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
-from aacmm_pin.unknowns import Unknowns, term_jacobian
+from aacmm_pin.unknowns import Unknowns
 from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
 
 
@@ -184,8 +184,6 @@ class LinearBar:
         Raises:
             AacmmError: if the term needs a column the bar readouts lack (e.g. ``temp_c``).
         """
-        if term.kind == "measurement":  # the bar has no R-Test displacement
-            return np.zeros((self.n, len(term.names)))
         cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, touched)
         return self.w @ cols.reshape(3 * self.samples.n, -1)
 
@@ -202,8 +200,5 @@ def scaled_columns(term: Term, samples: Samples, stylus: StylusJacobians, params
         touched: map nodes the SPAT readouts touch, shape (n_axes, n_nodes): a map term's
             parameters.
     """
-    if term.kind == "map":
-        weights = params.map(term.axis).weights(samples.q[:, term.axis - 1]).toarray()
-        weights = weights[:, touched[term.axis - 1]]
-        return stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :] * PLAUSIBLE["node"]
-    return term_jacobian(term, samples, stylus, params) * term.plausible
+    sizes = PLAUSIBLE["node"] if term.kind is Kind.MAP else np.asarray(term.plausible)
+    return term_columns(term, samples, stylus, params, touched) * sizes

@@ -37,7 +37,7 @@ from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.bar_linear import LinearBar
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.discovery_results import Discovery, Score, Step
-from aacmm_pin.effects import LIBRARY, Term
+from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identification import Calibration, check_campaign, identify
 from aacmm_pin.linear_scorer import LinearScorer
@@ -61,7 +61,7 @@ def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | N
 def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: bool) -> bool:
     if term.effect == "rtest":  # the measured displacement is used, or not
         return use_rtest
-    if term.kind == "map":  # a map may replace a harmonic term of its axis
+    if term.kind is Kind.MAP:  # a map may replace a harmonic term of its axis
         return term.axis in map_axes
     if term.effect == "encoder":
         return term.axis in map_axes or any(t.effect == "encoder" and t.axes == term.axes
@@ -152,9 +152,9 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
             break
         chosen = _forward(lin, good[0], terms_now, threshold)
         new_terms = [s.term for s in chosen]
-        map_axes += [t.axis for t in new_terms if t.kind == "map"]
+        map_axes += [t.axis for t in new_terms if t.kind is Kind.MAP]
         terms = [t for t in terms if not (t.effect == "encoder" and t.axis in map_axes)]
-        terms += [t for t in new_terms if t.kind != "map" and t.effect != "rtest"]
+        terms += [t for t in new_terms if t.kind is not Kind.MAP and t.effect != "rtest"]
         use_rtest = use_rtest or any(t.effect == "rtest" for t in new_terms)
         new_cal = fit()
         new_bar = _linear_bar(arm, new_cal, campaign)
@@ -219,7 +219,7 @@ def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: 
         cols = np.hstack([lin.columns(c.term) for c in chosen])
         taken = {c.term.axes: c.term for c in chosen}
         pool = [t for t in pool if t.axes not in taken or (
-            t.kind == "map" and taken[t.axes].kind != "map")]
+            t.kind is Kind.MAP and taken[t.axes].kind is not Kind.MAP)]
         rescored = [s for s in _scored(lin, pool, threshold, (cols, lin.evaluate(cols)))
                     if s.significant]
         if not rescored:

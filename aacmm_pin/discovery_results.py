@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from aacmm_pin.effects import LIBRARY, Term
+from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.identification import Calibration
 
 
@@ -102,7 +102,7 @@ class Step:
 
     def to_dict(self) -> dict[str, Any]:
         """Return the step as in ``discovery.json`` (um)."""
-        forms = sorted({"map" if t.kind == "map" else "harmonic" for t in self.terms})
+        forms = sorted({"map" if t.kind is Kind.MAP else "harmonic" for t in self.terms})
         out: dict[str, Any] = {
             "effect": self.effect, "axes": self.axes, "terms": [t.key for t in self.terms],
             "description": self.description,

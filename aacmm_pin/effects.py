@@ -28,8 +28,9 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from enum import Enum
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -37,6 +38,34 @@ from aacmm_pin.arm import Arm
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.samples import Samples
 from aacmm_pin.units import ARCSEC, REFERENCE_TEMPERATURE_C
+
+if TYPE_CHECKING:
+    from aacmm_pin.parameters import Parameters
+
+
+class Kind(str, Enum):
+    """How a term acts on the model (see module doc); equal to its string value."""
+
+    ANGLE = "angle"
+    """An error of the true angle of one axis."""
+    SCALE = "scale"
+    """A uniform scale of every length of the arm."""
+    MEASUREMENT = "measurement"
+    """A change of the measured point (R-Test), not of the arm."""
+    MAP = "map"
+    """The encoder error map of one axis (its nodes are the parameters, in the maps)."""
+
+
+class StylusDerivatives(Protocol):
+    """What :func:`term_columns` needs of :class:`aacmm_pin.kinematics.StylusJacobians`."""
+
+    @property
+    def position(self) -> np.ndarray:
+        """Stylus centres, shape (N, 3), m."""
+
+    @property
+    def angles(self) -> np.ndarray:
+        """d(position)/d(true joint angle), shape (N, 3, n_axes), m/rad."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,8 +81,8 @@ class Term:
     """Unique name, e.g. ``compliance[A2]`` (the key in ``parameters.json``)."""
     effect: str
     """Name of the effect this term belongs to."""
-    kind: str
-    """``"angle"``, ``"scale"``, ``"measurement"`` or ``"map"``."""
+    kind: Kind
+    """How the term acts: :class:`Kind` (a plain ``"angle"`` etc. is converted)."""
     names: tuple[str, ...]
     """Names of the parameters, e.g. ``compliance[A2].k``."""
     plausible: tuple[float, ...]
@@ -68,6 +97,7 @@ class Term:
     """Axes the term acts on (empty for arm-wide terms); an angle term changes ``axes[0]``."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", Kind(self.kind))
         _MADE[self.key] = self  # any term made in this process can be found by its key
 
     def __eq__(self, other: object) -> bool:
@@ -153,7 +183,7 @@ def _displacement_variable(samples: Samples) -> tuple[str, np.ndarray]:
 
 def encoder_map(axis: int) -> Term:
     """The paper's encoder error map of one axis (its nodes are the parameters, in the maps)."""
-    return Term(f"encoder_map[A{axis}]", "encoder", "map", (), (),
+    return Term(f"encoder_map[A{axis}]", "encoder", Kind.MAP, (), (),
                 f"angular position measurement error of axis A{axis}: an error that depends on the "
                 f"A{axis} angle (encoder map, nodes every few degrees)",
                 _no_basis, partial(_readout, axis), (axis,))
@@ -162,7 +192,7 @@ def encoder_map(axis: int) -> Term:
 def encoder_harmonic(axis: int, order: int = 3) -> Term:
     """Encoder error of one axis as harmonics 1..order of its angle (for sparse data)."""
     key = f"encoder_harmonic[A{axis}]" if order == 3 else f"encoder_harmonic{order}[A{axis}]"
-    return Term(key, "encoder", "angle",
+    return Term(key, "encoder", Kind.ANGLE,
                 tuple(f"{key}.{f}{h}" for h in range(1, order + 1) for f in ("cos", "sin")),
                 (20 * ARCSEC,) * (2 * order),
                 f"angular position measurement error of axis A{axis}: harmonics 1..{order} of the "
@@ -172,7 +202,7 @@ def encoder_harmonic(axis: int, order: int = 3) -> Term:
 def compliance(axis: int) -> Term:
     """Gravity-induced deflection of one joint: ``k * gravity torque`` (k in rad per N m)."""
     key = f"compliance[A{axis}]"
-    return Term(key, "compliance", "angle", (f"{key}.k",), (1e-5,),  # 20 arcsec at 10 N m
+    return Term(key, "compliance", Kind.ANGLE, (f"{key}.k",), (1e-5,),  # 20 arcsec at 10 N m
                 f"gravity compliance of joint A{axis}: the arm's own weight bends it by k x the "
                 f"gravity torque on A{axis} (torque from the URDF inertias)",
                 partial(_gravity, axis), partial(_gravity_variable, axis), (axis,))
@@ -180,7 +210,7 @@ def compliance(axis: int) -> Term:
 
 def thermal() -> Term:
     """Uniform thermal expansion of every length: scale ``1 + alpha (T - 20 deg C)``."""
-    return Term("thermal", "thermal", "scale", ("thermal.alpha",), (2.3e-5,),
+    return Term("thermal", "thermal", Kind.SCALE, ("thermal.alpha",), (2.3e-5,),
                 "thermal expansion: every length of the arm scales with its temperature "
                 "(1 + alpha (T - 20 deg C))", _temperature, _temperature_variable)
 
@@ -188,7 +218,7 @@ def thermal() -> Term:
 def backlash(axis: int) -> Term:
     """Direction-dependent angular error of one axis: ``+-half`` by the direction of motion."""
     key = f"backlash[A{axis}]"
-    return Term(key, "backlash", "angle", (f"{key}.half",), (10 * ARCSEC,),
+    return Term(key, "backlash", Kind.ANGLE, (f"{key}.half",), (10 * ARCSEC,),
                 f"backlash of axis A{axis}: an angular error whose sign follows the direction in "
                 f"which A{axis} last moved", partial(_direction, axis),
                 partial(_direction_variable, axis), (axis,))
@@ -197,7 +227,7 @@ def backlash(axis: int) -> Term:
 def crosstalk(axis: int, source: int) -> Term:
     """Angular error of one axis depending on a neighbouring axis' angle (first harmonic)."""
     key = f"crosstalk[A{axis}<-A{source}]"
-    return Term(key, "crosstalk", "angle", (f"{key}.cos", f"{key}.sin"), (10 * ARCSEC,) * 2,
+    return Term(key, "crosstalk", Kind.ANGLE, (f"{key}.cos", f"{key}.sin"), (10 * ARCSEC,) * 2,
                 f"crosstalk: the A{axis} angle reads wrong by an amount that depends on the "
                 f"A{source} angle (e.g. bearing or encoder runout coupled across axes)",
                 partial(_neighbour, source), partial(_readout, source), (axis, source))
@@ -208,7 +238,7 @@ def rtest() -> Term:
 
     With the displacement ignored (``use_rtest=False``) the gains come out near 1.
     """
-    return Term("rtest", "rtest", "measurement", ("rtest.gain_x", "rtest.gain_y", "rtest.gain_z"),
+    return Term("rtest", "rtest", Kind.MEASUREMENT, ("rtest.gain_x", "rtest.gain_y", "rtest.gain_z"),
                 (1.0, 1.0, 1.0), "the stylus sphere moves in its seat: the R-Test's measured "
                 "displacement must be added to the nest position (Eq. 3)",
                 _displacement, _displacement_variable)
@@ -356,11 +386,79 @@ def apply_terms(extensions: dict[str, np.ndarray], samples: Samples, n_axes: int
     scale = np.ones(samples.n)
     for key, values in extensions.items():
         term = term_from_key(key)
-        if term.kind == "angle":
+        if term.kind is Kind.ANGLE:
             offsets[:, term.axis - 1] += term.basis(samples) @ np.asarray(values, dtype=float)
-        elif term.kind == "scale":
+        elif term.kind is Kind.SCALE:
             scale += term.basis(samples) @ np.asarray(values, dtype=float)
     return offsets, scale
+
+
+def measurement_shift(terms: Iterable[Term], extensions: dict[str, np.ndarray], samples: Samples
+                      ) -> np.ndarray:
+    """Return the measurement terms' change of the modelled point, shape (N, 3), m."""
+    out = np.zeros((samples.n, 3))
+    for t in terms:
+        if t.kind is Kind.MEASUREMENT:
+            out += t.basis(samples) @ extensions[t.key]
+    return out
+
+
+def residual_along(term: Term, residuals: np.ndarray, samples: Samples,
+                   stylus: StylusDerivatives, origin: np.ndarray) -> tuple[str, np.ndarray]:
+    """Return a label and every sample's residual seen along the term's direction (figures).
+
+    Angle and map terms: the residual as an angle error of the term's axis (arcsec, least squares
+    on d(position)/d(angle)); scale terms: along the radius from ``origin`` (the r-CS origin in
+    the residuals' frame, um); measurement terms: along the R-Test displacement (um).
+
+    Args:
+        term: the term.
+        residuals: model - measured, shape (N, 3), m.
+        samples: the samples (N).
+        stylus: stylus Jacobians at the samples, in the residuals' frame.
+        origin: r-CS origin in that frame, shape (3,), m.
+    """
+    if term.kind in (Kind.ANGLE, Kind.MAP):
+        j = stylus.angles[:, :, term.axis - 1]
+        angle = np.sum(j * residuals, axis=1) / np.maximum(np.sum(j * j, axis=1), 1e-30)
+        return f"A{term.axis} angle residual (arcsec)", np.degrees(angle) * 3600
+    if term.kind is Kind.SCALE:
+        radial = stylus.position - origin
+        radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+        return "radial residual (um)", np.sum(residuals * radial, axis=1) * 1e6
+    disp = samples.displacement
+    unit = np.zeros_like(residuals) if disp is None else disp / np.maximum(
+        np.linalg.norm(disp, axis=1, keepdims=True), 1e-12)
+    return "residual along the displacement (um)", np.sum(residuals * unit, axis=1) * 1e6
+
+
+def term_columns(term: Term, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                 touched: np.ndarray | None = None) -> np.ndarray:
+    """Return d(model point)/d(term parameters), shape (N, 3, k), at ``params``.
+
+    The one place where a term's kind decides how it moves the modelled point.
+
+    Args:
+        term: a term of any kind.
+        samples: the samples' readouts, temperature, motion and displacement (N).
+        stylus: stylus Jacobians in the output frame at ``params`` (:func:`aacmm_pin.stylus_jacobians`).
+        params: the parameters (translation, a scale term's current value, the maps' grids).
+        touched: for a map term, the nodes that are its parameters, shape (n_axes, n_nodes)
+            (default: every node).
+    """
+    if term.kind is Kind.MAP:
+        weights = params.map(term.axis).weights(samples.q[:, term.axis - 1]).toarray()
+        if touched is not None:
+            weights = weights[:, touched[term.axis - 1]]
+        return stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :]
+    basis = term.basis(samples)
+    if term.kind is Kind.ANGLE:
+        return stylus.angles[:, :, term.axis - 1, None] * basis[:, None, :]
+    if term.kind is Kind.SCALE:
+        scale = 1.0 + basis @ params.extensions.get(term.key, np.zeros(basis.shape[1]))
+        radial = (stylus.position - params.translation) / scale[:, None]
+        return radial[:, :, None] * basis[:, None, :]
+    return basis  # Kind.MEASUREMENT: the basis is the change of the measured point
 
 
 def effect_names(terms: Iterable[Term]) -> list[str]:

@@ -26,7 +26,7 @@ from tqdm.auto import tqdm
 from aacmm_pin import identifiability as ident
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign, SpatLog
-from aacmm_pin.effects import Term
+from aacmm_pin.effects import Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
@@ -264,7 +264,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), campaign)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
-                             tuple(t for t in extensions if t.kind != "map"),
+                             tuple(t for t in extensions if t.kind is not Kind.MAP),
                              Samples.of_spat(arm, spat))
     unvisited = ident.unvisited_nodes(unknowns, q)
     unknowns = unknowns.with_fixed(unvisited)

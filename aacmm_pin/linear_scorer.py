@@ -16,7 +16,7 @@ from scipy import stats
 
 from aacmm_pin.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.discovery_results import Score
-from aacmm_pin.effects import Term
+from aacmm_pin.effects import Term, residual_along
 from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identification import Calibration
@@ -178,20 +178,7 @@ class LinearScorer:
     def view(self, term: Term) -> tuple[str, np.ndarray]:
         """Return a label and the residual of every sample seen along the term's direction.
 
-        Angle terms: the residual as an angle error of the term's axis (arcsec, least squares on
-        d(position)/d(angle)); scale terms: along the r-CS radius (um); measurement terms: along the
-        R-Test displacement (um).
+        See :func:`aacmm_pin.effects.residual_along`.
         """
-        res = self.cal.fun
-        if term.kind in ("angle", "map"):
-            j = self.stylus.angles[:, :, term.axis - 1]
-            angle = np.sum(j * res, axis=1) / np.maximum(np.sum(j * j, axis=1), 1e-30)
-            return f"A{term.axis} angle residual (arcsec)", np.degrees(angle) * 3600
-        if term.kind == "scale":
-            radial = self.stylus.position - self.cal.parameters.translation
-            radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-            return "radial residual (um)", np.sum(res * radial, axis=1) * 1e6
-        disp = self.samples.displacement
-        unit = np.zeros_like(res) if disp is None else disp / np.maximum(
-            np.linalg.norm(disp, axis=1, keepdims=True), 1e-12)
-        return "residual along the displacement (um)", np.sum(res * unit, axis=1) * 1e6
+        return residual_along(term, self.cal.fun, self.samples, self.stylus,
+                              self.cal.parameters.translation)

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from aacmm_pin.arm import Arm
-from aacmm_pin.effects import Term
+from aacmm_pin.effects import Term, measurement_shift, term_columns
 from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
@@ -175,12 +175,10 @@ class Unknowns:
 
     def measurement_shift(self, params: Parameters, q: np.ndarray) -> np.ndarray:
         """Return the measurement terms' change of the modelled point, shape (N, 3), m."""
-        out = np.zeros((q.shape[0], 3))
         samples = self._samples(q)
-        for t in self.terms:
-            if t.kind == "measurement" and samples is not None:
-                out += t.basis(samples) @ params.extensions[t.key]
-        return out
+        if samples is None:  # readouts other than the identification's: no measurement there
+            return np.zeros((q.shape[0], 3))
+        return measurement_shift(self.terms, params.extensions, samples)
 
     def term_columns(self, params: Parameters, q: np.ndarray, jac: Any) -> np.ndarray:
         """Return d(model point)/d(extension parameters) at ``params``, shape (N, 3, n_terms).
@@ -188,7 +186,7 @@ class Unknowns:
         ``jac`` are the stylus Jacobians at ``params`` (:func:`stylus_jacobians`).
         """
         samples = self._samples(q) or Samples(self.arm, q)
-        cols = [term_jacobian(t, samples, jac, params) for t in self.terms]
+        cols = [term_columns(t, samples, jac, params) for t in self.terms]
         return np.concatenate(cols, axis=2) if cols else np.zeros((q.shape[0], 3, 0))
 
     # ------------------------------------------------------------ model
@@ -236,26 +234,6 @@ class Unknowns:
         out = (position, BlockJacobian(dense, nodes))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
         return out
-
-
-def term_jacobian(term: Term, samples: Samples, jac: Any, params: Parameters) -> np.ndarray:
-    """Return d(model point)/d(term parameters), shape (N, 3, k), at ``params``.
-
-    Args:
-        term: an angle, scale or measurement term.
-        samples: the samples' temperature, motion and displacement.
-        jac: :class:`aacmm_pin.kinematics.StylusJacobians` in the MT-CS at ``params``.
-        params: the parameters (for the translation and the term's current scale).
-    """
-    basis = term.basis(samples)
-    if term.kind == "angle":
-        return jac.angles[:, :, term.axis - 1, None] * basis[:, None, :]
-    if term.kind == "scale":
-        scale = 1.0 + basis @ params.extensions.get(term.key, np.zeros(basis.shape[1]))
-        return ((jac.position - params.translation) / scale[:, None])[:, :, None] * basis[:, None, :]
-    if term.kind == "measurement":
-        return basis
-    raise ValueError(f"{term.key}: kind {term.kind!r} has no columns (maps are node columns)")
 
 
 @dataclass(frozen=True)
