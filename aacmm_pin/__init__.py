@@ -1,35 +1,47 @@
-"""aacmm_pin: calibrate articulated arm CMMs on Pinocchio (Ibaraki & Saito, CIRP Annals 2023)."""
+"""aacmm_pin: calibrate articulated arm CMMs on Pinocchio (Ibaraki & Saito, CIRP Annals 2023).
 
-from aacmm_pin.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
-from aacmm_pin.campaign import (
-    Campaign,
-    LengthBarLog,
-    SpatLog,
-    read_campaign,
-    read_readouts,
-    write_campaign,
-    write_points,
-)
-from aacmm_pin.discovery import Discovery, discover
-from aacmm_pin.discovery_figures import write_discovery
-from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles
-from aacmm_pin.errors import (
-    AacmmError,
-    ArmModelError,
-    CampaignFormatError,
-    FileFormatError,
-    FrameNotFound,
-    Problem,
-)
-from aacmm_pin.export import write_calibration
-from aacmm_pin.identification import Calibration, IdentificationError, identify, measured_positions
-from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
-from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
-from aacmm_pin.planning import Plan, plan
-from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
-from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
-from aacmm_pin.validation import ValidationResult, validate
-from aacmm_pin.viewer import View, view
+The public names below are imported on first use (PEP 562): ``import aacmm_pin`` costs nothing,
+and ``aacmm_pin.identify`` imports :mod:`aacmm_pin.identification` (and Pinocchio, scipy) the
+first time it is read. ``from aacmm_pin import identify`` works as usual.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from aacmm_pin.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
+    from aacmm_pin.campaign import (
+        Campaign,
+        LengthBarLog,
+        SpatLog,
+        read_campaign,
+        read_readouts,
+        write_campaign,
+        write_points,
+    )
+    from aacmm_pin.discovery import Discovery, discover
+    from aacmm_pin.discovery_figures import write_discovery
+    from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles
+    from aacmm_pin.errors import (
+        AacmmError,
+        ArmModelError,
+        CampaignFormatError,
+        FileFormatError,
+        FrameNotFound,
+        Problem,
+    )
+    from aacmm_pin.export import write_calibration
+    from aacmm_pin.identification import Calibration, IdentificationError, identify, measured_positions
+    from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
+    from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
+    from aacmm_pin.planning import Plan, plan
+    from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
+    from aacmm_pin.validation import ValidationResult, validate
+    from aacmm_pin.viewer import View, view
 
 __version__ = "0.1.0"
 
@@ -45,3 +57,48 @@ __all__ = [
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
 ]
+
+_PUBLIC: dict[str, tuple[str, ...]] = {
+    # module -> the public names it defines (the same as the TYPE_CHECKING imports above)
+    "arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
+    "campaign": ("Campaign", "LengthBarLog", "SpatLog", "read_campaign", "read_readouts",
+                 "write_campaign", "write_points"),
+    "discovery": ("Discovery", "discover"),
+    "discovery_figures": ("write_discovery",),
+    "encoder_map": ("EncoderMap", "correct_readouts", "node_angles"),
+    "errors": ("AacmmError", "ArmModelError", "CampaignFormatError", "FileFormatError",
+               "FrameNotFound", "Problem"),
+    "export": ("write_calibration",),
+    "identification": ("Calibration", "IdentificationError", "identify", "measured_positions"),
+    "kinematics": ("StylusJacobians", "predict", "stylus_jacobians", "stylus_positions"),
+    "parameters": ("Parameters", "read_parameters", "write_parameters"),
+    "planning": ("Plan", "plan"),
+    "simulate": ("Simulation", "SimulationConfig", "simulate_campaign", "write_simulation"),
+    "uncertainty": ("MonteCarloResult", "monte_carlo"),
+    "validation": ("ValidationResult", "validate"),
+    "viewer": ("View", "view"),
+}
+_MODULE_OF = {name: module for module, names in _PUBLIC.items() for name in names}
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name from its module on first use (then it is a plain global).
+
+    A submodule's name (``aacmm_pin.parameters``) imports that submodule, as it was an attribute
+    of the package when ``__init__`` imported every module.
+    """
+    module = _MODULE_OF.get(name)
+    if module is not None:
+        value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    elif name.isidentifier() and not name.startswith("__") \
+            and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        value = importlib.import_module(f"{__name__}.{name}")
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    """List the public names (imported or not) beside the package's globals."""
+    return sorted({*globals(), *__all__})

@@ -33,10 +33,18 @@ from aacmm_pin.encoder_map import EncoderMap, node_angles
 from aacmm_pin.kinematics import solve_ik, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import motion_direction
-from aacmm_pin.units import ARCSEC, REFERENCE_TEMPERATURE_C, SIGMA_LOCATION, SIGMA_RTEST, STEP_DEG
+from aacmm_pin.units import (
+    ARCSEC,
+    DEFAULT_SIMULATOR_EFFECTS,
+    REFERENCE_TEMPERATURE_C,
+    SIGMA_LOCATION,
+    SIGMA_RTEST,
+    SIMULATOR_EFFECTS,
+    STEP_DEG,
+)
 
-EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
-DEFAULT_EFFECTS = ("dh", "encoder", "rtest")
+EFFECTS = SIMULATOR_EFFECTS
+DEFAULT_EFFECTS = DEFAULT_SIMULATOR_EFFECTS
 BAR_LENGTHS = {("A", "B"): 0.361775, ("A", "C"): 0.711211}
 """The paper's bar: calibrated socket distances A-B and A-C, in m."""
 

@@ -24,3 +24,8 @@ STEP_DEG = 5.0
 """Encoder map node step, deg (nodes at -180, -175, ..., 175 deg)."""
 REFERENCE_TEMPERATURE_C = 20.0
 """ISO 1 reference temperature, deg C: thermal terms are zero there."""
+
+SIMULATOR_EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
+"""Effects the simulator (:mod:`aacmm_pin.simulate`) can switch on."""
+DEFAULT_SIMULATOR_EFFECTS = ("dh", "encoder", "rtest")
+"""Effects a simulated campaign has by default: the paper's model."""

@@ -22,10 +22,8 @@ imported inside the functions only.
 
 from __future__ import annotations
 
-import argparse
 import base64
 import json
-import time
 import webbrowser
 from collections.abc import Sequence
 from dataclasses import replace
@@ -211,43 +209,3 @@ def write_html(scene: Scene, path: str | Path) -> Path:
     path.write_text(static_html(scene, title=f"aacmm_pin: {', '.join(m.label for m in scene.models)}"),
                     encoding="utf-8")
     return path
-
-
-def _view_command(args: argparse.Namespace) -> int:
-    """Handler of ``aacmm-pin view``."""
-    result = view(args.caldir, args.campaign, html=args.html, open_browser=args.open,
-                  compare=args.compare, location=args.location, scale=args.scale)
-    summary = ", ".join(f"{m['label']} RMS {m['rms_um']:.2f} um" for m in result.scene.info["models"])
-    if result.html is not None:
-        print(f"wrote {result.html}: {summary} (deviations magnified {args.scale:g}x)")
-        return 0
-    try:
-        print(f"serving {result.url} : {summary}; Ctrl+C stops", flush=True)
-        deadline = None if args.serve_for is None else time.monotonic() + args.serve_for
-        while deadline is None or time.monotonic() < deadline:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        result.close()
-    return 0
-
-
-def add_parsers(subparsers: Any) -> None:
-    """Add the ``view`` subcommand to ``aacmm-pin``'s subparsers (``handler`` set to its function)."""
-    p = subparsers.add_parser("view", help="MeshCat view of the arm, the campaign and the residuals "
-                                           "(live on localhost, or --html FILE)")
-    p.add_argument("caldir", type=Path, help="calibration folder or parameters.json (shown first)")
-    p.add_argument("campaign", type=Path, help="campaign folder")
-    p.add_argument("--html", type=Path, default=None,
-                   help="write one self-contained HTML file (opens offline) instead of serving")
-    p.add_argument("--open", action="store_true", help="open the page in the default browser")
-    p.add_argument("--compare", type=Path, nargs="+", action="extend", default=[], metavar="CALDIR",
-                   help="more calibrations to switch to (e.g. the dh model's folder)")
-    p.add_argument("--location", type=int, default=None,
-                   help="R-Test location whose SPAT postures the animation steps through")
-    p.add_argument("--scale", type=float, default=1000.0,
-                   help="magnification of the deviations from each nest (default 1000)")
-    p.add_argument("--serve-for", type=float, default=None, metavar="SECONDS",
-                   help="stop the live server after this long (default: at Ctrl+C)")
-    p.set_defaults(handler=_view_command)

@@ -12,13 +12,14 @@ import numpy as np
 import pytest
 
 from aacmm_pin.acquire import protocols as pr
-from aacmm_pin.acquire.cli import add_parsers
 from aacmm_pin.acquire.faults import AcquisitionError, LineError, PortCounts
 from aacmm_pin.acquire.nest import Nest, read_nest
 from aacmm_pin.acquire.pairing import Pairer
 from aacmm_pin.acquire.session import AcquisitionConfig
 from aacmm_pin.acquire.writer import SpatWriter, write_zero
 from aacmm_pin.campaign import read_campaign
+from aacmm_pin.cli.acquisition import add_parsers
+from aacmm_pin.cli.iso10360 import add_parsers as add_iso10360
 from aacmm_pin.errors import FileFormatError
 
 Q_DEG = [-35.063444, 78.282159, 171.07413, 35.139578, -135.639175, -78.001445, 128.347322]
@@ -241,9 +242,11 @@ def test_port_counts():
 
 
 def test_parsers_set_handlers():
-    """add_parsers adds acquire, fake-devices and iso10360 subcommands, each with a handler."""
+    """The CLI's add_parsers add acquire, fake-devices and iso10360 subcommands, each with a handler."""
     parser = argparse.ArgumentParser()
-    add_parsers(parser.add_subparsers(dest="command", required=True))
+    subparsers = parser.add_subparsers(dest="command", required=True)
+    add_parsers(subparsers)
+    add_iso10360(subparsers)
     args = parser.parse_args(["acquire", "camp", "--arm-port", "/dev/a", "--gauge",
                               "mitutoyo=/dev/b", "--location", "2", "--zero", "1,2,-3.5",
                               "--heidenhain-request", r"\x05"])

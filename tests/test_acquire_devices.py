@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aacmm_pin.acquire.cli import add_parsers
 from aacmm_pin.campaign import read_campaign
+from aacmm_pin.cli.acquisition import add_parsers
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from aacmm_pin import iso10360 as iso
-from aacmm_pin.acquire.cli import add_parsers
+from aacmm_pin.cli.iso10360 import add_parsers
 from aacmm_pin.errors import FileFormatError
 
 NIST = Path(__file__).resolve().parents[2] / "shared" / "nist-l2-reference-pairs" / "Sphere"

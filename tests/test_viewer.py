@@ -24,12 +24,12 @@ import pytest
 
 from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.cli.viewer import add_parsers
 from aacmm_pin.export import write_calibration
 from aacmm_pin.identification import identify
 from aacmm_pin.kinematics import predict
 from aacmm_pin.parameters import read_parameters
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.viewer import add_parsers, view
+from aacmm_pin.viewer import view
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
@@ -68,15 +68,12 @@ CHROME = ["/Background", "/Grid", "/Axes", "/Cameras/default/rotated/<object>/le
 
 
 @pytest.fixture(scope="module")
-def folders(tmp_path_factory):
-    """A small simulated campaign and its DH and proposed calibration folders."""
+def folders(tmp_path_factory, arm, small_sim, small_cal):
+    """The shared small simulated campaign and its DH and proposed calibration folders."""
     out = tmp_path_factory.mktemp("viewer")
-    arm = load_arm()
-    sim = simulate_campaign(arm, SimulationConfig(samples_per_location=50, samples_per_socket=5,
-                                                  bar_placements=2))
-    write_campaign(sim.campaign, out / "campaign")
-    for model in ("dh", "proposed"):
-        write_calibration(identify(sim.campaign, arm, model=model), arm, out / model)
+    write_campaign(small_sim.campaign, out / "campaign")
+    write_calibration(identify(small_sim.campaign, arm, model="dh"), arm, out / "dh")
+    write_calibration(small_cal, arm, out / "proposed")
     return out
 
 

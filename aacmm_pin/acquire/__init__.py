@@ -15,7 +15,8 @@ pseudo-terminals. The rooms:
 * :mod:`~aacmm_pin.acquire.ports`: one reader thread per serial port (pyserial);
 * :mod:`~aacmm_pin.acquire.session`: :func:`acquire`, the run loop, status and summary;
 * :mod:`~aacmm_pin.acquire.fake_devices`: :class:`FakeDevices`, simulator-driven ptys;
-* :mod:`~aacmm_pin.acquire.cli`: the ``acquire``, ``fake-devices`` and ``iso10360`` subcommands.
+* :mod:`aacmm_pin.cli.acquisition` (outside this package): the ``acquire`` and ``fake-devices``
+  subcommands.
 
 pyserial and the simulator are imported only by the modules that use them.
 """

@@ -1,17 +1,30 @@
-"""The ``aacmm-pin`` command: one small function per subcommand over the public API."""
+"""The calibration subcommands: simulate, predict, identify, discover, validate, uncertainty, plan, demo.
+
+Each handler parses nothing itself: it calls the public API with the parsed arguments and prints.
+The modules that import Pinocchio, scipy or matplotlib are imported inside the handlers.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+from aacmm_pin.cli._options import (
+    add_command,
+    arm_option,
+    json_option,
+    model_option,
+    no_rtest_option,
+    out_option,
+    seed_option,
+)
+from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
+from aacmm_pin.units import SIMULATOR_EFFECTS
 
-from aacmm_pin.errors import AacmmError
-
-Handler = Callable[[argparse.Namespace], int]
+if TYPE_CHECKING:
+    from aacmm_pin.identification import Calibration
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -34,9 +47,9 @@ def _simulate(args: argparse.Namespace) -> int:
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_readout_columns, write_points
-    from aacmm_pin.effects import Samples
     from aacmm_pin.kinematics import predict
     from aacmm_pin.parameters import check_against_arm, read_parameters
+    from aacmm_pin.samples import Samples
 
     params = read_parameters(args.params)
     arm = load_arm(args.arm or params.arm)
@@ -64,10 +77,8 @@ def _identify(args: argparse.Namespace) -> int:
     return 0 if cal.success else 1
 
 
-def _print_calibration(cal: object, out: Path) -> None:
-    from aacmm_pin.identification import Calibration
-
-    assert isinstance(cal, Calibration)
+def _print_calibration(cal: Calibration, out: Path) -> None:
+    """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
     state = "converged" if cal.success else "DID NOT CONVERGE"
     by_loc = ", ".join(f"{m}: {v * 1e6:.2f}" for m, v in cal.fit_rms_by_location().items())
     rtest = "with" if cal.use_rtest else "without"
@@ -129,6 +140,8 @@ def _validate(args: argparse.Namespace) -> int:
 def _uncertainty(args: argparse.Namespace) -> int:
     import json
 
+    import numpy as np
+
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.export import write_calibration, write_maps_csv
@@ -170,6 +183,8 @@ def _uncertainty(args: argparse.Namespace) -> int:
 
 def _plan(args: argparse.Namespace) -> int:
     import json
+
+    import numpy as np
 
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
@@ -214,121 +229,96 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``aacmm-pin``."""
-    from aacmm_pin.simulate import DEFAULT_EFFECTS, EFFECTS
+def add_parsers(subparsers: Any) -> None:
+    """Add simulate, predict, identify, discover, validate, uncertainty, plan and demo.
 
-    parser = argparse.ArgumentParser(
-        prog="aacmm-pin",
-        description="Calibrate articulated arm CMMs (Ibaraki & Saito, CIRP Annals 2023) on "
-                    "Pinocchio.")
-    sub = parser.add_subparsers(dest="command", required=True)
+    Args:
+        subparsers: what ``ArgumentParser.add_subparsers()`` returned; each parser sets
+            ``handler``, a function of the parsed arguments returning the exit status.
+    """
+    arm = arm_option()
 
-    p = sub.add_parser("simulate", help="write a simulated SPAT + length-bar campaign and its truth")
+    p = add_command(subparsers, "simulate",
+                    "write a simulated SPAT + length-bar campaign and its truth",
+                    parents=[seed_option("random seed (same seed, same files)"), arm])
     p.add_argument("out", type=Path, help="campaign folder to write")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same files)")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS),
-                   help=f"comma-separated effects from {', '.join(EFFECTS)} "
-                        f"(default: {','.join(DEFAULT_EFFECTS)})")
-    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
-    p.add_argument("--samples-per-location", type=int, default=200)
-    p.add_argument("--samples-per-socket", type=int, default=40)
+                   help=f"comma-separated effects from {', '.join(SIMULATOR_EFFECTS)}")
+    p.add_argument("--samples-per-location", type=int, default=200,
+                   help="SPAT samples per R-Test location")
+    p.add_argument("--samples-per-socket", type=int, default=40,
+                   help="length-bar postures per socket")
     p.set_defaults(handler=_simulate)
 
-    p = sub.add_parser("predict", help="stylus centres (r-CS, mm) for encoder readouts")
+    p = add_command(subparsers, "predict", "stylus centres (r-CS, mm) for encoder readouts",
+                    parents=[out_option(Path("points.csv"), "output CSV"),
+                             arm_option(None, "override the URDF named in the parameters")])
     p.add_argument("params", type=Path, help="parameters.json or a calibration folder")
     p.add_argument("readouts", type=Path, help="CSV with columns q1_deg..qn_deg")
-    p.add_argument("--out", type=Path, default=Path("points.csv"), help="output CSV")
-    p.add_argument("--arm", default=None, help="override the URDF named in the parameters")
     p.set_defaults(handler=_predict)
 
-    p = sub.add_parser("identify", help="identify DH errors (and encoder maps) from SPATs")
+    p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
+                    parents=[model_option(),
+                             no_rtest_option("conventional SPAT: each location's mean "
+                                             "displacement for every sample"),
+                             arm, out_option(Path("calibration"), "calibration folder")])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
-    p.add_argument("--model", choices=("dh", "proposed"), default="proposed",
-                   help="dh: DH errors only; proposed: DH errors and encoder maps (default)")
-    p.add_argument("--no-rtest", action="store_true",
-                   help="conventional SPAT: each location's mean displacement for every sample")
-    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
-    p.add_argument("--out", type=Path, default=Path("calibration"), help="calibration folder")
     p.add_argument("--loss", default="linear",
-                   help="scipy loss: linear (default), soft_l1, huber, cauchy, arctan")
+                   help="scipy loss: linear, soft_l1, huber, cauchy, arctan")
     p.add_argument("--sigma-um", type=float, default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
-    p.add_argument("--step-deg", type=float, default=5.0, help="map node step (default 5)")
+    p.add_argument("--step-deg", type=float, default=5.0, help="map node step, deg")
     p.set_defaults(handler=_identify)
 
-    p = sub.add_parser("discover", help="find what a model is missing: name the effect, add it, "
-                                        "show the held-out gap shrink")
+    p = add_command(subparsers, "discover", "find what a model is missing: name the effect, add "
+                                            "it, show the held-out gap shrink",
+                    parents=[no_rtest_option("start without the R-Test displacements "
+                                             "(location means)"),
+                             arm, out_option(Path("discovery"), "output folder: discovery.json, "
+                                                                "figures, final CALDIR")])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
-                   help="start model: dh (DH errors, tool; default) or proposed (also encoder maps)")
+                   help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
                    help="comma-separated library effects to try (default: all)")
-    p.add_argument("--no-rtest", action="store_true",
-                   help="start without the R-Test displacements (location means)")
-    p.add_argument("--max-steps", type=int, default=6, help="most effects to add (default 6)")
-    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
-    p.add_argument("--out", type=Path, default=Path("discovery"),
-                   help="output folder: discovery.json, figures, final CALDIR (default discovery)")
+    p.add_argument("--max-steps", type=int, default=6, help="most effects to add")
     p.set_defaults(handler=_discover)
 
-    p = sub.add_parser("validate", help="length-bar errors of a calibration (paper Fig. 9)")
+    p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
+                    parents=[json_option("the errors")])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")
     p.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
-    p.add_argument("--json", type=Path, default=None, help="also write the errors as JSON")
     p.set_defaults(handler=_validate)
 
-    p = sub.add_parser("uncertainty", help="Monte Carlo uncertainty of every identified value")
+    p = add_command(subparsers, "uncertainty", "Monte Carlo uncertainty of every identified value",
+                    parents=[model_option(),
+                             no_rtest_option("conventional SPAT (location means)"), arm,
+                             seed_option("seed of the first trial (trial i uses seed + i)"),
+                             out_option(Path("uncertainty"), "output folder")])
     p.add_argument("campaign", type=Path, help="campaign folder")
-    p.add_argument("--model", choices=("dh", "proposed"), default="proposed")
-    p.add_argument("--no-rtest", action="store_true", help="conventional SPAT (location means)")
-    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
-    p.add_argument("--trials", type=int, default=100, help="Monte Carlo trials (default 100)")
+    p.add_argument("--trials", type=int, default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
     p.add_argument("--sigma-rtest-um", type=float, default=2.0, help="R-Test reading sigma, um")
     p.add_argument("--sigma-location-um", type=float, default=3.0, help="R-Test location sigma, um")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first trial")
-    p.add_argument("--out", type=Path, default=Path("uncertainty"), help="output folder")
     p.set_defaults(handler=_uncertainty)
 
-    p = sub.add_parser("plan", help="where to measure next: rank candidate SPATs")
+    p = add_command(subparsers, "plan", "where to measure next: rank candidate SPATs",
+                    parents=[model_option(("proposed",), "the model whose uncertainty is planned "
+                                                         "for (DH errors and encoder maps)"),
+                             arm, seed_option("seed of the candidate postures' IK starts"),
+                             json_option("the plan")])
     p.add_argument("campaign", type=Path, help="campaign folder")
-    p.add_argument("--model", choices=("proposed",), default="proposed")
-    p.add_argument("--arm", default="aacmm7", help="URDF path or embedded arm (default aacmm7)")
-    p.add_argument("--grid", type=int, default=3, help="candidate nests per side (default 3)")
+    p.add_argument("--grid", type=int, default=3, help="candidate nests per side")
     p.add_argument("--spacing-mm", type=float, default=260.0,
-                   help="half width of the candidate grid around the nests' centre (default 260)")
-    p.add_argument("--heights-mm", default="0,250", help="candidate heights above the nests")
+                   help="half width of the candidate grid around the nests' centre, mm")
+    p.add_argument("--heights-mm", default="0,250",
+                   help="comma-separated candidate heights above the nests, mm")
     p.add_argument("--postures", type=int, default=40, help="postures per candidate SPAT")
     p.add_argument("--top", type=int, default=10, help="candidates to print")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", type=Path, default=None, help="also write the plan as JSON")
     p.set_defaults(handler=_plan)
 
-    p = sub.add_parser("demo", help="the main job: simulate, identify the paper's 3 models, "
-                                    "validate, figures")
-    p.add_argument("--out", type=Path, default=Path("aacmm-pin-demo"), help="output folder")
-    p.add_argument("--seed", type=int, default=0, help="seed of the simulated campaign")
+    p = add_command(subparsers, "demo", "the main job: simulate, identify the paper's 3 models, "
+                                        "validate, figures",
+                    parents=[out_option(Path("aacmm-pin-demo"), "output folder"),
+                             seed_option("seed of the simulated campaign")])
     p.set_defaults(handler=_demo)
-
-    from aacmm_pin.acquire.cli import add_parsers as add_acquisition
-    from aacmm_pin.viewer import add_parsers as add_viewer
-
-    add_viewer(sub)
-    add_acquisition(sub)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
-    args = build_parser().parse_args(argv)
-    try:
-        handler: Handler = args.handler
-        return handler(args)
-    except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
-        print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

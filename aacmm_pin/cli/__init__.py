@@ -1,0 +1,80 @@
+"""The ``aacmm-pin`` command: :func:`main`, and one module of subcommands per group.
+
+* :mod:`~aacmm_pin.cli.calibration`: ``simulate``, ``predict``, ``identify``, ``discover``,
+  ``validate``, ``uncertainty``, ``plan``, ``demo``;
+* :mod:`~aacmm_pin.cli.viewer`: ``view``;
+* :mod:`~aacmm_pin.cli.acquisition`: ``acquire``, ``fake-devices``;
+* :mod:`~aacmm_pin.cli.iso10360`: ``iso10360 spat|sphere|ldia|euni``.
+
+Each module's ``add_parsers(subparsers)`` adds its commands; every leaf parser sets ``handler``,
+a thin function of the parsed arguments that calls the public API, prints and returns the exit
+status. Building the parser imports neither Pinocchio, yourdfpy, scipy nor matplotlib: the
+handlers import what they need, so ``aacmm-pin --help`` and ``--version`` answer at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
+from aacmm_pin.cli._options import Handler, HelpFormatter
+from aacmm_pin.errors import AacmmError
+
+__all__ = ["Handler", "build_parser", "main", "version"]
+
+
+def version() -> str:
+    """Return the installed version of aacmm_pin (the package's ``__version__`` if not installed)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed_version
+
+    try:
+        return installed_version("aacmm_pin")
+    except PackageNotFoundError:
+        from aacmm_pin import __version__
+
+        return __version__
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: print ``aacmm-pin <version>`` and exit 0 (the version is looked up only then)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS,
+                 default: Any = argparse.SUPPRESS, help: str | None = None) -> None:
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        print(f"{parser.prog} {version()}")
+        parser.exit()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``aacmm-pin``."""
+    parser = argparse.ArgumentParser(
+        prog="aacmm-pin",
+        description="Calibrate articulated arm CMMs (Ibaraki & Saito, CIRP Annals 2023) on "
+                    "Pinocchio.",
+        formatter_class=HelpFormatter)
+    parser.add_argument("--version", action=_VersionAction,
+                        help="print the program's version (aacmm-pin X.Y.Z) and exit")
+    sub = parser.add_subparsers(dest="command", required=True)
+    calibration.add_parsers(sub)
+    viewer.add_parsers(sub)
+    acquisition.add_parsers(sub)
+    iso10360.add_parsers(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
+    args = build_parser().parse_args(argv)
+    try:
+        handler: Handler = args.handler
+        return handler(args)
+    except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
+        print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
+        return 2

@@ -1,0 +1,128 @@
+"""Shared pieces of the ``aacmm-pin`` parsers: help formatter, repeated options, ``--json`` writer.
+
+Every option repeated across commands is a parent parser (``argparse``'s ``parents=[...]``) made by
+one function here, so its name, type and wording are written once. The functions take the default
+or the help text where commands differ (the ``--out`` folder of ``identify`` is not ``demo``'s).
+Nothing here imports the rest of the package: building the parser stays cheap.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+Handler = Callable[[argparse.Namespace], int]
+"""What every leaf parser sets as ``handler``: parsed arguments -> exit status."""
+
+
+ARM_HELP = "URDF path or embedded arm name"
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """``ArgumentDefaultsHelpFormatter`` that shows no ``(default: None)``, ``False`` or ``[]``.
+
+    Such an option is off unless given; its help says what happens without it (``--workers``:
+    "default: all cores"), which says more than ``None``.
+    """
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or action.default is False or action.default == []:
+            return action.help
+        return super()._get_help_string(action)
+
+
+def add_command(subparsers: Any, name: str, help: str, *,
+                parents: Sequence[argparse.ArgumentParser] = (),
+                description: str | None = None) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` with the defaults-showing help formatter and return its parser.
+
+    Args:
+        subparsers: what ``ArgumentParser.add_subparsers()`` returned.
+        name: the subcommand.
+        help: one line for the list of commands (and the description, unless given).
+        parents: parent parsers of shared options (made by the functions of this module).
+        description: longer text for the command's own ``--help``.
+    """
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        name, help=help, description=description or help, parents=list(parents),
+        formatter_class=HelpFormatter)
+    return parser
+
+
+def _parent() -> argparse.ArgumentParser:
+    return argparse.ArgumentParser(add_help=False)
+
+
+def arm_option(default: str | None = "aacmm7", text: str = ARM_HELP) -> argparse.ArgumentParser:
+    """``--arm URDF``: the arm's URDF path or embedded name."""
+    p = _parent()
+    p.add_argument("--arm", default=default, metavar="URDF", help=text)
+    return p
+
+
+def out_option(default: Path, text: str) -> argparse.ArgumentParser:
+    """``--out PATH``: where the command writes."""
+    p = _parent()
+    p.add_argument("--out", type=Path, default=default, help=text)
+    return p
+
+
+def seed_option(text: str) -> argparse.ArgumentParser:
+    """``--seed N``: a random seed, 0 by default (same seed, same result)."""
+    p = _parent()
+    p.add_argument("--seed", type=int, default=0, help=text)
+    return p
+
+
+def json_option(what: str) -> argparse.ArgumentParser:
+    """``--json FILE``: also write ``what`` as JSON."""
+    p = _parent()
+    p.add_argument("--json", type=Path, default=None, metavar="FILE",
+                   help=f"also write {what} as JSON")
+    return p
+
+
+def model_option(choices: Sequence[str] = ("dh", "proposed"),
+                 text: str = "dh: DH errors only; proposed: DH errors and encoder maps"
+                 ) -> argparse.ArgumentParser:
+    """``--model``: the identification model."""
+    p = _parent()
+    p.add_argument("--model", choices=tuple(choices), default="proposed", help=text)
+    return p
+
+
+def no_rtest_option(text: str) -> argparse.ArgumentParser:
+    """``--no-rtest``: leave out the R-Test displacements (conventional SPAT)."""
+    p = _parent()
+    p.add_argument("--no-rtest", action="store_true", help=text)
+    return p
+
+
+def nest_option(text: str) -> argparse.ArgumentParser:
+    """``--nest FILE``: the R-Test nest's sensor directions."""
+    p = _parent()
+    p.add_argument("--nest", type=Path, default=None, metavar="FILE", help=text)
+    return p
+
+
+def params_option() -> argparse.ArgumentParser:
+    """``--params PARAMS_OR_CALDIR``: a calibration instead of the nominal arm."""
+    p = _parent()
+    p.add_argument("--params", type=Path, default=None, metavar="PARAMS_OR_CALDIR",
+                   help="parameters.json or calibration folder (default: the nominal arm)")
+    return p
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` as JSON to ``path`` (what ``--json FILE`` asks for), atomically.
+
+    The text goes to a temporary file beside ``path`` first, then replaces ``path`` in one rename.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, path)

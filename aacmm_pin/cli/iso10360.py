@@ -1,0 +1,155 @@
+"""The ``iso10360`` subcommand: acceptance figures ``spat``, ``sphere``, ``ldia`` and ``euni``.
+
+The formulas and their sources are in :mod:`aacmm_pin.iso10360`, imported inside the handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from aacmm_pin.cli._options import (
+    add_command,
+    arm_option,
+    json_option,
+    no_rtest_option,
+    params_option,
+    write_json,
+)
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, Any]:
+    """Return (arm, parameters): from --params, else the nominal --arm."""
+    from aacmm_pin.arm import load_arm
+    from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
+
+    if getattr(args, "params", None):
+        params = read_parameters(args.params)
+        arm = load_arm(args.arm or params.arm)
+        check_against_arm(params, arm)
+        return arm, params
+    arm = load_arm(args.arm or "aacmm7")
+    return arm, Parameters.nominal(arm)
+
+
+def _points(args: argparse.Namespace) -> tuple[Any, Any]:
+    """Return (points (N, 3) in m, group column or None) of the POINTS file."""
+    from aacmm_pin.iso10360 import read_points
+
+    points, groups, readouts = read_points(args.points)
+    if readouts is not None:
+        from aacmm_pin.kinematics import predict
+
+        arm, params = _load(args)
+        points = predict(arm, params, readouts)
+    return points, groups
+
+
+def _finish(args: argparse.Namespace, text: str, data: dict[str, Any]) -> int:
+    print(text)
+    if args.json:
+        write_json(args.json, data)
+    return 0
+
+
+def _spat(args: argparse.Namespace) -> int:
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.iso10360 import point_articulation, spat_centres
+
+    arm, params = _load(args)
+    centres = spat_centres(arm, params, read_campaign(args.campaign), use_rtest=not args.no_rtest)
+    rows, data = [], {}
+    head = (f"{'location':>8} {'n':>6} {'max dev (um)':>13} {'2 sigma (um)':>13} "
+            f"{'range x (um)':>13} {'range y (um)':>13} {'range z (um)':>13}")
+    for m, p in centres.items():
+        r = point_articulation(p)
+        rows.append(f"{m:>8} {r.n:>6} {r.max_deviation * 1e6:>13.2f} {r.two_sigma * 1e6:>13.2f} "
+                    + " ".join(f"{v * 1e6:>13.2f}" for v in r.ranges))
+        data[str(m)] = r.to_dict()
+    rtest = "without R-Test correction" if args.no_rtest else "R-Test displacement removed"
+    text = "\n".join([f"point articulation (SPAT) per location, {rtest}:", head, *rows])
+    return _finish(args, text, {"locations": data, "use_rtest": not args.no_rtest})
+
+
+def _sphere(args: argparse.Namespace) -> int:
+    from aacmm_pin.iso10360 import probing_errors
+
+    points, _ = _points(args)
+    r = probing_errors(points, args.diameter_mm * 1e-3)
+    note = "" if len(points) == 25 else f" (the test takes 25 points; {len(points)} given)"
+    text = (f"least-squares sphere of {len(points)} points{note}: centre "
+            + ", ".join(f"{v * 1e3:.6f}" for v in r.fit.centre)
+            + f" mm, diameter {r.fit.diameter * 1e3:.6f} mm\n"
+            f"P_Size {r.p_size * 1e6:+.2f} um, P_Form {r.p_form * 1e6:.2f} um")
+    return _finish(args, text, r.to_dict())
+
+
+def _ldia(args: argparse.Namespace) -> int:
+    from aacmm_pin.iso10360 import articulated_location
+
+    points, groups = _points(args)
+    r = articulated_location(points, groups=groups, group_size=args.group_size)
+    rows = [f"  centre {k + 1}: " + ", ".join(f"{v * 1e3:.6f}" for v in c) + " mm"
+            for k, c in enumerate(r.centres)]
+    text = "\n".join([f"{len(r.centres)} sphere centres:", *rows,
+                      f"L_Dia {r.l_dia * 1e6:.2f} um (diameter of the smallest sphere enclosing "
+                      "the centres)"])
+    return _finish(args, text, r.to_dict())
+
+
+def _euni(args: argparse.Namespace) -> int:
+    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.iso10360 import length_errors
+
+    arm, params = _load(args)
+    r = length_errors(arm, params, read_campaign(args.campaign))
+    rows = [f"  placement {k}: " + ", ".join(f"{a}-{b} {e * 1e6:+.2f} um"
+                                              for (a, b), e in zip(r.pairs, errs))
+            for k, errs in zip(r.placements, r.errors)]
+    text = "\n".join(["length errors (measured - calibrated):", *rows,
+                      f"E_UNI {r.e_uni * 1e6:.2f} um (largest |error| of {r.errors.size} lengths)"])
+    return _finish(args, text, r.to_dict())
+
+
+def add_parsers(subparsers: Any) -> None:
+    """Add the subcommand ``iso10360`` (with ``spat``, ``sphere``, ``ldia``, ``euni``) to ``subparsers``.
+
+    Args:
+        subparsers: what ``ArgumentParser.add_subparsers()`` returned; each leaf parser sets
+            ``handler``, a function of the parsed arguments returning the exit status.
+    """
+    iso = add_command(
+        subparsers, "iso10360", "acceptance figures (ISO 10360-12 / ASME B89.4.22)",
+        description="Point articulation (SPAT), P_Size/P_Form, L_Dia and E_UNI; formulas and "
+                    "sources in aacmm_pin.iso10360.")
+    sub = iso.add_subparsers(dest="figure", required=True)
+    common = [params_option(),
+              arm_option(None, "URDF path or embedded arm name (default: the one the parameters "
+                               "name, else aacmm7)"),
+              json_option("the figures")]
+
+    q = add_command(sub, "spat", "point articulation figures of a SPAT log, per location",
+                    parents=[*common, no_rtest_option("do not remove the R-Test displacement "
+                                                      "(conventional SPAT)")])
+    q.add_argument("campaign", type=Path, help="campaign folder with spat.csv")
+    q.set_defaults(handler=_spat)
+
+    points_help = ("CSV with x_mm,y_mm,z_mm (points) or q1_deg..qn_deg (readouts, with --params); "
+                   "optional column group")
+    q = add_command(sub, "sphere", "P_Size and P_Form from 25 points on a calibrated sphere",
+                    parents=common)
+    q.add_argument("points", type=Path, help=points_help)
+    q.add_argument("--diameter-mm", type=float, required=True,
+                   help="calibrated sphere diameter, mm")
+    q.set_defaults(handler=_sphere)
+
+    q = add_command(sub, "ldia", "L_Dia from 5 x 5 articulated points on a sphere",
+                    parents=common)
+    q.add_argument("points", type=Path, help=points_help + " (else consecutive groups)")
+    q.add_argument("--group-size", type=int, default=5, help="points per articulation")
+    q.set_defaults(handler=_ldia)
+
+    q = add_command(sub, "euni", "E_UNI from the length bar", parents=common)
+    q.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
+    q.set_defaults(handler=_euni)
