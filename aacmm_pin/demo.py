@@ -55,7 +55,7 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
                       std={a: best.node_std(a) for a in best.node_identifiable},
                       truth={a: best.equivalent(truth)[0].map(a).values
                              for a in best.node_identifiable})
-    plot_length_errors({labels[k]: v.to_dict() for k, v in results.items()},
+    plot_length_errors({labels[k]: v for k, v in results.items()},
                        out / "fig9_length_errors.png")
     print(_table(results, labels))
     for folder, cal in calibrations.items():

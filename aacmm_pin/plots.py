@@ -8,7 +8,6 @@ so no pyplot state, GUI backend or open-figure registry is touched.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,6 +17,7 @@ import numpy as np
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.encoder_map import node_count
 from aacmm_pin.units import ARCSEC
+from aacmm_pin.validation import ValidationResult
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -26,7 +26,6 @@ UM_PER_M = 1e6
 DPI = 150
 # Colour-blind-safe model colours (grey, then Okabe-Ito orange, vermillion, blue, green, purple, sky).
 MODEL_COLOURS = ("#8c8c8c", "#e69f00", "#d55e00", "#0072b2", "#009e73", "#cc79a7", "#56b4e9")
-_PAIR_KEY = re.compile(r"(.+)_um")
 
 
 def _new_figure(width_in: float, height_in: float) -> Figure:
@@ -256,51 +255,46 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
 # --- Fig. 9: length errors on the bar ------------------------------------------------------------
 
 
-def _length_table(results: dict[str, dict]) -> tuple[list[int], list[str], dict[str, np.ndarray]]:
-    """Return placements, pair keys and model -> errors (placements x pairs, µm, NaN if absent)."""
+def _length_table(results: Mapping[str, ValidationResult]
+                  ) -> tuple[list[int], list[tuple[str, str]], dict[str, np.ndarray]]:
+    """Return placements, socket pairs and model -> errors (placements x pairs, µm, NaN if absent)."""
     if not results:
         raise ValueError("results: no model given")
-    rows: dict[str, dict[int, dict[str, Any]]] = {}
-    for label, result in results.items():
-        entries = result.get("placements") if isinstance(result, Mapping) else None
-        if not isinstance(entries, list) or not all(isinstance(e, Mapping) and "placement" in e
-                                                    for e in entries):
-            raise ValueError(f"results: model '{label}' needs a 'placements' list of dicts with a "
-                             "'placement' key")
-        rows[label] = {int(e["placement"]): dict(e) for e in entries}
-    keys = [k for r in rows.values() for e in r.values() for k in e if _PAIR_KEY.fullmatch(k)]
-    pairs = list(dict.fromkeys(keys))
+    pairs = list(dict.fromkeys(pair for r in results.values() for pair in r.pairs))
     if not pairs:
-        raise ValueError("results: no '<from><to>_um' length errors (e.g. 'AB_um') in the placements")
-    placements = sorted({k for r in rows.values() for k in r})
-    errors = {label: np.array([[np.nan if r.get(k, {}).get(p) is None else float(r[k][p])
-                                for p in pairs] for k in placements]) for label, r in rows.items()}
+        raise ValueError("results: no socket pair has a length error")
+    placements = sorted({int(k) for r in results.values() for k in r.placements})
+    if not placements:
+        raise ValueError("results: no bar placement has a length error")
+    errors = {}
+    for label, r in results.items():
+        table = np.full((len(placements), len(pairs)), np.nan)
+        for i, k in enumerate(r.placements):
+            for j, pair in enumerate(r.pairs):
+                table[placements.index(int(k)), pairs.index(pair)] = r.errors[i, j] * 1e6
+        errors[label] = table
     return placements, pairs, errors
 
 
-def _pair_title(key: str) -> str:
-    """Return 'A-B' for the key 'AB_um' (two one-letter sockets), else the key without '_um'."""
-    name = key[:-3]
-    return f"{name[0]}-{name[1]}" if len(name) == 2 else name
+def _pair_title(pair: tuple[str, str]) -> str:
+    """Return 'A-B' for the socket pair ('A', 'B')."""
+    return f"{pair[0]}-{pair[1]}"
 
 
-def plot_length_errors(results: dict[str, dict], path: str | Path) -> Path:
+def plot_length_errors(results: Mapping[str, ValidationResult], path: str | Path) -> Path:
     """Plot the length errors per bar placement as grouped bars, one panel per socket pair (Fig. 9).
 
     Args:
-        results: model label (e.g. "proposed, R-Test") -> validation JSON
-            (``ValidationResult.to_dict()``): ``{"placements": [{"placement": 1, "AB_um": 1.2,
-            "AC_um": -0.4}, ...], "rms_um": .., "max_abs_um": ..}``, errors in µm; the pairs are the
-            ``<from><to>_um`` keys. A missing or null error leaves its bar out; a missing
-            ``rms_um`` is computed from the errors.
+        results: model label (e.g. "proposed, R-Test") -> its :func:`aacmm_pin.validate` result.
+            Placements and pairs are the union over the models; an error a model did not measure
+            (NaN) leaves its bar out.
         path: PNG file to write.
 
     Returns:
         ``path`` as a Path.
 
     Raises:
-        ValueError: if ``results`` is empty, a model lacks its ``placements`` list or no pair key
-            is found.
+        ValueError: if ``results`` is empty or has no placement or no socket pair.
     """
     placements, pairs, errors = _length_table(results)
     n_models = len(errors)
@@ -311,8 +305,7 @@ def plot_length_errors(results: dict[str, dict], path: str | Path) -> Path:
     for ax in grid[len(pairs):]:
         ax.remove()
     finite = {label: err[np.isfinite(err)] for label, err in errors.items()}
-    rms = {label: float(results[label]["rms_um"]) if results[label].get("rms_um") is not None
-           else float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan
+    rms = {label: float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan
            for label, e in finite.items()}
     x = np.arange(len(placements), dtype=float)
     width = 0.8 / n_models

@@ -17,6 +17,7 @@ from aacmm_pin.plots import (
     plot_length_errors,
     plot_rtest_displacement,
 )
+from aacmm_pin.validation import ValidationResult
 from tests.helpers import SAMPLE
 
 N_NODES = 72  # 5 deg step
@@ -39,16 +40,14 @@ def _maps(axes: list[int]) -> dict[int, np.ndarray]:
     return {a: 5e-5 * np.sin(a * x + 0.3) for a in axes}
 
 
-def _results() -> dict[str, dict]:
-    """Validation JSON of three models, two socket pairs, four placements."""
+def _results() -> dict[str, ValidationResult]:
+    """Validation results of three models, two socket pairs, four placements."""
     rng = np.random.default_rng(1)
     out = {}
     for label, scale in (("DH only, R-Test", 6.0), ("proposed, no R-Test", 3.0),
                          ("proposed, R-Test", 1.5)):
-        e = rng.normal(0.0, scale, (4, 2))
-        out[label] = {"placements": [{"placement": k + 1, "AB_um": e[k, 0], "AC_um": e[k, 1]}
-                                     for k in range(4)],
-                      "rms_um": float(np.sqrt(np.mean(e ** 2))), "max_abs_um": float(abs(e).max())}
+        out[label] = ValidationResult([1, 2, 3, 4], [("A", "B"), ("A", "C")],
+                                      rng.normal(0.0, scale * 1e-6, (4, 2)))
     return out
 
 
@@ -179,23 +178,34 @@ def test_length_error_figure_is_a_png(tmp_path):
 
 
 def test_length_error_figure_tolerates_missing_values(tmp_path):
-    """A null error, a missing placement and a missing rms_um still give a figure."""
+    """An unmeasured error (NaN) and a placement one model lacks still give a figure."""
     results = _results()
     model = results["proposed, R-Test"]
-    model["placements"][0]["AC_um"] = None
-    del model["placements"][2]
-    del model["rms_um"]
+    errors = np.delete(model.errors.copy(), 2, axis=0)
+    errors[0, 1] = np.nan
+    results["proposed, R-Test"] = ValidationResult([1, 2, 4], model.pairs, errors)
     _assert_png(plot_length_errors(results, tmp_path / "fig9.png"))
+
+
+def test_length_error_table_aligns_placements_and_pairs():
+    """Models with other placements and pair orders land in the right cells, in um."""
+    from aacmm_pin.plots import _length_table
+
+    a = ValidationResult([1, 2], [("A", "B"), ("A", "C")], np.array([[1.0, 2.0], [3.0, 4.0]]) * 1e-6)
+    b = ValidationResult([2, 3], [("A", "C")], np.array([[5.0], [6.0]]) * 1e-6)
+    placements, pairs, errors = _length_table({"a": a, "b": b})
+    assert placements == [1, 2, 3] and pairs == [("A", "B"), ("A", "C")]
+    np.testing.assert_allclose(errors["a"], [[1, 2], [3, 4], [np.nan, np.nan]])
+    np.testing.assert_allclose(errors["b"], [[np.nan, np.nan], [np.nan, 5], [np.nan, 6]])
 
 
 @pytest.mark.parametrize("results", [
     {},
-    {"proposed": {"rms_um": 1.0}},
-    {"proposed": {"placements": [{"AB_um": 1.0}]}},
-    {"proposed": {"placements": [{"placement": 1}]}},
+    {"proposed": ValidationResult([1], [], np.zeros((1, 0)))},
+    {"proposed": ValidationResult([], [("A", "B")], np.zeros((0, 1)))},
 ])
 def test_length_error_bad_results_name_the_argument(tmp_path, results):
-    """Empty results, a model without placements and rows without pair keys raise ValueError."""
+    """Empty results, no socket pair and no placement raise ValueError naming the argument."""
     with pytest.raises(ValueError, match=r"^results:"):
         plot_length_errors(results, tmp_path / "x.png")
 
