@@ -63,6 +63,29 @@ class Plan:
     candidates: list[Candidate] = field(default_factory=list)
     """Candidates ranked by the predicted worst-axis map uncertainty, best first."""
 
+    def reduction(self, candidate: Candidate) -> float:
+        """Return the share by which a candidate shrinks the worst axis' map uncertainty (0-1)."""
+        return 1 - candidate.worst_after / self.map_std[self.worst_axis]
+
+    def table(self, top: int = 10) -> str:
+        """Return the plan as plain text: the worst axes and ranges, then the ``top`` candidates."""
+        lines = [f"worst axis: A{self.worst_axis}, map uncertainty (RMS node std, k=1) "
+                 + ", ".join(f"A{a} {v / ARCSEC:.1f}" for a, v in self.map_std.items()) + " arcsec"]
+        for axis, ranges in self.worst_ranges.items():
+            text = "; ".join(f"{lo:g}..{hi:g} deg ({s / ARCSEC:.1f} arcsec)" for lo, hi, s in ranges)
+            lines.append(f"  A{axis} worst ranges: {text or 'none'}")
+        if self.length_std is not None:
+            lines.append(f"length-error uncertainty now: {self.length_std * 1e6:.2f} um RMS")
+        lines.append(f"{'rank':>4}  {'nest x, y, z (mm, MT-CS)':>28}  {'family':<28} "
+                     f"{'worst axis after':>17} {'reduction':>9} {'length std after':>16}")
+        for rank, c in enumerate(self.candidates[:top], start=1):
+            x, y, z = c.location_mt * 1e3
+            length = "" if c.length_std_after is None else f"{c.length_std_after * 1e6:.2f} um"
+            lines.append(f"{rank:>4}  {x:>8.1f} {y:>8.1f} {z:>9.1f}  {c.family:<28} "
+                         f"{c.worst_after / ARCSEC:>12.2f} arcsec {100 * self.reduction(c):>8.1f}% "
+                         f"{length:>16}")
+        return "\n".join(lines)
+
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-ready summary (arcsec, um, mm, deg)."""
         def arcsec(d: dict[int, float]) -> dict[str, float]:
@@ -75,8 +98,7 @@ class Plan:
             "candidates": [{"rank": i + 1, "location_mt_mm": (c.location_mt * 1e3).tolist(),
                             "family": c.family, "n_postures": len(c.postures),
                             "worst_axis_std_after_arcsec": c.worst_after / ARCSEC,
-                            "reduction_percent": 100 * (1 - c.worst_after
-                                                        / self.map_std[self.worst_axis]),
+                            "reduction_percent": 100 * self.reduction(c),
                             "map_std_after_arcsec": arcsec(c.map_std_after),
                             "length_std_after_um": None if c.length_std_after is None
                             else c.length_std_after * 1e6}

@@ -200,25 +200,9 @@ def _plan(args: argparse.Namespace) -> int:
     heights = [float(h) * 1e-3 for h in args.heights_mm.split(",")]
     grid = np.array([centre + [dx, dy, dz] for dz in heights for dx in steps for dy in steps])
     result = plan(cal, campaign, grid=grid, n_postures=args.postures, seed=args.seed)
-    data = result.to_dict()
-    arcsec = 180 / np.pi * 3600
-    print(f"worst axis: A{result.worst_axis}, map uncertainty (RMS node std, k=1) "
-          + ", ".join(f"A{a} {v * arcsec:.1f}" for a, v in result.map_std.items()) + " arcsec")
-    for axis, ranges in result.worst_ranges.items():
-        text = "; ".join(f"{lo:g}..{hi:g} deg ({s * arcsec:.1f} arcsec)" for lo, hi, s in ranges)
-        print(f"  A{axis} worst ranges: {text or 'none'}")
-    if result.length_std is not None:
-        print(f"length-error uncertainty now: {result.length_std * 1e6:.2f} um RMS")
-    print(f"{'rank':>4}  {'nest x, y, z (mm, MT-CS)':>28}  {'family':<28} "
-          f"{'worst axis after':>17} {'reduction':>9} {'length std after':>16}")
-    for c in data["candidates"][:args.top]:
-        x, y, z = c["location_mt_mm"]
-        length = "" if c["length_std_after_um"] is None else f"{c['length_std_after_um']:.2f} um"
-        print(f"{c['rank']:>4}  {x:>8.1f} {y:>8.1f} {z:>9.1f}  {c['family']:<28} "
-              f"{c['worst_axis_std_after_arcsec']:>12.2f} arcsec {c['reduction_percent']:>8.1f}% "
-              f"{length:>16}")
+    print(result.table(args.top))
     if args.json:
-        Path(args.json).write_text(json.dumps(data, indent=2) + "\n")
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
     return 0
 
 
