@@ -447,10 +447,10 @@ def term_columns(term: Term, samples: Samples, stylus: StylusDerivatives, params
             (default: every node).
     """
     if term.kind is Kind.MAP:
-        weights = params.map(term.axis).weights(samples.q[:, term.axis - 1]).toarray()
-        if touched is not None:
-            weights = weights[:, touched[term.axis - 1]]
-        return stylus.angles[:, :, term.axis - 1, None] * weights[:, None, :]
+        cols = params.map(term.axis).node_columns(samples.q[:, term.axis - 1],
+                                                  stylus.angles[:, :, term.axis - 1],
+                                                  None if touched is None else touched[term.axis - 1])
+        return cols.toarray().reshape(samples.n, 3, -1)
     basis = term.basis(samples)
     if term.kind is Kind.ANGLE:
         return stylus.angles[:, :, term.axis - 1, None] * basis[:, None, :]

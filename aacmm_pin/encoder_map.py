@@ -119,6 +119,34 @@ class EncoderMap:
         data = np.column_stack([1.0 - frac, frac]).reshape(-1)
         return sp.csr_matrix((data, (rows, cols)), shape=(readout.size, self.n_nodes))
 
+    def node_columns(self, readout: np.ndarray, d_angle: np.ndarray,
+                     nodes: np.ndarray | None = None) -> sp.csc_matrix:
+        """Return d(points)/d(node values) by the chain rule: d(point)/d(angle) x weight.
+
+        The one builder of map-node columns (identification, discovery, tests).
+
+        Args:
+            readout: encoder readouts of this axis, shape (N,), rad.
+            d_angle: d(point)/d(true angle of this axis) at each readout, shape (N, 3).
+            nodes: which nodes are columns (mask, shape (n_nodes,)); default: all.
+
+        Returns:
+            Sparse, shape (3N, n_columns), rows sample-major (row ``3 i + k`` is coordinate k of
+            point i), at most two entries per point and coordinate (none where a weight is 0).
+        """
+        readout = np.asarray(readout, dtype=float).reshape(-1)
+        keep_nodes = np.ones(self.n_nodes, dtype=bool) if nodes is None else np.asarray(nodes, bool)
+        column = np.cumsum(keep_nodes) - 1
+        lower, upper, frac = self.neighbours(readout)
+        rows, cols, vals = [], [], []
+        for node, weight in ((lower, 1.0 - frac), (upper, frac)):
+            keep = keep_nodes[node] & (weight != 0.0)
+            rows.append((3 * np.flatnonzero(keep)[:, None] + np.arange(3)).reshape(-1))
+            cols.append(np.repeat(column[node[keep]], 3))
+            vals.append((d_angle[keep] * weight[keep, None]).reshape(-1))
+        return sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(3 * readout.size, int(keep_nodes.sum())))
+
     def correct(self, readout: np.ndarray) -> np.ndarray:
         """Return the angle the model uses, readout + error(readout), same shape, in rad."""
         readout = np.asarray(readout, dtype=float)

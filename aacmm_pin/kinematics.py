@@ -51,9 +51,8 @@ class StylusJacobians(NamedTuple):
 
         Rows are ordered sample-major: row ``3 * i + k`` is coordinate k of sample i.
         """
-        weights = params.map(axis).weights(self.q_readout[:, axis - 1])  # (N, n_nodes)
-        col = self.angles[:, :, axis - 1].reshape(-1)  # (3N,)
-        return sp.csr_matrix(sp.diags(col) @ sp.kron(weights, np.ones((3, 1)), format="csr"))
+        return sp.csr_matrix(params.map(axis).node_columns(self.q_readout[:, axis - 1],
+                                                           self.angles[:, :, axis - 1]))
 
 
 def _readouts_2d(readouts: np.ndarray, arm: Arm) -> np.ndarray:

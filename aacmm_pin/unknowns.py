@@ -211,25 +211,11 @@ class Unknowns:
         dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool,
                                 self.term_columns(params, q, jac)], axis=2)
         dense = dense.reshape(3 * n, -1)[:, self.free[:self.n_dense]]
-        # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, built straight in COO
-        free_index = np.cumsum(self.free) - 1 - int(self.free[:self.n_dense].sum())
-        rows, cols, vals = [], [], []
-        for axis in self.map_axes:
-            sl = self.map_slice(axis)
-            lower, upper, frac = params.map(axis).neighbours(q[:, axis - 1])
-            col = jac.angles[:, :, axis - 1]  # (N, 3)
-            for node, weight in ((lower, 1.0 - frac), (upper, frac)):
-                full_col = sl.start + node
-                keep = self.free[full_col] & (weight != 0.0)
-                r = (3 * np.flatnonzero(keep)[:, None] + np.arange(3)).reshape(-1)
-                rows.append(r)
-                cols.append(np.repeat(free_index[full_col[keep]], 3))
-                vals.append((col[keep] * weight[keep, None]).reshape(-1))
-        n_nodes = int(self.free[self.n_dense:].sum())
-        nodes = sp.csc_matrix((np.concatenate(vals) if vals else np.zeros(0),
-                               (np.concatenate(rows) if rows else np.zeros(0, int),
-                                np.concatenate(cols) if cols else np.zeros(0, int))),
-                              shape=(3 * n, n_nodes))
+        # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
+        blocks = [params.map(a).node_columns(q[:, a - 1], jac.angles[:, :, a - 1],
+                                             self.free[self.map_slice(a)]) for a in self.map_axes]
+        nodes = (sp.csc_matrix(sp.hstack(blocks, format="csc")) if blocks
+                 else sp.csc_matrix((3 * n, 0)))
         position = jac.position + self.measurement_shift(params, q) if self.terms else jac.position
         out = (position, BlockJacobian(dense, nodes))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
