@@ -93,3 +93,20 @@ def random_dh(rng: np.random.Generator, length: float = 1e-3, angle: float = 1e-
     """Random DH errors, larger than real ones so that every term matters."""
     return {n: rng.normal(0, angle if n[0] in "abc" or n.startswith("dth") else length)
             for n in DH_NAMES}
+
+
+def central_differences(f, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Jacobian of ``f`` at ``x`` by central differences, shape (f(x).size, x.size).
+
+    Column j is ``(f(x + h_j e_j) - f(x - h_j e_j)) / (2 h_j)`` with ``h_j = steps[j]``; ``f`` may
+    return any shape (flattened). Its error is ``h_j^2 |f'''| / 6`` (truncation) plus about
+    ``eps |f| / h_j`` (rounding of f): choose the steps from those two.
+    """
+    x = np.asarray(x, dtype=float)
+    steps = np.broadcast_to(np.asarray(steps, dtype=float), x.shape)
+    columns = []
+    for j, h in enumerate(steps):
+        e = np.zeros_like(x)
+        e[j] = h
+        columns.append((np.ravel(f(x + e)) - np.ravel(f(x - e))) / (2 * h))
+    return np.column_stack(columns)

@@ -33,11 +33,6 @@ TWO_AXIS = """<?xml version="1.0"?>
 """
 
 
-@pytest.fixture(scope="module")
-def arm():
-    return load_arm()
-
-
 def test_default_arm_conventions(arm):
     """The embedded arm has axes A1..A7, the paper's 22 error frames in order, tool (0,0,-120) mm."""
     assert arm.axis_names == [f"A{n}" for n in range(1, 8)]

@@ -18,11 +18,6 @@ from aacmm_pin.samples import Samples
 
 
 @pytest.fixture(scope="module")
-def arm() -> ap.Arm:
-    return ap.load_arm()
-
-
-@pytest.fixture(scope="module")
 def sim(arm: ap.Arm) -> ap.Simulation:
     config = ap.SimulationConfig(seed=3, effects=("dh", "encoder", "rtest", "compliance"),
                                  samples_per_location=150, bar_placements=4)

@@ -20,11 +20,6 @@ from aacmm_pin.samples import Samples
 SIGMA_RTEST = 2e-6
 
 
-@pytest.fixture(scope="module")
-def arm() -> ap.Arm:
-    return ap.load_arm()
-
-
 def _campaign(arm: ap.Arm, seed: int, effects: tuple[str, ...], n: int = 100, bar: int = 0,
               **extra: object) -> ap.Simulation:
     config = ap.SimulationConfig(seed=seed, effects=effects, samples_per_location=n,
@@ -66,15 +61,24 @@ COMPLIANCE_SEEDS = range(6)
 
 
 @pytest.fixture(scope="module")
-def compliance_runs(arm: ap.Arm) -> list[object]:
-    """Paper-sized campaigns (4 x 200 SPAT samples, 7 bar placements) hiding compliance on A2, A4."""
-    return [discover(_campaign(arm, seed, ("dh", "encoder", "rtest", "compliance"), n=200,
-                               bar=7).campaign, arm, "proposed") for seed in COMPLIANCE_SEEDS]
+def compliance_runs(arm: ap.Arm):
+    """Seeds -> discoveries on paper-sized campaigns (4 x 200 SPAT samples, 7 bar placements)
+    hiding compliance on A2, A4; each seed's is made once, when first asked for."""
+    done: dict[int, object] = {}
+
+    def runs(seeds) -> list[object]:
+        for seed in seeds:
+            if seed not in done:
+                done[seed] = discover(_campaign(arm, seed, ("dh", "encoder", "rtest", "compliance"),
+                                                n=200, bar=7).campaign, arm, "proposed")
+        return [done[seed] for seed in seeds]
+    return runs
 
 
-@pytest.mark.parametrize("k", range(len(COMPLIANCE_SEEDS)))
-def test_gravity_compliance_named_from_the_paper_model(compliance_runs: list[object], k: int) -> None:
-    result = compliance_runs[k]
+@pytest.mark.parametrize("k", [0, *(pytest.param(k, marks=pytest.mark.slow)
+                                    for k in COMPLIANCE_SEEDS[1:])])
+def test_gravity_compliance_named_from_the_paper_model(compliance_runs, k: int) -> None:
+    (result,) = compliance_runs([COMPLIANCE_SEEDS[k]])
     assert result.named == [("compliance", [2, 4])]  # type: ignore[attr-defined]
     step = result.steps[0]  # type: ignore[attr-defined]
     # the maps absorb what compliance does along their own axis' angle; the rest is held-out gap
@@ -84,8 +88,12 @@ def test_gravity_compliance_named_from_the_paper_model(compliance_runs: list[obj
     _assert_stops_clean(result)
 
 
-def test_gravity_compliance_shrinks_the_length_bar_error(compliance_runs: list[object]) -> None:
-    """The bar errors over the six campaigns, before and after compliance is added.
+@pytest.mark.parametrize("seeds", [pytest.param(COMPLIANCE_SEEDS[:1], id="seed0"),
+                                   pytest.param(COMPLIANCE_SEEDS, id="6-seeds",
+                                                marks=pytest.mark.slow)])
+def test_gravity_compliance_shrinks_the_length_bar_error(compliance_runs, seeds: range) -> None:
+    """The bar errors over the six campaigns (seed 0 alone in the default run), before and after
+    compliance is added.
 
     One campaign's plain bar RMS is dominated by what the SPATs do not determine (the nests' scale:
     ~4.7 um predicted; A4 below -12 deg, visited by a third of the bar readouts and by no SPAT), so
@@ -95,9 +103,11 @@ def test_gravity_compliance_shrinks_the_length_bar_error(compliance_runs: list[o
     (measured: no compliance hidden, or compliance on A3, A6), so a mean-square ratio below 0.8 is
     the effect, not the noise (measured 0.49 over these seeds, 0.51 over 20; it shrinks on 17 of
     20). The RMS over the bar readouts inside the SPATs' coverage shrinks too (0.54 here, 0.74 over
-    20 seeds).
+    20 seeds). Seed 0 alone (example 02's campaign): normalised 0.58 -> 0.34 (mean square 0.34 x
+    before), inside the coverage 3.80 -> 2.43 um.
     """
-    steps = [r.steps[0] for r in compliance_runs]  # type: ignore[attr-defined]
+    runs = compliance_runs(seeds)
+    steps = [r.steps[0] for r in runs]  # type: ignore[attr-defined]
     norm_before = np.mean([s.bar_normalised_before ** 2 for s in steps])
     norm_after = np.mean([s.bar_normalised_after ** 2 for s in steps])
     assert norm_after < 0.8 * norm_before
@@ -105,7 +115,7 @@ def test_gravity_compliance_shrinks_the_length_bar_error(compliance_runs: list[o
     covered_after = np.mean([s.bar_covered_rms_after ** 2 for s in steps])
     assert covered_after < covered_before
     # and the identified compliances are the true ones (4e-6, 6e-6 rad/(N m)) within 4 std
-    for r in compliance_runs:
+    for r in runs:
         cal = r.calibration  # type: ignore[attr-defined]
         for axis, true in ((2, 4e-6), (4, 6e-6)):
             key = f"compliance[A{axis}]"
@@ -159,7 +169,8 @@ def test_ignored_rtest_displacement_is_named(arm: ap.Arm) -> None:
     _assert_stops_clean(result)
 
 
-@pytest.mark.parametrize("seed", range(100, 110))
+@pytest.mark.parametrize("seed", [100, *(pytest.param(s, marks=pytest.mark.slow)
+                                          for s in range(101, 110))])
 def test_no_false_discovery_from_dh(arm: ap.Arm, seed: int) -> None:
     sim = _campaign(arm, seed, ("dh", "rtest"), bar=3)  # the bar joins the held-out score
     result = discover(sim.campaign, arm, "dh")
@@ -167,7 +178,8 @@ def test_no_false_discovery_from_dh(arm: ap.Arm, seed: int) -> None:
     _assert_stops_clean(result)
 
 
-@pytest.mark.parametrize("seed", [100, 101, 102, 103])
+@pytest.mark.parametrize("seed", [100, *(pytest.param(s, marks=pytest.mark.slow)
+                                          for s in (101, 102, 103))])
 def test_no_false_discovery_from_the_paper_model(arm: ap.Arm, seed: int) -> None:
     sim = _campaign(arm, seed, ("dh", "encoder", "rtest"), bar=3)
     result = discover(sim.campaign, arm, "proposed")

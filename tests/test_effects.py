@@ -19,16 +19,9 @@ TERMS = (fx.compliance(2), fx.compliance(4), fx.thermal(), fx.backlash(3), fx.cr
 
 
 @pytest.fixture(scope="module")
-def arm() -> ap.Arm:
-    return ap.load_arm()
-
-
-@pytest.fixture(scope="module")
-def sim(arm: ap.Arm) -> ap.Simulation:
-    config = ap.SimulationConfig(seed=3, effects=("dh", "encoder", "rtest", "compliance",
-                                                  "thermal"), samples_per_location=15,
-                                 bar_placements=1, samples_per_socket=5)
-    return ap.simulate_campaign(arm, config)
+def sim(effects_sim: ap.Simulation) -> ap.Simulation:
+    """The shared small campaign with compliance and temperatures (tests/conftest.py)."""
+    return effects_sim
 
 
 def _with_extensions(params: ap.Parameters, rng: np.random.Generator) -> ap.Parameters:

@@ -25,11 +25,6 @@ MODELS = (("dh", True), ("proposed", False), ("proposed", True))
 
 
 @pytest.fixture(scope="module")
-def arm():
-    return load_arm()
-
-
-@pytest.fixture(scope="module")
 def runs(arm):
     """Three simulated campaigns with encoder errors, each identified with the paper's 3 models."""
     out = {}

@@ -6,15 +6,9 @@ import numpy as np
 import pytest
 
 from aacmm_pin import kinematics
-from aacmm_pin.arm import load_arm
 from aacmm_pin.encoder_map import EncoderMap
 from aacmm_pin.parameters import Parameters
 from tests.helpers import paper_stylus, paper_to_mt, random_dh
-
-
-@pytest.fixture(scope="module")
-def arm():
-    return load_arm()
 
 
 def random_parameters(arm, seed: int) -> Parameters:

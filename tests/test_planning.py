@@ -30,7 +30,7 @@ def _with_spat(sim, cand: Candidate, rng: np.random.Generator) -> Campaign:
                     locations=locations, lengthbar=None, bar={})
 
 
-@pytest.mark.parametrize("seed", [0, 2, 4])
+@pytest.mark.parametrize("seed", [0, *(pytest.param(s, marks=pytest.mark.slow) for s in (2, 4))])
 def test_top_ranked_spat_beats_a_random_candidate(seed):
     """Adding the first-ranked SPAT shrinks the worst-axis map uncertainty more than a random one."""
     arm = load_arm()

@@ -1,0 +1,55 @@
+"""Shared, session-scoped fixtures: the default arm and the simulated campaigns several modules use.
+
+Everything here is built once per session and shared by every test that asks for it, so tests must
+not change these objects: the campaigns' arrays are read-only; copy anything else (``Parameters``
+arrays, a calibration's ``x``) before changing it.
+
+BLAS runs single-threaded in the test process and in what it starts (worker processes, the
+examples): the work is many products of a few hundred columns, which gain nothing from BLAS threads,
+while threads spinning on two busy cores slow them down many times (``aacmm_pin._blas``). Set
+``OPENBLAS_NUM_THREADS`` (or ``OMP_NUM_THREADS``) to choose otherwise.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+if not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"  # subprocesses and spawned workers
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)  # this process, whose BLAS may be loaded already
+
+import aacmm_pin as ap  # noqa: E402
+
+SMALL = {"samples_per_location": 50, "samples_per_socket": 5, "bar_placements": 2}
+"""A small campaign (seed 0, default effects): 4 x 50 SPAT samples, a bar at 2 placements."""
+
+
+@pytest.fixture(scope="session")
+def arm() -> ap.Arm:
+    """The embedded default arm (aacmm7)."""
+    return ap.load_arm()
+
+
+@pytest.fixture(scope="session")
+def effects_sim(arm: ap.Arm) -> ap.Simulation:
+    """A tiny campaign (4 x 15 SPAT samples, 1 bar placement) with compliance and temperatures."""
+    config = ap.SimulationConfig(seed=3, effects=("dh", "encoder", "rtest", "compliance",
+                                                  "thermal"), samples_per_location=15,
+                                 bar_placements=1, samples_per_socket=5)
+    return ap.simulate_campaign(arm, config)
+
+
+@pytest.fixture(scope="session")
+def small_sim(arm: ap.Arm) -> ap.Simulation:
+    """The small campaign :data:`SMALL` (DH and encoder errors, the sphere moving in its seat)."""
+    return ap.simulate_campaign(arm, ap.SimulationConfig(**SMALL))  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="session")
+def small_cal(arm: ap.Arm, small_sim: ap.Simulation) -> ap.Calibration:
+    """The proposed model identified on the small campaign."""
+    return ap.identify(small_sim.campaign, arm, model="proposed")

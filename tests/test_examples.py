@@ -1,0 +1,100 @@
+"""The numbered examples run as a user runs them (``python examples/NN_*.py`` in a fresh folder) and
+print and write what their docstrings say."""
+
+from __future__ import annotations
+
+import filecmp
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+FIGURES = ("fig5_rtest_displacement.png", "fig6_encoder_maps.png", "fig9_length_errors.png")
+LABELS = ("DH only, R-Test", "proposed, no R-Test", "proposed, R-Test")
+NUMBER = r"-?\d+\.\d+"
+
+
+def _run(script: str, *args: str, cwd: Path) -> str:
+    """Run one example with this interpreter in ``cwd``; return its standard output."""
+    proc = subprocess.run([sys.executable, str(EXAMPLES / script), *args], cwd=cwd, env=ENV,
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout
+
+
+def test_01_reproduce_paper_prints_fig9_and_copies_the_figures(tmp_path: Path) -> None:
+    """Example 01 prints the Fig. 9 table (7 placements x 2 pairs, 3 models, RMS and max rows),
+    writes the demo folder and copies the three figures where --figures says, not into the repo."""
+    readme_figures = {name: (EXAMPLES / "figures" / name).read_bytes() for name in FIGURES
+                      if (EXAMPLES / "figures" / name).is_file()}
+    out = _run("01_reproduce_paper.py", "demo", "--figures", "figs", cwd=tmp_path)
+    lines = out.splitlines()
+    head = lines.index("Length errors on the bar (um), paper Fig. 9:")
+    assert lines[head + 1].split()[:2] == ["placement", "pair"]
+    assert all(label in lines[head + 1] for label in LABELS)
+    rows = lines[head + 2:head + 16]
+    for k, row in enumerate(rows):
+        assert re.fullmatch(rf"\s*{k // 2 + 1}\s+A-[BC](\s+{NUMBER}){{3}}", row), row
+    rms = [float(v) for v in re.fullmatch(rf"\s*RMS((?:\s+{NUMBER}){{3}})", lines[head + 16])
+           .group(1).split()]
+    assert re.fullmatch(rf"\s*max \|error\|(\s+{NUMBER}){{3}}", lines[head + 17])
+    assert rms[2] < rms[0]  # the proposed model with the R-Test beats DH only (paper Fig. 9)
+    for label in LABELS:
+        assert re.search(rf"{re.escape(label)}\s+fit RMS .*, converged -> demo", out), label
+    assert f"copied the figures to {Path('figs')}" in out
+    for name in FIGURES:
+        assert (tmp_path / "demo" / name).stat().st_size > 20_000
+        assert filecmp.cmp(tmp_path / "demo" / name, tmp_path / "figs" / name, shallow=False)
+    for folder in ("dh_rtest", "proposed_no_rtest", "proposed_rtest"):
+        assert (tmp_path / "demo" / folder / "parameters.json").is_file()
+    assert (tmp_path / "demo" / "campaign" / "spat.csv").is_file()
+    assert readme_figures == {name: (EXAMPLES / "figures" / name).read_bytes()
+                              for name in readme_figures}  # the README's pictures untouched
+
+
+def _check_02(out: str, folder: Path) -> None:
+    """What example 02 prints and writes whatever the campaign size."""
+    lines = out.splitlines()
+    assert re.fullmatch(rf"start: proposed model, held-out RMS {NUMBER} um, length-bar RMS "
+                        rf"{NUMBER} um", lines[0]), lines[0]
+    step = re.fullmatch(rf"step 1: compliance \(A2, A4\): held-out RMS ({NUMBER}) -> ({NUMBER}) um",
+                        lines[1])
+    assert step, lines[1]
+    assert float(step.group(2)) < float(step.group(1))  # named: the held-out gap shrank
+    assert lines[2].startswith("  length bar: RMS ") and "normalised" in lines[2]
+    assert any(line.startswith("stopped: ") for line in lines)
+    table = lines.index("compliance, rad/(N m):   true        identified")
+    assert re.fullmatch(rf"\s+A2\s+4\.000e-06\s+{NUMBER}e-0\d", lines[table + 1]), lines[table + 1]
+    assert re.fullmatch(rf"\s+A4\s+6\.000e-06\s+{NUMBER}e-0\d", lines[table + 2]), lines[table + 2]
+    assert re.fullmatch(rf"wrote {re.escape(str(folder.name))} \({NUMBER} s of discovery\)",
+                        lines[-1]), lines[-1]
+    report = json.loads((folder / "discovery.json").read_text())
+    assert [(s["effect"], s["axes"]) for s in report["steps"]][:1] == [("compliance", [2, 4])]
+    for name in ("discovery_gap.png", "discovery_step1.png"):
+        assert (folder / name).stat().st_size > 10_000
+    params = json.loads((folder / "parameters.json").read_text())
+    assert {"compliance[A2]", "compliance[A4]"} <= set(params["extensions"])
+
+
+def test_02_discover_compliance_on_a_small_campaign(tmp_path: Path) -> None:
+    """Example 02 with --samples 60 --placements 3 names compliance of A2 and A4 first, prints
+    each step and the compliances, and writes discovery.json, its figures and the calibration."""
+    out = _run("02_discover_compliance.py", "--out", "disc", "--samples", "60", "--placements",
+               "3", cwd=tmp_path)
+    _check_02(out, tmp_path / "disc")
+
+
+@pytest.mark.slow
+def test_02_discover_compliance_paper_sized(tmp_path: Path) -> None:
+    """Example 02 as documented (4 x 200 SPAT samples, 7 bar placements): the same output, and the
+    length-bar numbers the README quotes (plain RMS 1.28 -> 2.36 um)."""
+    out = _run("02_discover_compliance.py", cwd=tmp_path)
+    _check_02(out, tmp_path / "discovery-example")
+    assert "length bar: RMS 1.28 -> 2.36 um" in out
