@@ -22,8 +22,9 @@ if TYPE_CHECKING:
         write_campaign,
         write_points,
     )
-    from aacmm_pin.discovery import Discovery, discover
+    from aacmm_pin.discovery import discover
     from aacmm_pin.discovery_figures import write_discovery
+    from aacmm_pin.discovery_results import Discovery
     from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles
     from aacmm_pin.errors import (
         AacmmError,
@@ -63,7 +64,8 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
     "campaign": ("Campaign", "LengthBarLog", "SpatLog", "read_campaign", "read_readouts",
                  "write_campaign", "write_points"),
-    "discovery": ("Discovery", "discover"),
+    "discovery": ("discover",),
+    "discovery_results": ("Discovery",),
     "discovery_figures": ("write_discovery",),
     "encoder_map": ("EncoderMap", "correct_readouts", "node_angles"),
     "errors": ("AacmmError", "ArmModelError", "CampaignFormatError", "FileFormatError",

@@ -90,7 +90,8 @@ class ModelResiduals:
     @property
     def residual(self) -> np.ndarray:
         """Predicted minus measured, shape (N, 3), m."""
-        return self.predicted - self.measured
+        residual: np.ndarray = self.predicted - self.measured
+        return residual
 
     @property
     def rms(self) -> float:

@@ -29,6 +29,7 @@ import copy
 import hashlib
 import re
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
@@ -176,7 +177,7 @@ class Arm:
         self.root_link: str = chain[0].parent
         """Name of the root link (the reference CS, r-CS)."""
 
-    def __reduce__(self) -> tuple:
+    def __reduce__(self) -> tuple[Callable[[str, str], Arm], tuple[str, str]]:
         """Pickle as the URDF path and name (reloaded on the other side, e.g. in a worker)."""
         return (_load_named, (str(self.source), self.name))
 

@@ -173,7 +173,8 @@ class LinearBar:
             info[:n_z, n_z:], info[n_z:, :n_z] = cross, cross.T
             info[n_z:, n_z:] = self._held_data.T @ self._held_data / sigma ** 2 + np.eye(n_h)
         posterior = np.linalg.inv(info)
-        return jac @ posterior @ jac.T + self.unvisited + self.socket
+        cov: np.ndarray = jac @ posterior @ jac.T + self.unvisited + self.socket
+        return cov
 
     def columns(self, term: Term, touched: np.ndarray) -> np.ndarray:
         """Return d(errors)/d(term parameters scaled by their plausible sizes), shape (n, k).
@@ -185,7 +186,8 @@ class LinearBar:
             AacmmError: if the term needs a column the bar readouts lack (e.g. ``temp_c``).
         """
         cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, touched)
-        return self.w @ cols.reshape(3 * self.samples.n, -1)
+        out: np.ndarray = self.w @ cols.reshape(3 * self.samples.n, -1)
+        return out
 
 
 def scaled_columns(term: Term, samples: Samples, stylus: StylusJacobians, params: Parameters,

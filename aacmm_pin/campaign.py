@@ -277,7 +277,8 @@ def _q_names(n: int) -> list[str]:
 
 def _matrix(table: _Table, names: Iterable[str], scale: float) -> np.ndarray:
     """Return the named columns as a float array, shape (rows, len(names)), times ``scale``."""
-    return np.array([table.cols[name] for name in names], dtype=float).T * scale
+    out: np.ndarray = np.array([table.cols[name] for name in names], dtype=float).T * scale
+    return out
 
 
 def _log_fields(table: _Table) -> dict[str, Any]:
@@ -437,7 +438,8 @@ def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
         writer.writerows(zip(*cells))
 
 
-def _file_columns(log: SpatLog | LengthBarLog, before: dict, after: dict) -> dict[str, Any]:
+def _file_columns(log: SpatLog | LengthBarLog, before: Mapping[str, list[int] | list[float] | list[str]],
+                  after: Mapping[str, list[int] | list[float] | list[str]]) -> dict[str, Any]:
     """Return a log's file columns: ``before``, q1_deg..qn_deg, ``after``, t_s and temp_c."""
     q_deg = dict(zip(_q_names(log.q.shape[1]), np.degrees(log.q).T.tolist()))
     extra = (("t_s", log.t), ("temp_c", log.temp))

@@ -450,14 +450,17 @@ def term_columns(term: Term, samples: Samples, stylus: StylusDerivatives, params
         cols = params.map(term.axis).node_columns(samples.q[:, term.axis - 1],
                                                   stylus.angles[:, :, term.axis - 1],
                                                   None if touched is None else touched[term.axis - 1])
-        return cols.toarray().reshape(samples.n, 3, -1)
+        dense: np.ndarray = cols.toarray().reshape(samples.n, 3, -1)
+        return dense
     basis = term.basis(samples)
     if term.kind is Kind.ANGLE:
-        return stylus.angles[:, :, term.axis - 1, None] * basis[:, None, :]
+        angle_cols: np.ndarray = stylus.angles[:, :, term.axis - 1, None] * basis[:, None, :]
+        return angle_cols
     if term.kind is Kind.SCALE:
         scale = 1.0 + basis @ params.extensions.get(term.key, np.zeros(basis.shape[1]))
         radial = (stylus.position - params.translation) / scale[:, None]
-        return radial[:, :, None] * basis[:, None, :]
+        scale_cols: np.ndarray = radial[:, :, None] * basis[:, None, :]
+        return scale_cols
     return basis  # Kind.MEASUREMENT: the basis is the change of the measured point
 
 

@@ -30,7 +30,8 @@ def node_count(step_deg: float) -> int:
 
 def node_angles(step_deg: float = DEFAULT_STEP_DEG) -> np.ndarray:
     """Return the nominal readouts of the nodes, shape (360/step,), in rad, from -pi upwards."""
-    return np.radians(-180.0 + step_deg * np.arange(node_count(step_deg)))
+    angles: np.ndarray = np.radians(-180.0 + step_deg * np.arange(node_count(step_deg)))
+    return angles
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,12 +98,14 @@ class EncoderMap:
     def __call__(self, readout: np.ndarray) -> np.ndarray:
         """Return the interpolated error at the readouts, same shape, in rad."""
         lower, upper, frac = self.neighbours(readout)
-        return (1.0 - frac) * self.values[lower] + frac * self.values[upper]
+        error: np.ndarray = (1.0 - frac) * self.values[lower] + frac * self.values[upper]
+        return error
 
     def slope(self, readout: np.ndarray) -> np.ndarray:
         """Return d(error)/d(readout) (dimensionless), the slope of the segment holding each readout."""
         lower, upper, _ = self.neighbours(readout)
-        return (self.values[upper] - self.values[lower]) / np.radians(self.step_deg)
+        slope: np.ndarray = (self.values[upper] - self.values[lower]) / np.radians(self.step_deg)
+        return slope
 
     def weights(self, readout: np.ndarray) -> sp.csr_matrix:
         """Return the interpolation weights W, shape (N, n_nodes), so that ``W @ values`` = error.
@@ -150,7 +153,8 @@ class EncoderMap:
     def correct(self, readout: np.ndarray) -> np.ndarray:
         """Return the angle the model uses, readout + error(readout), same shape, in rad."""
         readout = np.asarray(readout, dtype=float)
-        return readout + self(readout)
+        angle: np.ndarray = readout + self(readout)
+        return angle
 
 
 def touched_nodes(q: np.ndarray, step_deg: float) -> np.ndarray:
@@ -176,7 +180,7 @@ def correct_readouts(q: np.ndarray, maps: dict[int, EncoderMap]) -> np.ndarray:
         The corrected angles, same shape as ``q``, in rad.
     """
     q = np.array(q, dtype=float)
-    out = q.copy()
+    out: np.ndarray = q.copy()
     for axis, emap in maps.items():
         out[..., axis - 1] = emap.correct(q[..., axis - 1])
     return out

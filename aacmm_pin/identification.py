@@ -165,7 +165,8 @@ def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray
         for m in np.unique(spat.location):
             sel = spat.location == m
             disp[sel] = disp[sel].mean(axis=0)
-    return np.array([campaign.locations[int(m)] for m in spat.location]) + disp
+    measured: np.ndarray = np.array([campaign.locations[int(m)] for m in spat.location]) + disp
+    return measured
 
 
 def check_campaign(campaign: Campaign, arm: Arm) -> SpatLog:

@@ -133,7 +133,8 @@ def fit_sphere(points: Any) -> SphereFit:
     c0, r0 = _algebraic_sphere(x)
 
     def fun(v: np.ndarray) -> np.ndarray:
-        return np.linalg.norm(x - v[:3], axis=1) - v[3]
+        res: np.ndarray = np.linalg.norm(x - v[:3], axis=1) - v[3]
+        return res
 
     def jac(v: np.ndarray) -> np.ndarray:
         diff = x - v[:3]

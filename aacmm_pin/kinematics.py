@@ -78,7 +78,8 @@ def extension_effects(arm: Arm, params: Parameters, q_read: np.ndarray,
 
 def _scaled(pos: np.ndarray, scale: np.ndarray, origin: np.ndarray) -> np.ndarray:
     """Return positions scaled about the r-CS origin (at ``origin`` in the output frame)."""
-    return origin + scale[:, None] * (pos - origin)
+    scaled: np.ndarray = origin + scale[:, None] * (pos - origin)
+    return scaled
 
 
 def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndarray,
@@ -206,7 +207,8 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
     for i, qi in enumerate(q):
         pin.forwardKinematics(model, data, qi)
         out[i] = pin.updateFramePlacement(model, data, fid).translation
-    return out * scale[:, None]
+    positions: np.ndarray = out * scale[:, None]
+    return positions
 
 
 PositionJacobian = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]

@@ -121,10 +121,12 @@ class LinearScorer:
         b_all[:p] += self.offset
 
         def solve(g: np.ndarray, b: np.ndarray) -> np.ndarray:
-            return -sla.solve(g + ridge, b, assume_a="pos")
+            d: np.ndarray = -sla.solve(g + ridge, b, assume_a="pos")
+            return d
 
         def residual(rows: np.ndarray, d: np.ndarray) -> np.ndarray:
-            return r[rows] + jac[rows] @ d[:p] + extra[rows] @ d[p:]
+            res: np.ndarray = r[rows] + jac[rows] @ d[:p] + extra[rows] @ d[p:]
+            return res
 
         d_all = solve(g_all, b_all)
         fit_ssr = float(np.sum(residual(np.arange(self.n_data), d_all) ** 2))

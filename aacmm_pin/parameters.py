@@ -34,7 +34,8 @@ from aacmm_pin.errors import FileFormatError, Problem
 def rotation_abc(abc: np.ndarray) -> np.ndarray:
     """Return D_b(beta0) D_a(alpha0) D_c(gamma0) (Eq. 4) as a 3x3 matrix; abc in rad."""
     a, b, c = np.asarray(abc, dtype=float)
-    return pin.rpy.rotate("y", b) @ pin.rpy.rotate("x", a) @ pin.rpy.rotate("z", c)
+    rot: np.ndarray = pin.rpy.rotate("y", b) @ pin.rpy.rotate("x", a) @ pin.rpy.rotate("z", c)
+    return rot
 
 
 @dataclass(frozen=True, eq=False)

@@ -137,7 +137,8 @@ class _Information:
         """Return info plus one SPAT's marginalised information."""
         a, e, w = self.rows(q)
         ea = e.T @ a
-        return info + a.T @ a - ea.T @ np.linalg.solve(w, ea)
+        out: np.ndarray = info + a.T @ a - ea.T @ np.linalg.solve(w, ea)
+        return out
 
 
 def _map_std(info_inv_diag: np.ndarray, u: Unknowns) -> dict[int, np.ndarray]:

@@ -149,7 +149,8 @@ class TrueArm:
             p_r = p_r * (1.0 + self.config.thermal_alpha * (temp - REFERENCE_TEMPERATURE_C))[:, None]
         if frame == "r":
             return p_r
-        return p_r @ self.truth.rotation().T + self.truth.translation
+        p_mt: np.ndarray = p_r @ self.truth.rotation().T + self.truth.translation
+        return p_mt
 
     def solve_ik(self, targets: np.ndarray, rng: np.random.Generator, temp: np.ndarray | None,
                  iterations: int = 25, starts: np.ndarray | None = None) -> np.ndarray:

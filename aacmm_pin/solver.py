@@ -152,7 +152,8 @@ class Problem:
 
     def x(self, z: np.ndarray) -> np.ndarray:
         """Return the full vector for reduced coordinates z."""
-        return self.x_ref + self.p @ z
+        x: np.ndarray = self.x_ref + self.p @ z
+        return x
 
     def with_measured(self, measured: np.ndarray) -> Problem:
         """Return the same problem (structure, preconditioner) for other measured centres."""
@@ -231,7 +232,7 @@ class Problem:
     # ------------------------------------------------------------ solving
     def dense(self, n_z: int) -> bool:
         """Whether a Jacobian of n_z reduced columns is small enough for the dense solver."""
-        return n_z * self.q.shape[0] * 3 < DENSE_LIMIT
+        return bool(n_z * self.q.shape[0] * 3 < DENSE_LIMIT)
 
     def solve(self, z0: np.ndarray, settings: SolverSettings, jac: str = "analytic",
               on_evaluation: Callable[[], None] | None = None) -> OptimizeResult:

@@ -143,7 +143,8 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
     _, grads = length_jacobian(cal, campaign)
     g = grads.reshape(-1, grads.shape[-1])
     var = np.einsum("ij,jk,ik->i", g, cal.covariance, g)  # NaN-free: missing pairs have g = 0
-    return np.sqrt(np.clip(var, 0, None)).reshape(grads.shape[:2])
+    std: np.ndarray = np.sqrt(np.clip(var, 0, None)).reshape(grads.shape[:2])
+    return std
 
 
 def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
@@ -221,7 +222,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
 def uncertainty_report(cal: Calibration, mc: MonteCarloResult) -> dict[str, Any]:
     """Return the ``uncertainty.json`` content (SI, plus arcsec for map nodes and um for lengths)."""
     params = {}
-    maps: dict[str, dict[str, list]] = {}
+    maps: dict[str, dict[str, list[float | bool]]] = {}
     for key, value, s_mc, s_lin, ok in zip(mc.keys, cal.x, mc.std, mc.linear_std,
                                            mc.identifiable):
         if isinstance(key, NodeKey):

@@ -150,7 +150,8 @@ class Unknowns:
 
     def vector(self, params: Parameters) -> np.ndarray:
         """Return the free entries for these parameters, shape (n_free,)."""
-        return self.full_vector(params)[self.free]
+        free: np.ndarray = self.full_vector(params)[self.free]
+        return free
 
     def parameters(self, x: np.ndarray) -> Parameters:
         """Return the parameters with the free entries set from ``x`` (others at start)."""
@@ -204,7 +205,8 @@ class Unknowns:
         key = x.tobytes()
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
-            return cache[2]
+            cached: tuple[np.ndarray, BlockJacobian] = cache[2]
+            return cached
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
@@ -258,7 +260,8 @@ class BlockJacobian:
     def matmul(self, m: np.ndarray) -> np.ndarray:
         """Return J @ m for m of shape (n_free,) or (n_free, k)."""
         nd = self.dense.shape[1]
-        return self.dense @ m[:nd] + self.nodes @ m[nd:]
+        out: np.ndarray = self.dense @ m[:nd] + self.nodes @ m[nd:]
+        return out
 
     def rmatmul(self, u: np.ndarray) -> np.ndarray:
         """Return J^T @ u for u of shape (3N,)."""
@@ -267,7 +270,7 @@ class BlockJacobian:
     def columns_sum(self, cols: np.ndarray) -> np.ndarray:
         """Return the sum of the given columns (free-vector indices), shape (3N,)."""
         nd = self.dense.shape[1]
-        out = self.dense[:, cols[cols < nd]].sum(axis=1)
+        out: np.ndarray = self.dense[:, cols[cols < nd]].sum(axis=1)
         node_cols = cols[cols >= nd] - nd
         if node_cols.size:
             out = out + np.asarray(self.nodes[:, node_cols].sum(axis=1)).ravel()

@@ -107,7 +107,8 @@ def _open_pty() -> tuple[int, int, str]:
 
 def _sent(values: np.ndarray, decimals: int) -> np.ndarray:
     """Return the values as the devices print them (rounded through their decimal text)."""
-    return np.vectorize(lambda v: float(f"{v:.{decimals}f}"))(values).astype(float)
+    sent: np.ndarray = np.vectorize(lambda v: float(f"{v:.{decimals}f}"))(values).astype(float)
+    return sent
 
 
 class FakeDevices:

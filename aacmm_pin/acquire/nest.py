@@ -58,11 +58,13 @@ class Nest:
         Returns:
             Displacement in the MT-CS, same shape, in m.
         """
-        return np.asarray(readings, dtype=float) @ self._inverse.T
+        displacement: np.ndarray = np.asarray(readings, dtype=float) @ self._inverse.T
+        return displacement
 
     def readings(self, displacement: np.ndarray) -> np.ndarray:
         """Return the gauge readings of a displacement, shape (3,) or (N, 3), in m (inverse)."""
-        return np.asarray(displacement, dtype=float) @ self.directions.T
+        readings: np.ndarray = np.asarray(displacement, dtype=float) @ self.directions.T
+        return readings
 
 
 def read_nest(path: str | Path) -> Nest:

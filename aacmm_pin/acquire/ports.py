@@ -33,6 +33,10 @@ MAX_LINE = 4096
 Parser = Callable[[bytes], Any]
 """Parses one line (without its end) into a value, or raises LineError."""
 
+PortEvent = tuple[str, str, str, Any]
+"""What a :class:`PortReader` puts on its queue: (what, port name, kind, payload); the payload is the
+list of (t, parsed value) for ``"data"``, else a str (see :class:`PortReader`)."""
+
 
 @dataclass(frozen=True)
 class PortConfig:
@@ -116,7 +120,7 @@ class PortReader(threading.Thread):
         port: an already open port (else opened at start; :func:`open_port` raises if it cannot).
     """
 
-    def __init__(self, config: PortConfig, out: queue.Queue, stop: threading.Event,
+    def __init__(self, config: PortConfig, out: queue.Queue[PortEvent], stop: threading.Event,
                  port: Any | None = None):
         super().__init__(name=f"aacmm-pin reader {config.name}", daemon=True)
         self.config = config

@@ -29,8 +29,8 @@ import numpy as np
 
 from aacmm_pin.acquire.faults import FAULT_KINDS, AcquisitionError, PortCounts
 from aacmm_pin.acquire.nest import Nest
-from aacmm_pin.acquire.pairing import Pairer
-from aacmm_pin.acquire.ports import PortConfig, PortReader, arm_port, gauge_port, open_port
+from aacmm_pin.acquire.pairing import Pair, Pairer
+from aacmm_pin.acquire.ports import PortConfig, PortEvent, PortReader, arm_port, gauge_port, open_port
 from aacmm_pin.acquire.protocols import COUNTER_MODULUS, HEIDENHAIN_REQUEST, GaugeSpec
 from aacmm_pin.acquire.writer import SpatWriter
 
@@ -248,7 +248,7 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
                                  locations_message=writer.locations_message,
                                  repaired_bytes=writer.repaired_bytes)
     configs = _port_configs(cfg)
-    events: queue.Queue = queue.Queue()
+    events: queue.Queue[PortEvent] = queue.Queue()
     halt = threading.Event()
     opened: list[Any] = []
     try:
@@ -270,7 +270,7 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
     last_counter: int | None = None
     n_pairs = 0
 
-    def handle(event: tuple) -> str | None:
+    def handle(event: PortEvent) -> str | None:
         nonlocal last_counter
         what, name = event[0], event[1]
         counts = summary.ports[name]
@@ -293,7 +293,7 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
             return f"{name} port gone: {event[3]}"
         return None
 
-    def write(pairs: list) -> None:
+    def write(pairs: list[Pair]) -> None:
         nonlocal n_pairs
         for pair in pairs:
             n_pairs += 1
