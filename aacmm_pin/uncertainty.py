@@ -183,7 +183,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     has_bar = campaign.lengthbar is not None and bool(campaign.bar)
     bar_only = Campaign(spat=None, locations={}, lengthbar=campaign.lengthbar,
                         bar=campaign.bar) if has_bar else None
-    results: list[Any] = []
+    results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
     pool = ProcessPoolExecutor(workers) if own else executor
     with tqdm(total=trials, desc="Monte Carlo", unit="trial", disable=not progress) as bar:

@@ -10,7 +10,7 @@ held fixed at its start value. Extension terms come from the effect library
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, TypeAlias
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 import scipy.sparse as sp
@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from aacmm_pin.arm import Arm
 from aacmm_pin.effects import Term, measurement_shift, term_columns
 from aacmm_pin.encoder_map import EncoderMap, node_angles
-from aacmm_pin.kinematics import stylus_jacobians, stylus_positions
+from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians, stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
 
@@ -76,7 +76,9 @@ class Unknowns:
     """Extension terms (angle, scale or measurement kind) whose parameters are estimated."""
     samples: Samples | None = field(default=None, compare=False)
     """Temperature, motion and R-Test displacement of the identification's samples."""
-    _cache: Any = field(default=None, init=False, repr=False, compare=False)
+    _cache: tuple[bytes, np.ndarray, tuple[np.ndarray, BlockJacobian]] | None = field(
+        default=None, init=False, repr=False, compare=False)
+    """The last Jacobian: (x bytes, the readouts array it was for, result)."""
 
     @classmethod
     def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...],
@@ -181,7 +183,7 @@ class Unknowns:
             return np.zeros((q.shape[0], 3))
         return measurement_shift(self.terms, params.extensions, samples)
 
-    def term_columns(self, params: Parameters, q: np.ndarray, jac: Any) -> np.ndarray:
+    def term_columns(self, params: Parameters, q: np.ndarray, jac: StylusJacobians) -> np.ndarray:
         """Return d(model point)/d(extension parameters) at ``params``, shape (N, 3, n_terms).
 
         ``jac`` are the stylus Jacobians at ``params`` (:func:`stylus_jacobians`).
@@ -205,8 +207,7 @@ class Unknowns:
         key = x.tobytes()
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
-            cached: tuple[np.ndarray, BlockJacobian] = cache[2]
-            return cached
+            return cache[2]
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
