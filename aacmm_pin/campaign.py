@@ -1,7 +1,8 @@
 """The campaign: SPAT and length-bar readouts, read from and written to a folder of CSV files.
 
-The folder holds ``spat.csv`` + ``locations.csv`` (R-Test SPAT) and/or ``lengthbar.csv`` +
-``bar.csv`` (length bar), comma separated with a header row, in mm and degrees (the columns are in
+The folder holds ``spat.csv`` + ``locations.csv`` (R-Test SPAT), ``lengthbar.csv`` + ``bar.csv``
+(length bar) and/or ``points.csv`` (absolute tool points from a laser tracker or motion capture),
+comma separated with a header row, in mm and degrees (the columns are in
 ``_FILES`` below). Readers check every cell and raise one :class:`CampaignFormatError` listing every
 problem of every file with its line and column. Inside the package everything is SI (m, rad, s).
 """
@@ -33,15 +34,16 @@ _FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
     "locations.csv": (("location", *_XYZ["loc"]), False, ()),
     "lengthbar.csv": (("placement", "socket"), True, _OPTIONAL),
     "bar.csv": (("from", "to", "length_mm"), False, ()),
+    "points.csv": (_XYZ["loc"], True, ("group", "sigma_um", *_OPTIONAL)),
 }
 # Column -> kind of cell; q columns are "angle", any other column "number".
 _KINDS = {"location": "id", "placement": "id", "socket": "text", "from": "text", "to": "text",
-          "length_mm": "length"}
+          "length_mm": "length", "group": "id", "sigma_um": "sigma"}
 # Log field -> (dtype, shape after the row axis); None: any length.
 _ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
     "location": (np.int64, ()), "placement": (np.int64, ()), "socket": (str, ()),
     "q": (float, (None,)), "displacement": (float, (3,)), "t": (float, ()), "temp": (float, ()),
-    "lines": (np.int64, ())}
+    "lines": (np.int64, ()), "group": (np.int64, ()), "point": (float, (3,)), "sigma": (float, ())}
 
 
 class _Log:
@@ -50,7 +52,7 @@ class _Log:
     def __post_init__(self) -> None:
         n_rows = None
         for name, value in list(vars(self).items()):
-            if value is None and name in ("t", "temp", "lines"):
+            if value is None and name in ("t", "temp", "lines", "sigma"):
                 continue
             dtype, trailing = _ARRAYS[name]
             arr = np.array(value, dtype=dtype)
@@ -101,6 +103,30 @@ class LengthBarLog(_Log):
 
 
 @dataclass(frozen=True, eq=False)
+class PointLog(_Log):
+    """Absolute positions of the tool point measured by an instrument, one row per pose.
+
+    The instrument (a laser tracker station, a motion-capture system) has its own frame; its
+    transform to the arm's base is unknown and identified, one per ``group``.
+    """
+
+    group: np.ndarray
+    """Instrument set-up (frame) of each point, shape (N,), integers >= 1."""
+    q: np.ndarray
+    """Joint readouts, shape (N, n), in rad."""
+    point: np.ndarray
+    """Measured tool point in the instrument frame, shape (N, 3), in m."""
+    sigma: np.ndarray | None = None
+    """Stated standard uncertainty of each point per coordinate, shape (N,), in m, or None."""
+    t: np.ndarray | None = None
+    """Time of each pose, shape (N,), in s, or None."""
+    temp: np.ndarray | None = None
+    """Arm temperature at each pose, shape (N,), in deg C, or None."""
+    lines: np.ndarray | None = None
+    """1-based line of each pose in points.csv, shape (N,), or None when built in code."""
+
+
+@dataclass(frozen=True, eq=False)
 class Campaign:
     """A measurement campaign: SPAT and/or length-bar readouts with their references.
 
@@ -117,12 +143,14 @@ class Campaign:
     """Calibrated socket distances, (from, to) -> length in m."""
     source: Path | None = None
     """Folder the campaign was read from, or None."""
+    points: PointLog | None = None
+    """Absolute tool points (laser tracker, motion capture), or None."""
 
     def __post_init__(self) -> None:
-        axes = {log.q.shape[1] for log in (self.spat, self.lengthbar) if log is not None}
+        axes = {log.q.shape[1] for log in self.logs}
         if len(axes) != 1:
-            raise ValueError(f"spat, lengthbar: give one or both, with one number of axes; got "
-                             f"{'none' if not axes else sorted(axes)}")
+            raise ValueError(f"spat, lengthbar, points: give one or more, with one number of axes; "
+                             f"got {'none' if not axes else sorted(axes)}")
         locations = {int(k): np.array(v, dtype=float) for k, v in self.locations.items()}
         if bad := [k for k, v in locations.items() if v.shape != (3,)]:
             raise ValueError(f"locations: shape (3,) expected for locations {bad}")
@@ -139,9 +167,14 @@ class Campaign:
         object.__setattr__(self, "source", None if self.source is None else Path(self.source))
 
     @property
+    def logs(self) -> list[SpatLog | LengthBarLog | PointLog]:
+        """The readout logs present (SPAT, length bar, points), in that order."""
+        return [log for log in (self.spat, self.lengthbar, self.points) if log is not None]
+
+    @property
     def n_axes(self) -> int:
         """Number of arm axes n (columns of the readouts)."""
-        return int(next(log for log in (self.spat, self.lengthbar) if log is not None).q.shape[1])
+        return int(self.logs[0].q.shape[1])
 
     @property
     def location_ids(self) -> tuple[int, ...]:
@@ -207,7 +240,8 @@ def _parse(text: str, kind: str) -> tuple[Any, str | None]:
               (not math.isfinite(value), "is not a finite number"),
               (kind == "angle" and abs(value) > MAX_ANGLE_DEG,
                f"deg is outside +-{MAX_ANGLE_DEG:g} deg"),
-              (kind == "length" and value <= 0, "mm is not a positive bar length"))
+              (kind == "length" and value <= 0, "mm is not a positive bar length"),
+              (kind == "sigma" and value <= 0, "um is not a positive standard uncertainty"))
     reason = next((f"{text} {why}" for bad, why in checks if bad), None)
     return (None if reason else value), reason
 
@@ -348,7 +382,8 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
     """Read and validate a campaign folder.
 
     Args:
-        folder: folder holding spat.csv + locations.csv and/or lengthbar.csv + bar.csv.
+        folder: folder holding spat.csv + locations.csv, lengthbar.csv + bar.csv and/or
+            points.csv.
         min_samples_per_location: fewest SPAT samples accepted at one R-Test location.
 
     Returns:
@@ -360,9 +395,9 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
     folder = Path(folder)
     paths = {name: folder / name for name in _FILES}
     present = {name for name, path in paths.items() if path.is_file()}
-    if not present & {"spat.csv", "lengthbar.csv"}:
+    if not present & {"spat.csv", "lengthbar.csv", "points.csv"}:
         why = ("does not exist" if not folder.exists() else "is not a folder"
-               if not folder.is_dir() else "holds neither spat.csv nor lengthbar.csv")
+               if not folder.is_dir() else "holds neither spat.csv, lengthbar.csv nor points.csv")
         raise CampaignFormatError([Problem(folder, None, None, f"the campaign folder {why}")])
     problems: list[Problem] = []
     for pair in (["spat.csv", "locations.csv"], ["lengthbar.csv", "bar.csv"]):
@@ -373,13 +408,17 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
               for name in _FILES if name in present}
     spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
     log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
+    points = tables.get("points.csv")
     if _usable(spat, "location") and _usable(locs, "location"):
         _check_locations(spat, locs, min_samples_per_location, problems)
     if _usable(log, "placement", "socket") and _usable(bar, "from", "to"):
         _check_bar(log, bar, problems)
-    if spat and log and spat.n_axes and log.n_axes and spat.n_axes != log.n_axes:
-        problems.append(Problem(log.path, 1, None, f"{log.n_axes} axes (q1_deg..q{log.n_axes}_deg)"
-                                                   f", but spat.csv has {spat.n_axes}"))
+    first = next((t for t in (spat, log, points) if t and t.n_axes), None)
+    for other in (log, points):
+        if first and other and other is not first and other.n_axes and other.n_axes != first.n_axes:
+            problems.append(Problem(other.path, 1, None,
+                                    f"{other.n_axes} axes (q1_deg..q{other.n_axes}_deg), but "
+                                    f"{first.path.name} has {first.n_axes}"))
     if problems:
         order: dict[Path | str, int] = {path: k for k, path in enumerate(paths.values())}
         raise CampaignFormatError(sorted(problems, key=lambda p: (order[p.path], p.line or 0)))
@@ -394,7 +433,12 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
             socket=np.array(log.cols["socket"], dtype=str), **_log_fields(log)),
         bar={} if not bar else {(a, b): v * 1e-3 for a, b, v in zip(
             bar.cols["from"], bar.cols["to"], bar.cols["length_mm"])},
-        source=folder)
+        source=folder,
+        points=None if not points else PointLog(
+            group=np.array(points.cols.get("group", [1] * len(points.lines)), dtype=np.int64),
+            point=_matrix(points, _XYZ["loc"], 1e-3),
+            sigma=(np.array(points.cols["sigma_um"], dtype=float) * 1e-6
+                   if "sigma_um" in points.cols else None), **_log_fields(points)))
 
 
 def read_readouts(path: str | Path) -> np.ndarray:
@@ -438,7 +482,8 @@ def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
         writer.writerows(zip(*cells))
 
 
-def _file_columns(log: SpatLog | LengthBarLog, before: Mapping[str, list[int] | list[float] | list[str]],
+def _file_columns(log: SpatLog | LengthBarLog | PointLog,
+                  before: Mapping[str, list[int] | list[float] | list[str]],
                   after: Mapping[str, list[int] | list[float] | list[str]]) -> dict[str, Any]:
     """Return a log's file columns: ``before``, q1_deg..qn_deg, ``after``, t_s and temp_c."""
     q_deg = dict(zip(_q_names(log.q.shape[1]), np.degrees(log.q).T.tolist()))
@@ -462,7 +507,8 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
     """
     folder = Path(folder)
     parts = {"spat.csv": campaign.spat, "locations.csv": campaign.spat,
-             "lengthbar.csv": campaign.lengthbar, "bar.csv": campaign.lengthbar}
+             "lengthbar.csv": campaign.lengthbar, "bar.csv": campaign.lengthbar,
+             "points.csv": campaign.points}
     if stale := [name for name, part in parts.items() if part is None and (folder / name).exists()]:
         raise FileExistsError(f"{folder} already holds {', '.join(stale)}, which this campaign "
                               "has no data for; remove it or write to another folder")
@@ -479,6 +525,11 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
         _write_csv(folder / "bar.csv", {"from": [a for a, _ in campaign.bar],
                                         "to": [b for _, b in campaign.bar],
                                         "length_mm": [v * 1e3 for v in campaign.bar.values()]})
+    if (pts := campaign.points) is not None:
+        after = _mm(_XYZ["loc"], pts.point)
+        if pts.sigma is not None:
+            after["sigma_um"] = (pts.sigma * 1e6).tolist()
+        _write_csv(folder / "points.csv", _file_columns(pts, {"group": pts.group.tolist()}, after))
 
 
 def write_points(path: str | Path, points: np.ndarray) -> None:

@@ -152,7 +152,7 @@ def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> l
                          "than the noise in these postures; held near zero")
     for key in free_keys:
         if key in weak_keys and not isinstance(key, NodeKey):
-            lines.append(f"{key}: not identifiable from these SPATs (other parameters can imitate "
+            lines.append(f"{key}: not identifiable from these measurements (other parameters can imitate "
                          "it in these postures); held near its start value")
     groups: dict[str, int] = {}
     for row in obs.hold:

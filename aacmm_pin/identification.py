@@ -25,14 +25,14 @@ from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
 from aacmm_pin.arm import Arm, load_arm
-from aacmm_pin.campaign import Campaign, SpatLog
+from aacmm_pin.campaign import Campaign, PointLog, SpatLog
 from aacmm_pin.effects import Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
 from aacmm_pin.solver import Factor, Problem, SolverSettings
-from aacmm_pin.units import SIGMA_LOCATION, SIGMA_RTEST, STEP_DEG
+from aacmm_pin.units import SIGMA_LOCATION, SIGMA_POINT, SIGMA_RTEST, STEP_DEG
 from aacmm_pin.unknowns import NestKey, NodeKey, UnknownKey, Unknowns
 
 MODELS = ("dh", "proposed")
@@ -108,7 +108,7 @@ class Calibration:
     @property
     def keys(self) -> list[UnknownKey]:
         """What each entry of ``x`` is (typed; ``names`` are their strings), in order."""
-        return [*self.unknowns.keys, *nest_keys(self.location)]
+        return [*self.unknowns.keys, *(nest_keys(self.location) if self.problem.n_loc else [])]
 
     @property
     def std(self) -> dict[str, float]:
@@ -197,16 +197,57 @@ def check_campaign(campaign: Campaign, arm: Arm) -> SpatLog:
     return spat
 
 
-def _initial_frame(arm: Arm, start: Parameters, campaign: Campaign) -> Parameters:
-    """Return start parameters with X0 and translation from a Kabsch fit of the location centres."""
-    spat = campaign.spat
-    assert spat is not None
-    ids = np.unique(spat.location)
-    pred = stylus_positions(arm, start, spat.q, frame="r")
-    p_r = np.array([pred[spat.location == m].mean(axis=0) for m in ids])
-    p_mt = np.array([campaign.locations[int(m)] for m in ids])
+def check_points(campaign: Campaign, arm: Arm) -> PointLog:
+    """Return the campaign's absolute points, or raise IdentificationError if they cannot be used.
+
+    One instrument frame (``group``) is identified with the arm (as X0 and the translation).
+    """
+    points = campaign.points
+    if points is None or len(points.group) == 0:
+        raise IdentificationError("the campaign has no absolute points (points.csv)")
+    if points.q.shape[1] != arm.n_axes:
+        raise IdentificationError(f"the campaign has {points.q.shape[1]} axes, the arm "
+                                  f"{arm.n_axes} ({arm.source})")
+    if not (np.all(np.isfinite(points.q)) and np.all(np.isfinite(points.point))):
+        raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
+    groups = np.unique(points.group)
+    if groups.size != 1:
+        raise IdentificationError(
+            f"points.csv has {groups.size} groups ({', '.join(str(g) for g in groups)}): one "
+            "instrument frame per identification is supported; identify each group on its own")
+    if np.linalg.matrix_rank(points.point - points.point.mean(axis=0), tol=1e-4) < 3:
+        raise IdentificationError("the measured points lie on a line or a plane: they cannot fix "
+                                  "the instrument's frame")
+    return points
+
+
+def _measurements(campaign: Campaign, arm: Arm, use_rtest: bool
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, Samples]:
+    """Return readouts (N, n), measured points (N, 3) m, group (N,), nests or not, and samples.
+
+    SPAT campaigns: the measured sphere centres (Eq. 3), the R-Test locations, whose nest offsets
+    are estimated. Point campaigns (no SPAT): the measured tool points and their instrument group.
+    """
+    if campaign.spat is not None or campaign.points is None:
+        spat = check_campaign(campaign, arm)
+        return (spat.q, measured_positions(campaign, use_rtest), spat.location, True,
+                Samples.of_spat(arm, spat))
+    points = check_points(campaign, arm)
+    return points.q, points.point, points.group, False, Samples.of_log(arm, points)
+
+
+def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndarray,
+                   group: np.ndarray) -> Parameters:
+    """Return start parameters with X0 and translation from a Kabsch fit of the group centres."""
+    ids = np.unique(group)
+    pred = stylus_positions(arm, start, q, frame="r")
+    if ids.size > 1:
+        p_r = np.array([pred[group == m].mean(axis=0) for m in ids])
+        p_mt = np.array([measured[group == m].mean(axis=0) for m in ids])
+    else:  # one group of absolute points: every point
+        p_r, p_mt = pred, measured
     a, b = p_r - p_r.mean(axis=0), p_mt - p_mt.mean(axis=0)
-    if ids.size < 3 or np.linalg.matrix_rank(a, tol=1e-3) < 2:
+    if len(p_r) < 3 or np.linalg.matrix_rank(a, tol=1e-3) < 2:
         return start.replace(translation=p_mt.mean(axis=0) - p_r.mean(axis=0))
     u, _, vt = np.linalg.svd(b.T @ a)
     rot = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt  # maps r-CS to MT-CS
@@ -222,12 +263,14 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = STEP_DEG,
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
-             sigma_location: float = SIGMA_LOCATION, max_nfev: int = 30, jac: str = "analytic",
+             sigma_location: float = SIGMA_LOCATION, max_nfev: int = 200, jac: str = "analytic",
              progress: bool = False, extensions: tuple[Term, ...] = ()) -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
     Args:
-        campaign: campaign with SPAT samples and R-Test zero positions.
+        campaign: campaign with SPAT samples and R-Test zero positions, or (without SPAT) with
+            absolute tool points (``points.csv``, one instrument frame identified as X0 and the
+            translation; no nest offsets).
         arm: the arm (default: the embedded default arm).
         model: ``"dh"`` (X0, DH errors, tool) or ``"proposed"`` (also the encoder maps).
         use_rtest: use each sample's R-Test displacement (True) or each location's mean (False).
@@ -240,7 +283,9 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         sigma: R-Test noise per coordinate, m; None estimates it from the residuals.
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
             (paper Section 5: 3 um); each nest's offset is estimated with this prior.
-        max_nfev: most residual evaluations per fit.
+        max_nfev: most residual evaluations per solve, a cap well above what a solve needs to
+            reach its tolerance (``nfev`` reports what was used; not converged within it:
+            ``success`` False).
         jac: ``"analytic"`` (Pinocchio, sparse in the map nodes) or a scipy finite-difference
             scheme (``"2-point"``, ``"3-point"``) on the same problem, for comparison.
         progress: show a progress bar.
@@ -260,23 +305,23 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
     tic = time.perf_counter()
     arm = arm or load_arm()
-    spat = check_campaign(campaign, arm)
-    q, measured = spat.q, measured_positions(campaign, use_rtest)
-    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), campaign)
+    q, measured, group, nests, samples = _measurements(campaign, arm, use_rtest)
+    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q, measured, group)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
-                             tuple(t for t in extensions if t.kind is not Kind.MAP),
-                             Samples.of_spat(arm, spat))
+                             tuple(t for t in extensions if t.kind is not Kind.MAP), samples)
     unvisited = ident.unvisited_nodes(unknowns, q)
     unknowns = unknowns.with_fixed(unvisited)
     x_arm = unknowns.vector(start)
     _, jac_now = unknowns.jacobian(x_arm, q)
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
-    sigma_class = sigma or SIGMA_RTEST
+    stated = None if nests or campaign.points is None else campaign.points.sigma
+    sigma_class = sigma or (SIGMA_RTEST if nests else SIGMA_POINT if stated is None
+                            else float(np.median(stated)))
     n = len(q)
     scale = f_scale or 3 * sigma_class
-    x_loc = np.zeros(3 * np.unique(spat.location).size)
+    x_loc = np.zeros(3 * np.unique(group).size if nests else 0)
     nfev = 0
     settings = SolverSettings(loss=loss, f_scale=scale, max_nfev=max_nfev)
     with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
@@ -291,7 +336,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
             x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
             x_now = np.concatenate([x_arm, x_loc])
-            problem = Problem(unknowns, q, measured, spat.location, constraints, obs.scale,
+            problem = Problem(unknowns, q, measured, group if nests else None, constraints, obs.scale,
                               x_start, x_now, sigma_class, sigma_location)
             z0 = problem.z(x_now)
             res = problem.solve(z0, settings, jac, on_evaluation=bar.update)
@@ -304,7 +349,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     data_res = res.fun[:3 * n]
     sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
     covariance = problem.covariance(x_full, sig)
-    names = unknowns.names + [str(k) for k in nest_keys(spat.location)]
+    names = unknowns.names + [str(k) for k in (nest_keys(group) if nests else [])]
     params = unknowns.parameters(x_arm)
     lines = ident.describe(unknowns, unvisited, obs)
     if gauges:
@@ -320,7 +365,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     message = res.message if success else f"did not converge: {res.message}"
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
                        x=x_full, covariance=covariance, sigma=sig,
-                       fun=data_res.reshape(n, 3), location=spat.location.copy(), success=success,
+                       fun=data_res.reshape(n, 3), location=group.copy(), success=success,
                        status=int(res.status), message=str(message),
                        nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,
                        runtime_s=time.perf_counter() - tic,

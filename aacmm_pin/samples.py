@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.arm import Arm
-from aacmm_pin.campaign import LengthBarLog, SpatLog
+from aacmm_pin.campaign import LengthBarLog, PointLog, SpatLog
 
 
 class Samples:
@@ -37,7 +37,7 @@ class Samples:
         self._direction: np.ndarray | None = None
 
     @classmethod
-    def of_log(cls, arm: Arm, log: SpatLog | LengthBarLog) -> Samples:
+    def of_log(cls, arm: Arm, log: SpatLog | LengthBarLog | PointLog) -> Samples:
         """Return the samples of a log's readouts with its temperature and time columns."""
         return cls(arm, log.q, log.temp, log.t)
 

@@ -63,7 +63,8 @@ class Problem:
         unknowns: the layout of the arm unknowns (free entries, start values).
         q: SPAT readouts, shape (N, n_axes), rad.
         measured: measured sphere centres in the MT-CS, shape (N, 3), m.
-        location: R-Test location of every sample, shape (N,).
+        location: R-Test location of every sample, shape (N,), whose nest offset is estimated;
+            None for measurements without nests (absolute points).
         constraints: rows C over the free arm entries held as ``C (x - x_start) = 0``,
             shape (k, n_arm).
         scale: plausible size of every free arm entry, shape (n_arm,), SI.
@@ -103,17 +104,21 @@ class Problem:
     """P = T R^-1: full-vector change per reduced coordinate (``x = x_ref + P z``), shape (n_x, n_z)."""
 
     def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
-                 location: np.ndarray, constraints: sp.csr_matrix, scale: np.ndarray,
+                 location: np.ndarray | None, constraints: sp.csr_matrix, scale: np.ndarray,
                  x_ref: np.ndarray, x_lin: np.ndarray, sigma: float, sigma_location: float):
         self.unknowns, self.q, self.measured = unknowns, q, measured
-        ids, index = np.unique(location, return_inverse=True)
         n = len(q)
         self.n_arm = int(unknowns.free.sum())
-        self.n_loc = 3 * ids.size
-        rows = np.arange(3 * n)
-        cols = 3 * np.repeat(index, 3) + np.tile(np.arange(3), n)
-        # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
-        self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
+        if location is None:
+            self.n_loc = 0
+            self.nest = sp.csr_matrix((3 * n, 0))
+        else:
+            ids, index = np.unique(location, return_inverse=True)
+            self.n_loc = 3 * ids.size
+            rows = np.arange(3 * n)
+            cols = 3 * np.repeat(index, 3) + np.tile(np.arange(3), n)
+            # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
+            self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
         self.prior = sigma / sigma_location
         self.sigma_location = sigma_location
         self.x_ref = x_ref
@@ -206,8 +211,9 @@ class Problem:
         na = self.n_arm
         info = np.empty((na + self.n_loc, na + self.n_loc))
         info[:na, :na] = jac.normal()
-        cross = np.column_stack([jac.rmatmul(self.nest[:, j].toarray().ravel())
-                                 for j in range(self.n_loc)])
+        cross = np.zeros((na, self.n_loc))
+        for j in range(self.n_loc):
+            cross[:, j] = jac.rmatmul(self.nest[:, j].toarray().ravel())
         info[:na, na:] = cross
         info[na:, :na] = cross.T
         info[na:, na:] = (self.nest.T @ self.nest).toarray() + self.prior ** 2 * np.eye(self.n_loc)

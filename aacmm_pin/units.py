@@ -20,6 +20,9 @@ SIGMA_RTEST = 2e-6
 """Standard uncertainty of an R-Test reading per coordinate, m (paper Section 5: 2 um)."""
 SIGMA_LOCATION = 3e-6
 """Standard uncertainty of an R-Test nest (zero) position per coordinate, m (paper: 3 um)."""
+SIGMA_POINT = 20e-6
+"""Default standard uncertainty of an absolute tool point per coordinate, m: a laser tracker's
+stated accuracy over a robot's workspace (e.g. 15 um + 6 um/m); a ``sigma_um`` column overrides it."""
 STEP_DEG = 5.0
 """Encoder map node step, deg (nodes at -180, -175, ..., 175 deg)."""
 REFERENCE_TEMPERATURE_C = 20.0

@@ -10,7 +10,7 @@ import numpy as np
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.kinematics import predict
+from aacmm_pin.kinematics import predict, stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
 
@@ -124,6 +124,66 @@ def as_table(pairs: BarPairs, values: np.ndarray) -> np.ndarray:
     for (i, j), v in zip(pairs.index, values):
         out[i, j] = v
     return out
+
+
+@dataclass(frozen=True)
+class PointValidation:
+    """Errors of a calibrated arm at absolutely measured tool points (laser tracker, mocap)."""
+
+    errors: np.ndarray
+    """Predicted minus measured point in the instrument frame, shape (N, 3), m."""
+    lines: np.ndarray | None
+    """1-based line of each point in points.csv, shape (N,), or None."""
+
+    @property
+    def distances(self) -> np.ndarray:
+        """Length of every error, shape (N,), m."""
+        out: np.ndarray = np.linalg.norm(self.errors, axis=1)
+        return out
+
+    @property
+    def mean(self) -> float:
+        """Mean error length, m."""
+        return float(np.mean(self.distances))
+
+    @property
+    def rms(self) -> float:
+        """RMS error length, m."""
+        return float(np.sqrt(np.mean(self.distances ** 2)))
+
+    @property
+    def max(self) -> float:
+        """Largest error length, m."""
+        return float(np.max(self.distances))
+
+    def table(self) -> str:
+        """Return a one-line summary in mm."""
+        worst = int(np.argmax(self.distances))
+        where = f" (line {int(self.lines[worst])})" if self.lines is not None else ""
+        return (f"{len(self.errors)} points: mean error {self.mean * 1e3:.4f} mm, RMS "
+                f"{self.rms * 1e3:.4f} mm, max {self.max * 1e3:.4f} mm{where}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form (mm)."""
+        return {"n_points": int(len(self.errors)), "mean_mm": self.mean * 1e3,
+                "rms_mm": self.rms * 1e3, "max_mm": self.max * 1e3,
+                "errors_mm": (self.errors * 1e3).tolist()}
+
+
+def validate_points(arm: Arm, params: Parameters, campaign: Campaign) -> PointValidation:
+    """Compare the calibrated arm's tool points with a campaign's absolutely measured points.
+
+    The points are predicted in the instrument frame of the calibration (its ``base_to_mt``
+    transform): a test campaign must be measured with the same instrument set-up.
+
+    Raises:
+        AacmmError: if the campaign has no points.
+    """
+    points = campaign.points
+    if points is None:
+        raise AacmmError("the campaign has no absolute points (points.csv)")
+    pred = stylus_positions(arm, params, points.q, frame="mt", samples=Samples.of_log(arm, points))
+    return PointValidation(pred - points.point, points.lines)
 
 
 def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResult:

@@ -71,7 +71,7 @@ def _identify(args: argparse.Namespace) -> int:
     cal = identify(read_campaign(args.campaign), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   progress=sys.stderr.isatty())
+                   max_nfev=args.max_nfev, progress=sys.stderr.isatty())
     write_calibration(cal, arm, args.out)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
@@ -81,10 +81,11 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
     """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
     state = "converged" if cal.success else "DID NOT CONVERGE"
     by_loc = ", ".join(f"{m}: {v * 1e6:.2f}" for m, v in cal.fit_rms_by_location().items())
-    rtest = "with" if cal.use_rtest else "without"
-    print(f"{cal.model} model ({rtest} R-Test): {state}, "
+    data = (f"{'with' if cal.use_rtest else 'without'} R-Test" if cal.problem.n_loc
+            else "absolute points")
+    print(f"{cal.model} model ({data}): {state} ({cal.nfev} evaluations), "
           f"{cal.n_determined} parameters determined, fit RMS {cal.fit_rms * 1e6:.2f} um "
-          f"(by location {by_loc}), "
+          f"(by {'location' if cal.problem.n_loc else 'group'} {by_loc}), "
           f"{cal.runtime_s:.1f} s -> {out}")
     for line in cal.unidentifiable:
         print(f"  not identifiable: {line}")
@@ -127,13 +128,22 @@ def _validate(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.parameters import read_parameters
-    from aacmm_pin.validation import validate
+    from aacmm_pin.validation import validate, validate_points
 
     params = read_parameters(args.caldir)
-    result = validate(load_arm(params.arm), params, read_campaign(args.campaign))
-    print(result.table())
+    arm = load_arm(params.arm)
+    campaign = read_campaign(args.campaign)
+    data: dict[str, Any] = {}
+    if campaign.lengthbar is not None or campaign.points is None:
+        result = validate(arm, params, campaign)
+        print(result.table())
+        data = result.to_dict()
+    if campaign.points is not None:
+        points = validate_points(arm, params, campaign)
+        print(points.table())
+        data["points"] = points.to_dict()
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        Path(args.json).write_text(json.dumps(data, indent=2) + "\n")
     return 0
 
 
@@ -252,6 +262,9 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--sigma-um", type=float, default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=float, default=5.0, help="map node step, deg")
+    p.add_argument("--max-nfev", type=int, default=200,
+                   help="most residual evaluations per solve (the solve stops at its tolerance; "
+                        "the count used is printed and in report.json)")
     p.set_defaults(handler=_identify)
 
     p = add_command(subparsers, "discover", "find what a model is missing: name the effect, add "
