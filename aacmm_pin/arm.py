@@ -76,6 +76,11 @@ class ErrorFrame:
         return out
 
 
+EMBEDDED = ("aacmm7", "ur5", "wam7")
+"""Arms shipped with the package, loadable by name: the default AACMM and the two robots of the
+public laser-tracker data (``urdf/make_serial_dh.py`` writes them from the makers' DH tables)."""
+
+
 def resolve_arm_path(arm: str | Path) -> Path:
     """Return the URDF path of an arm given by path or by the name of an embedded arm.
 
@@ -92,7 +97,7 @@ def resolve_arm_path(arm: str | Path) -> Path:
         if candidate.is_file():
             return Path(str(candidate))
     raise ArmModelError(arm, f"no such URDF file, and no embedded arm named '{name}' "
-                             f"(embedded: {DEFAULT_ARM})")
+                             f"(embedded: {', '.join(EMBEDDED)})")
 
 
 def _chain(robot: yourdfpy.Robot, path: Path | str) -> list[yourdfpy.Joint]:

@@ -114,5 +114,5 @@ def test_bad_urdf_is_named(tmp_path, edit, message):
 
 def test_missing_arm_names_embedded_choices():
     """An arm that is neither a file nor an embedded name says so."""
-    with pytest.raises(ArmModelError, match="embedded: aacmm7"):
+    with pytest.raises(ArmModelError, match="embedded: aacmm7, ur5, wam7"):
         load_arm("no_such_arm")
