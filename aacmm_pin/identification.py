@@ -59,7 +59,8 @@ class Calibration:
     covariance: np.ndarray
     """Linearised covariance of ``x``, shape (n, n), SI (sigma from ``sigma``)."""
     sigma: float
-    """Noise standard deviation per coordinate used for the covariance, m."""
+    """Noise standard deviation per coordinate used for the covariance, m (with per-point
+    ``sigma_um``: that of a point whose stated noise is the median, the others scaled by theirs)."""
     fun: np.ndarray
     """Residuals predicted - measured, shape (N, 3), m."""
     location: np.ndarray
@@ -337,7 +338,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
             x_now = np.concatenate([x_arm, x_loc])
             problem = Problem(unknowns, q, measured, group if nests else None, constraints, obs.scale,
-                              x_start, x_now, sigma_class, sigma_location)
+                              x_start, x_now, sigma_class, sigma_location,
+                              None if stated is None else sigma_class / stated)
             z0 = problem.z(x_now)
             res = problem.solve(z0, settings, jac, on_evaluation=bar.update)
             nfev += res.nfev
@@ -346,7 +348,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             _, jac_now = unknowns.jacobian(x_arm, q)
 
     obs = used
-    data_res = res.fun[:3 * n]
+    data_res = res.fun[:3 * n]  # weighted: the noise in units of sigma_class
+    residual = data_res if problem.row_weight is None else data_res / problem.row_weight
     sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
     covariance = problem.covariance(x_full, sig)
     names = unknowns.names + [str(k) for k in (nest_keys(group) if nests else [])]
@@ -365,7 +368,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     message = res.message if success else f"did not converge: {res.message}"
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
                        x=x_full, covariance=covariance, sigma=sig,
-                       fun=data_res.reshape(n, 3), location=group.copy(), success=success,
+                       fun=residual.reshape(n, 3), location=group.copy(), success=success,
                        status=int(res.status), message=str(message),
                        nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,
                        runtime_s=time.perf_counter() - tic,

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.optimize import OptimizeResult, least_squares
 from scipy.sparse.linalg import LinearOperator
 
-from aacmm_pin.unknowns import Unknowns
+from aacmm_pin.unknowns import BlockJacobian, Unknowns
 
 DENSE_LIMIT = 2e7
 """Above this many Jacobian entries (residuals x unknowns) the solver uses LSMR on an operator."""
@@ -72,6 +72,8 @@ class Problem:
         x_lin: full vector near the solution, where the preconditioner is computed.
         sigma: noise per coordinate assumed by the solve, m (weights the nests' prior rows).
         sigma_location: prior standard deviation of each nest offset per coordinate, m.
+        weight: per sample, ``sigma / (its stated noise)``, shape (N,); None: all 1 (generalised
+            least squares with per-sample noise: the data rows are multiplied by it).
     """
 
     unknowns: Unknowns
@@ -85,7 +87,9 @@ class Problem:
     n_loc: int
     """Number of nest offsets (3 per location; the last entries of a full vector)."""
     nest: sp.csr_matrix
-    """d(data residuals)/d(nest offsets), shape (3N, n_loc)."""
+    """d(data residuals)/d(nest offsets), shape (3N, n_loc) (weighted rows)."""
+    row_weight: np.ndarray | None
+    """Weight of every data row, shape (3N,), or None (all 1)."""
     prior: float
     """Weight of the nest offsets' prior rows in the residual, ``sigma / sigma_location``."""
     sigma_location: float
@@ -105,7 +109,8 @@ class Problem:
 
     def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
                  location: np.ndarray | None, constraints: sp.csr_matrix, scale: np.ndarray,
-                 x_ref: np.ndarray, x_lin: np.ndarray, sigma: float, sigma_location: float):
+                 x_ref: np.ndarray, x_lin: np.ndarray, sigma: float, sigma_location: float,
+                 weight: np.ndarray | None = None):
         self.unknowns, self.q, self.measured = unknowns, q, measured
         n = len(q)
         self.n_arm = int(unknowns.free.sum())
@@ -119,6 +124,9 @@ class Problem:
             cols = 3 * np.repeat(index, 3) + np.tile(np.arange(3), n)
             # d(residual)/d(nest offset): -1 on the rows of that location and coordinate
             self.nest = sp.csr_matrix((-np.ones(3 * n), (rows, cols)), shape=(3 * n, self.n_loc))
+        self.row_weight = None if weight is None else np.repeat(np.asarray(weight, float), 3)
+        if self.row_weight is not None:
+            self.nest = sp.csr_matrix(sp.diags(self.row_weight) @ self.nest)
         self.prior = sigma / sigma_location
         self.sigma_location = sigma_location
         self.x_ref = x_ref
@@ -168,23 +176,31 @@ class Problem:
         return out
 
     # ------------------------------------------------------------ residuals and Jacobians
+    def data_jacobian(self, x_arm: np.ndarray) -> BlockJacobian:
+        """Return d(data residuals)/d(free arm entries) at x_arm (weighted rows), (3N, n_arm)."""
+        _, jac = self.unknowns.jacobian(x_arm, self.q)
+        return jac if self.row_weight is None else jac.scaled(self.row_weight)
+
     def fun(self, z: np.ndarray) -> np.ndarray:
-        """Return the residuals: data (predicted - measured, 3N) then the nests' prior rows, m."""
+        """Return the residuals: data (predicted - measured, 3N, weighted) then the nests' prior rows."""
         x = self.x(z)
         pred = self.unknowns.positions(x[:self.n_arm], self.q).reshape(-1)
-        data = pred - self.measured.reshape(-1) + self.nest @ x[self.n_arm:]
+        data = pred - self.measured.reshape(-1)
+        if self.row_weight is not None:
+            data = data * self.row_weight
+        data = data + self.nest @ x[self.n_arm:]
         return np.concatenate([data, self.prior * x[self.n_arm:]])
 
     def jac(self, z: np.ndarray) -> np.ndarray:
         """Return d(fun)/dz as a dense array, shape (n_data + n_loc, n_z)."""
-        _, jac = self.unknowns.jacobian(self.x(z)[:self.n_arm], self.q)
+        jac = self.data_jacobian(self.x(z)[:self.n_arm])
         p_arm, p_loc = self.p[:self.n_arm], self.p[self.n_arm:]
         out: np.ndarray = np.vstack([jac.matmul(p_arm) + self.nest @ p_loc, self.prior * p_loc])
         return out
 
     def jac_operator(self, z: np.ndarray) -> LinearOperator:
         """Return d(fun)/dz as an operator (products only), for large campaigns."""
-        _, jac = self.unknowns.jacobian(self.x(z)[:self.n_arm], self.q)
+        jac = self.data_jacobian(self.x(z)[:self.n_arm])
         nest, prior = self.nest, self.prior
         p_arm, p_loc = self.p[:self.n_arm], self.p[self.n_arm:]
         n_data = self.n_data
@@ -207,7 +223,7 @@ class Problem:
 
     def normal_matrix(self, x: np.ndarray) -> np.ndarray:
         """Return J^T J of the data and prior rows w.r.t. the full vector at x, shape (n_x, n_x)."""
-        _, jac = self.unknowns.jacobian(x[:self.n_arm], self.q)
+        jac = self.data_jacobian(x[:self.n_arm])
         na = self.n_arm
         info = np.empty((na + self.n_loc, na + self.n_loc))
         info[:na, :na] = jac.normal()

@@ -258,6 +258,11 @@ class BlockJacobian:
         out[nd:, nd:] = (self.nodes.T @ self.nodes).toarray()
         return out
 
+    def scaled(self, row_weight: np.ndarray) -> BlockJacobian:
+        """Return diag(row_weight) @ J (row_weight shape (3N,))."""
+        return BlockJacobian(self.dense * row_weight[:, None],
+                             sp.csc_matrix(sp.diags(row_weight) @ self.nodes))
+
     def matmul(self, m: np.ndarray) -> np.ndarray:
         """Return J @ m for m of shape (n_free,) or (n_free, k)."""
         nd = self.dense.shape[1]

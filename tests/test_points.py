@@ -105,6 +105,29 @@ def test_dh_identified_from_points_matches_the_truth(seed):
     assert err.rms < 3 * SIGMA  # predictions at new poses within the noise of the fit
 
 
+def test_points_are_weighted_by_their_stated_noise():
+    """Half the points 10 um, half 100 um (stated so): the weighted fit is right and much better."""
+    arm = ap.load_arm(UR5)
+    truth = _truth(arm, 5)
+    noisy = _points_campaign(arm, truth, 400, 5, sigma=0.0)
+    pts = noisy.points
+    assert pts is not None
+    sigma = np.where(np.arange(400) % 2, 100e-6, 10e-6)
+    point = pts.point + np.random.default_rng(6).normal(0.0, 1.0, (400, 3)) * sigma[:, None]
+
+    def fit(stated: np.ndarray | None) -> ap.Calibration:
+        log = PointLog(group=pts.group, q=pts.q, point=point, sigma=stated)
+        campaign = ap.Campaign(spat=None, locations={}, lengthbar=None, bar={}, points=log)
+        return ap.identify(campaign, arm, model="dh")
+
+    weighted, plain = fit(sigma), fit(None)
+    # the reference noise is the median stated one (55 um here): the estimate agrees within ~4 %
+    assert abs(weighted.sigma / np.median(sigma) - 1) < 0.15
+    fresh = _points_campaign(arm, truth, 200, 50, sigma=0.0)
+    better, worse = (validate_points(arm, c.parameters, fresh).rms for c in (weighted, plain))
+    assert better < 0.6 * worse  # GLS against OLS: the 10 um points carry the fit
+
+
 def test_several_instrument_groups_are_refused():
     """Two groups (two tracker stations) are refused with a message, not mixed into one frame."""
     arm = ap.load_arm(UR5)
