@@ -21,7 +21,7 @@ from aacmm_pin import cli
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 HEAVY = ("pinocchio", "yourdfpy", "scipy", "matplotlib")
-COMMANDS = {("simulate",), ("predict",), ("identify",), ("discover",), ("validate",),
+COMMANDS = {("axes",), ("simulate",), ("predict",), ("identify",), ("discover",), ("validate",),
             ("uncertainty",), ("plan",), ("demo",), ("view",), ("acquire",), ("fake-devices",),
             ("iso10360", "spat"), ("iso10360", "sphere"), ("iso10360", "ldia"),
             ("iso10360", "euni")}
@@ -151,3 +151,11 @@ def test_lazy_table_matches_the_type_checking_imports():
                 for alias in node.names}
     assert imported == {(module, name) for name, module in aacmm_pin._MODULE_OF.items()}
     assert {name for _, name in imported} == set(aacmm_pin.__all__)
+
+
+def test_axes_lists_readout_order_of_a_robot(capsys):
+    """`aacmm-pin axes ur5` names the 6 readout columns in chain order and the error frames."""
+    assert cli.main(["axes", "ur5"]) == 0
+    out = capsys.readouterr().out
+    assert "6 axes" in out and "q6_deg  joint A6" in out and "q7_deg" not in out
+    assert "error frames (26)" in out

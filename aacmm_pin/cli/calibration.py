@@ -223,14 +223,33 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _axes(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from aacmm_pin.arm import load_arm
+
+    arm = load_arm(args.arm)
+    print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order")
+    for n, (name, (lo, hi)) in enumerate(zip(arm.axis_names, np.degrees(arm.joint_limits)), 1):
+        print(f"  q{n}_deg  joint {name:<12} limits {lo:8.1f} .. {hi:7.1f} deg")
+    print(f"error frames ({len(arm.error_names)}): {', '.join(arm.error_names)}")
+    return 0
+
+
 def add_parsers(subparsers: Any) -> None:
-    """Add simulate, predict, identify, discover, validate, uncertainty, plan and demo.
+    """Add axes, simulate, predict, identify, discover, validate, uncertainty, plan and demo.
 
     Args:
         subparsers: what ``ArgumentParser.add_subparsers()`` returned; each parser sets
             ``handler``, a function of the parsed arguments returning the exit status.
     """
     arm = arm_option()
+
+    p = add_command(subparsers, "axes", "list an arm's axes in readout-column order, its limits "
+                    "and its error frames")
+    p.add_argument("arm", nargs="?", default="aacmm7", metavar="URDF",
+                   help="URDF path or embedded arm name (aacmm7, ur5, wam7)")
+    p.set_defaults(handler=_axes)
 
     p = add_command(subparsers, "simulate",
                     "write a simulated SPAT + length-bar campaign and its truth",
