@@ -13,6 +13,18 @@ HEAD = ("# Benchmarks\n\nEach section is written by the script it names; rerun i
         "Ratios compare methods in the same run (the machines are noisy).\n")
 
 
+def best_of(f, repeat: int):
+    """Return the best wall time of ``repeat`` calls of ``f`` and the last result."""
+    import time
+
+    best, out = np.inf, None
+    for _ in range(repeat):
+        tic = time.perf_counter()
+        out = f()
+        best = min(best, time.perf_counter() - tic)
+    return best, out
+
+
 def machine() -> str:
     """One line describing this machine."""
     import os

@@ -17,17 +17,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import Campaign, SpatLog, load_arm, simulate_campaign  # noqa: E402
 from aacmm_pin.identification import identify  # noqa: E402
 from aacmm_pin.simulate import SimulationConfig  # noqa: E402
+from benchmarks._report import best_of as timed
 from benchmarks._report import machine, write_section  # noqa: E402
-
-
-def timed(f, repeat: int):
-    """Return the best time of ``repeat`` calls and the last result."""
-    best, out = np.inf, None
-    for _ in range(repeat):
-        tic = time.perf_counter()
-        out = f()
-        best = min(best, time.perf_counter() - tic)
-    return best, out
 
 
 def tiled(sim, k: int, rng: np.random.Generator) -> Campaign:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import importlib.util
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 import aacmm_pin as ap  # noqa: E402
 from aacmm_pin.unknowns import Unknowns  # noqa: E402
-from benchmarks._report import machine, write_section  # noqa: E402
+from benchmarks._report import best_of, machine, write_section  # noqa: E402
 
 REPEAT = 5
 spec = importlib.util.spec_from_file_location("example03",
@@ -32,16 +31,6 @@ spec = importlib.util.spec_from_file_location("example03",
 assert spec is not None and spec.loader is not None
 example = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(example)
-
-
-def best_of(f, repeat: int):
-    """Return the best wall time of ``repeat`` calls and the last result."""
-    best, out = np.inf, None
-    for _ in range(repeat):
-        tic = time.perf_counter()
-        out = f()
-        best = min(best, time.perf_counter() - tic)
-    return best, out
 
 
 def main() -> None:
