@@ -39,9 +39,8 @@ from aacmm_pin.campaign import Campaign
 from aacmm_pin.discovery_results import Discovery, Score, Step
 from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.identification import Calibration, check_campaign, identify
+from aacmm_pin.identification import Calibration, identify, measurements
 from aacmm_pin.linear_scorer import LinearScorer
-from aacmm_pin.samples import Samples
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
@@ -106,7 +105,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
               max_steps: int, alpha: float, progress: bool) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
-    samples = Samples.of_spat(arm, check_campaign(campaign, arm))
+    samples = measurements(campaign, arm, use_rtest)[4]
     map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
     terms: list[Term] = []
 
@@ -236,7 +235,13 @@ def _scored(lin: LinearScorer, terms: list[Term], threshold: float,
     return sorted(scores, key=lambda s: -s.total_gain)
 
 
+MIN_K_EFF = 0.1
+"""A term the data determine less than this (effective parameters) is not named: its columns are
+(near) zero on these samples, e.g. an axis that does not move the measured point."""
+
+
 def _mark(score: Score, threshold: float) -> Score:
     """Return the score marked significant: F test, BIC and held-out (locations plus bar) pass."""
-    ok = score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
+    ok = (score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
+          and score.k_eff >= MIN_K_EFF)
     return dataclasses.replace(score, significant=bool(ok))

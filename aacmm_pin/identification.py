@@ -222,7 +222,7 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
     return points
 
 
-def _measurements(campaign: Campaign, arm: Arm, use_rtest: bool
+def measurements(campaign: Campaign, arm: Arm, use_rtest: bool
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, Samples]:
     """Return readouts (N, n), measured points (N, 3) m, group (N,), nests or not, and samples.
 
@@ -306,7 +306,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
     tic = time.perf_counter()
     arm = arm or load_arm()
-    q, measured, group, nests, samples = _measurements(campaign, arm, use_rtest)
+    q, measured, group, nests, samples = measurements(campaign, arm, use_rtest)
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q, measured, group)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),

@@ -23,6 +23,9 @@ from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.samples import Samples
 
+FOLDS = 5
+"""Folds of the held-out score for absolute points (k-fold over the samples)."""
+
 
 class LinearScorer:
     """A calibration linearised at its solution, for scoring candidate terms on the residuals.
@@ -47,9 +50,17 @@ class LinearScorer:
         arm_rows = problem.r_inv[:problem.n_arm_y]
         self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
         self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
-        rows_loc = np.repeat(cal.location, 3)
-        self.groups = [np.flatnonzero(rows_loc == m) for m in np.unique(cal.location)]
-        self.n_held = self.n_data - 3 * len(self.groups)  # each left-out SPAT less its mean
+        # held-out groups: the R-Test locations (each left-out SPAT less its mean: its nest offset
+        # is unknown); absolute points (no nests): FOLDS folds of the samples, seeded
+        self.centred = problem.n_loc > 0
+        if self.centred:
+            fold = cal.location
+        else:
+            fold = np.empty(len(cal.location), dtype=np.int64)
+            fold[np.random.default_rng(0).permutation(len(fold))] = np.arange(len(fold)) % FOLDS
+        rows = np.repeat(fold, 3)
+        self.groups = [np.flatnonzero(rows == m) for m in np.unique(fold)]
+        self.n_held = self.n_data - (3 * len(self.groups) if self.centred else 0)
         self.prior_rows = np.arange(self.n_data, len(self.r))
         self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
                                                         samples.q, frame="mt", samples=samples)
@@ -133,7 +144,7 @@ class LinearScorer:
         held = 0.0
         for rows, (g, b) in zip(self.groups, grams):
             e = residual(rows, solve(g_all - g, b_all - b)).reshape(-1, 3)
-            held += float(np.sum((e - e.mean(axis=0)) ** 2))
+            held += float(np.sum((e - e.mean(axis=0) if self.centred else e) ** 2))
         bar_chi2 = float("nan")
         if self._bar_white is not None:
             _, e_bar, j_bar = self._bar_white

@@ -8,11 +8,14 @@ joint angles, the commanded (nominal) tool position and its difference from the 
 tool points, one instrument frame) and calibrates the makers' DH models (``urdf/ur5.urdf``,
 ``urdf/wam7.urdf``, written by ``urdf/make_serial_dh.py``):
 
-* UR5: ``aacmm-pin identify`` on the 1000 grid poses (DH model), ``aacmm-pin validate`` on the 20
-  random poses never used for calibration;
-* WAM (grid poses only): the DH model's error on held-out poses by 5-fold cross-validation.
+* UR5: ``aacmm-pin identify`` on the 1000 grid poses (DH model) and ``aacmm-pin discover`` (what
+  the DH model misses, step by step), each validated by ``aacmm-pin validate`` on the 20 random
+  poses never used for calibration;
+* WAM (grid poses only): the DH model's error on held-out poses by 5-fold cross-validation, and
+  ``aacmm-pin discover`` (its k-fold held-out RMS per step).
 
-It prints the mean position error uncalibrated and calibrated, beside the thesis' figures.
+It prints the mean position error uncalibrated and calibrated, beside the thesis' figures, and the
+discovery steps.
 
 Run: ``python examples/03_laser_tracker_ur5_wam.py [--data DIR] [--out DIR]`` (a few seconds).
 """
@@ -54,8 +57,18 @@ def write_points_campaign(source: Path, folder: Path) -> float:
     return float(np.mean(np.linalg.norm(dif, axis=1)))
 
 
-def ur5(data: Path, out: Path) -> tuple[float, float]:
-    """Return the UR5's mean error on the random poses, mm: uncalibrated and DH-calibrated."""
+def discover_steps(campaign: Path, arm: str, out: Path) -> list[str]:
+    """Run ``aacmm-pin discover`` from the DH model; return one line per step (k-fold held out)."""
+    if main(["discover", str(campaign), "--arm", arm, "--start", "dh", "--out", str(out)]):
+        raise SystemExit("discover failed")
+    report = json.loads((out / "discovery.json").read_text())
+    return [f"{s['effect']} on A{', A'.join(str(a) for a in s['axes'])}: k-fold held-out RMS "
+            f"{s['heldout_rms_before_um'] / 1e3:.4f} -> {s['heldout_rms_after_um'] / 1e3:.4f} mm"
+            for s in report["steps"]]
+
+
+def ur5(data: Path, out: Path) -> tuple[float, float, float, list[str]]:
+    """Return the UR5's mean error on the random poses, mm: uncalibrated, DH, discovered model."""
     write_points_campaign(data / "UR5" / "3D_UR5_uncalibrated_grid_cleaned.csv", out / "ur5_grid")
     before = write_points_campaign(data / "UR5" / "3D_UR5_uncalibrated_random_cleaned.csv",
                                    out / "ur5_random")
@@ -66,10 +79,14 @@ def ur5(data: Path, out: Path) -> tuple[float, float]:
     main(["validate", str(out / "ur5_dh"), str(out / "ur5_random"),
           "--json", str(out / "ur5_random_errors.json")])
     after = json.loads((out / "ur5_random_errors.json").read_text())["points"]["mean_mm"]
-    return before, float(after)
+    steps = discover_steps(out / "ur5_grid", "ur5", out / "ur5_discovered")
+    main(["validate", str(out / "ur5_discovered"), str(out / "ur5_random"),
+          "--json", str(out / "ur5_random_errors_discovered.json")])
+    found = json.loads((out / "ur5_random_errors_discovered.json").read_text())["points"]["mean_mm"]
+    return before, float(after), float(found), steps
 
 
-def wam(data: Path, out: Path) -> tuple[float, float]:
+def wam(data: Path, out: Path) -> tuple[float, float, float, list[str]]:
     """Return the WAM's mean error, mm: uncalibrated, and DH-calibrated on held-out folds."""
     before = write_points_campaign(data / "WAM" / "3D_WAM_uncalibrated_grid_cleaned.csv",
                                    out / "wam_grid")
@@ -86,11 +103,13 @@ def wam(data: Path, out: Path) -> tuple[float, float]:
         cal = ap.identify(dataclasses.replace(campaign, points=part), arm, model="dh")
         pred = ap.stylus_positions(arm, cal.parameters, points.q[test], frame="mt")
         errors.append(np.linalg.norm(pred - points.point[test], axis=1))
-    return before, float(np.mean(np.concatenate(errors)) * 1e3)
+    steps = discover_steps(out / "wam_grid", "wam7", out / "wam_discovered")
+    return before, float(np.mean(np.concatenate(errors)) * 1e3), float("nan"), steps
 
 
-def run(data: Path, out: Path) -> dict[str, tuple[float, float]]:
-    """Calibrate both robots; return robot -> (uncalibrated, DH) mean error, mm."""
+def run(data: Path, out: Path) -> dict[str, tuple[float, float, float, list[str]]]:
+    """Calibrate both robots; return robot -> (uncalibrated, DH, discovered) mean error, mm, and
+    the discovery steps (the WAM's discovered model has no test poses: NaN)."""
     return {"UR5": ur5(data, out), "WAM": wam(data, out)}
 
 
@@ -101,8 +120,12 @@ if __name__ == "__main__":
                         help="folder for the campaigns and calibrations")
     args = parser.parse_args()
     results = run(args.data, args.out)
-    print("\nmean position error (mm)   uncalibrated   DH model   | thesis: uncalibrated  MDH + GNN")
-    for robot, (before, after) in results.items():
+    print("\nmean position error (mm)   uncalibrated   DH model   discovered | thesis: uncalibrated"
+          "  MDH + GNN")
+    for robot, (before, after, found, _) in results.items():
         test = "20 random poses" if robot == "UR5" else f"{FOLDS}-fold held-out grid poses"
-        print(f"{robot:<4} ({test:<27}) {before:>8.4f}   {after:>8.4f}   | "
+        print(f"{robot:<4} ({test:<27}) {before:>8.4f}   {after:>8.4f}   {found:>8.4f}   | "
               f"{PUBLISHED[robot][0]:>10.4f}  {PUBLISHED[robot][1]:>10.4f}")
+    for robot, (*_, steps) in results.items():
+        print(f"{robot} discovery from the DH model:", *(f"\n  step {k}: {s}"
+                                                       for k, s in enumerate(steps, 1)) or " none")
