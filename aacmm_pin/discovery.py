@@ -105,7 +105,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
               max_steps: int, alpha: float, progress: bool) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
-    samples = measurements(campaign, arm, use_rtest)[4]
+    samples = measurements(campaign, arm, use_rtest).samples
     map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
     terms: list[Term] = []
 

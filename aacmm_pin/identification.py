@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -222,19 +222,36 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
     return points
 
 
-def measurements(campaign: Campaign, arm: Arm, use_rtest: bool
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, Samples]:
-    """Return readouts (N, n), measured points (N, 3) m, group (N,), nests or not, and samples.
+class Measurements(NamedTuple):
+    """What an identification fits: one row per sample."""
+
+    q: np.ndarray
+    """Readouts, shape (N, n), rad."""
+    measured: np.ndarray
+    """Measured points, shape (N, 3), m (sphere centres in the MT-CS, or tool points)."""
+    group: np.ndarray
+    """R-Test location or instrument group of each sample, shape (N,)."""
+    nests: bool
+    """Whether each group is an R-Test nest whose offset is estimated."""
+    samples: Samples
+    """What effects depend on, per sample."""
+    sigma: np.ndarray | None
+    """Stated noise of each sample per coordinate, shape (N,), m, or None."""
+
+
+def measurements(campaign: Campaign, arm: Arm, use_rtest: bool) -> Measurements:
+    """Return what an identification of ``campaign`` fits (checked; see :class:`Measurements`).
 
     SPAT campaigns: the measured sphere centres (Eq. 3), the R-Test locations, whose nest offsets
     are estimated. Point campaigns (no SPAT): the measured tool points and their instrument group.
     """
     if campaign.spat is not None or campaign.points is None:
         spat = check_campaign(campaign, arm)
-        return (spat.q, measured_positions(campaign, use_rtest), spat.location, True,
-                Samples.of_spat(arm, spat))
+        return Measurements(spat.q, measured_positions(campaign, use_rtest), spat.location, True,
+                            Samples.of_spat(arm, spat), None)
     points = check_points(campaign, arm)
-    return points.q, points.point, points.group, False, Samples.of_log(arm, points)
+    return Measurements(points.q, points.point, points.group, False, Samples.of_log(arm, points),
+                        points.sigma)
 
 
 def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndarray,
@@ -306,7 +323,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
     tic = time.perf_counter()
     arm = arm or load_arm()
-    q, measured, group, nests, samples = measurements(campaign, arm, use_rtest)
+    q, measured, group, nests, samples, stated = measurements(campaign, arm, use_rtest)
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q, measured, group)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
@@ -317,7 +334,6 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     _, jac_now = unknowns.jacobian(x_arm, q)
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
-    stated = None if nests or campaign.points is None else campaign.points.sigma
     sigma_class = sigma or (SIGMA_RTEST if nests else SIGMA_POINT if stated is None
                             else float(np.median(stated)))
     n = len(q)

@@ -18,6 +18,7 @@ solvers converge in a few steps at any campaign size.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -170,8 +171,7 @@ class Problem:
 
     def with_measured(self, measured: np.ndarray) -> Problem:
         """Return the same problem (structure, preconditioner) for other measured centres."""
-        out = object.__new__(Problem)
-        out.__dict__.update(self.__dict__)
+        out = copy.copy(self)
         out.measured = np.asarray(measured, dtype=float)
         return out
 
