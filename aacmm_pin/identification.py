@@ -31,11 +31,21 @@ from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
-from aacmm_pin.solver import Factor, Problem, SolverSettings
-from aacmm_pin.units import SIGMA_LOCATION, SIGMA_POINT, SIGMA_RTEST, STEP_DEG
-from aacmm_pin.unknowns import NestKey, NodeKey, UnknownKey, Unknowns
+from aacmm_pin.solver import Factor, Nuisance, Problem, SolverSettings
+from aacmm_pin.units import (
+    SIGMA_BAR,
+    SIGMA_LOCATION,
+    SIGMA_POINT,
+    SIGMA_RTEST,
+    SIGMA_SOCKET,
+    SOCKET_PRIOR,
+    STEP_DEG,
+)
+from aacmm_pin.unknowns import FrameKey, NestKey, NodeKey, UnknownKey, Unknowns
 
 MODELS = ("dh", "proposed")
+BAR_ID = 100_000
+"""A length-bar socket used as a nest has id ``BAR_ID * placement + socket index`` (sorted names)."""
 
 
 class IdentificationError(AacmmError):
@@ -93,6 +103,10 @@ class Calibration:
     """The solved least-squares problem (structure and preconditioner), for :func:`refit`."""
     settings: SolverSettings = field(repr=False)
     """Solver settings (loss, f_scale, max_nfev) for :func:`refit`."""
+    nuisance_keys: tuple[UnknownKey, ...] = ()
+    """What each entry of ``x`` after the arm's is: nest offsets, then instrument frames."""
+    inputs: tuple[str, ...] = ("spat",)
+    """The measurement kinds fitted: ``"spat"``, ``"points"``, ``"bar"`` (the length bar)."""
 
     def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
         """Return ``other`` (e.g. the truth) moved into this calibration's gauge and held values.
@@ -109,7 +123,7 @@ class Calibration:
     @property
     def keys(self) -> list[UnknownKey]:
         """What each entry of ``x`` is (typed; ``names`` are their strings), in order."""
-        return [*self.unknowns.keys, *(nest_keys(self.location) if self.problem.n_loc else [])]
+        return [*self.unknowns.keys, *self.nuisance_keys]
 
     @property
     def std(self) -> dict[str, float]:
@@ -137,24 +151,30 @@ class Calibration:
         return {int(m): float(np.sqrt(np.mean(self.fun[self.location == m] ** 2)))
                 for m in np.unique(self.location)}
 
+    def group_label(self, group: int) -> str:
+        """Return the name of a group id of :attr:`location`.
+
+        ``"2"`` for R-Test location 2 (or points group 2 alone), ``"bar3A"`` for a bar socket,
+        ``"group 2"`` for points of group 2 beside SPATs.
+        """
+        labels = {k.location: k.label for k in self.nuisance_keys
+                  if isinstance(k, NestKey) and k.label}
+        return labels.get(group, f"group {-group}" if group < 0 else str(group))
+
     def report(self) -> dict[str, Any]:
         """Return the ``report.json`` content."""
         return {
-            "model": self.model, "use_rtest": self.use_rtest, "n_samples": int(len(self.fun)),
+            "model": self.model, "use_rtest": self.use_rtest, "inputs": list(self.inputs),
+            "n_samples": int(len(self.fun)),
             "n_parameters": self.n_determined, "n_unknowns": int(len(self.x)),
             "fit_rms_um": self.fit_rms * 1e6,
-            "fit_rms_um_by_location": {str(k): v * 1e6 for k, v in
+            "fit_rms_um_by_location": {self.group_label(k): v * 1e6 for k, v in
                                        self.fit_rms_by_location().items()},
             "sigma_um": self.sigma * 1e6, "runtime_s": self.runtime_s, "success": self.success,
             "status": self.status, "message": self.message, "nfev": self.nfev,
             "unidentifiable": list(self.unidentifiable),
             "std": {n: float(s) for n, s in self.std.items()},
         }
-
-
-def nest_keys(location: np.ndarray) -> list[NestKey]:
-    """Return the keys of the nest offsets (3 per R-Test location, in location order)."""
-    return [NestKey(int(m), c) for m in np.unique(location) for c in "xyz"]
 
 
 def measured_positions(campaign: Campaign, use_rtest: bool = True) -> np.ndarray:
@@ -201,7 +221,8 @@ def check_campaign(campaign: Campaign, arm: Arm) -> SpatLog:
 def check_points(campaign: Campaign, arm: Arm) -> PointLog:
     """Return the campaign's absolute points, or raise IdentificationError if they cannot be used.
 
-    One instrument frame (``group``) is identified with the arm (as X0 and the translation).
+    Every instrument frame (``group``) is identified with the arm: one as X0 and the translation
+    (without SPAT), the others with six unknowns each; each group's points must span 3-D space.
     """
     points = campaign.points
     if points is None or len(points.group) == 0:
@@ -211,47 +232,149 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
                                   f"{arm.n_axes} ({arm.source})")
     if not (np.all(np.isfinite(points.q)) and np.all(np.isfinite(points.point))):
         raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
-    groups = np.unique(points.group)
-    if groups.size != 1:
-        raise IdentificationError(
-            f"points.csv has {groups.size} groups ({', '.join(str(g) for g in groups)}): one "
-            "instrument frame per identification is supported; identify each group on its own")
-    if np.linalg.matrix_rank(points.point - points.point.mean(axis=0), tol=1e-4) < 3:
-        raise IdentificationError("the measured points lie on a line or a plane: they cannot fix "
-                                  "the instrument's frame")
+    for g in np.unique(points.group):
+        pts = points.point[points.group == g]
+        if len(pts) < 4 or np.linalg.matrix_rank(pts - pts.mean(axis=0), tol=1e-4) < 3:
+            raise IdentificationError(
+                f"the measured points of group {g} ({len(pts)} points) lie on a line or a plane: "
+                "they cannot fix that instrument's frame (measure 4 or more poses spread in 3-D)")
     return points
 
 
 class Measurements(NamedTuple):
-    """What an identification fits: one row per sample."""
+    """What an identification fits: one row per sample (SPAT, points, length-bar readouts)."""
 
     q: np.ndarray
     """Readouts, shape (N, n), rad."""
     measured: np.ndarray
-    """Measured points, shape (N, 3), m (sphere centres in the MT-CS, or tool points)."""
+    """Measured points, shape (N, 3), m: sphere centres in the MT-CS, tool points in their
+    instrument frame; NaN for length-bar readouts (their socket's position is estimated)."""
     group: np.ndarray
-    """R-Test location or instrument group of each sample, shape (N,)."""
+    """R-Test location, instrument group or bar socket of each sample, shape (N,) (ids as in
+    :attr:`labels`)."""
     nests: bool
-    """Whether each group is an R-Test nest whose offset is estimated."""
+    """Whether some samples sit in nests (R-Test locations, bar sockets) whose offsets are estimated."""
     samples: Samples
     """What effects depend on, per sample."""
     sigma: np.ndarray | None
-    """Stated noise of each sample per coordinate, shape (N,), m, or None."""
+    """Stated noise of each sample per coordinate, shape (N,), m (NaN: the R-Test's), or None."""
+    nest: np.ndarray | None = None
+    """Nest index of every sample (-1: none), shape (N,); None: no nests."""
+    nest_sigma: np.ndarray = np.zeros(0)
+    """Prior standard deviation of each nest's position per coordinate, shape (n_nests,), m."""
+    nest_keys: tuple[tuple[int, str], ...] = ()
+    """(id, label) of each nest: R-Test location m is (m, ""), a bar socket (id, "bar3A")."""
+    frame: np.ndarray | None = None
+    """Instrument frame index of every sample (-1: the main frame), shape (N,), or None."""
+    frame_groups: tuple[int, ...] = ()
+    """Instrument group of each frame besides the main one."""
+    lengths: np.ndarray = np.zeros((0, 3))
+    """Length rows (nest a, nest b, calibrated distance m), shape (n, 3)."""
 
 
-def measurements(campaign: Campaign, arm: Arm, use_rtest: bool) -> Measurements:
+def _spat_part(campaign: Campaign, arm: Arm, use_rtest: bool) -> Measurements:
+    spat = check_campaign(campaign, arm)
+    ids = np.unique(spat.location)
+    return Measurements(spat.q, measured_positions(campaign, use_rtest), spat.location, True,
+                        Samples.of_spat(arm, spat), None, np.searchsorted(ids, spat.location),
+                        np.zeros(ids.size), tuple((int(m), "") for m in ids))
+
+
+def _bar_part(campaign: Campaign, arm: Arm) -> Measurements:
+    """The bar readouts: one nest per (placement, socket), lengths between a placement's sockets."""
+    log = campaign.lengthbar
+    if log is None or not campaign.bar:
+        raise IdentificationError("--use-bar: the campaign has no length-bar data (lengthbar.csv "
+                                  "and bar.csv)")
+    if log.q.shape[1] != arm.n_axes or not np.all(np.isfinite(log.q)):
+        raise IdentificationError("the length-bar readouts do not match the arm's axes or are not "
+                                  "finite")
+    sockets = sorted({str(s) for s in log.socket})
+    keys = list(dict.fromkeys((int(p), str(s)) for p, s in zip(log.placement, log.socket)))
+    index = {k: i for i, k in enumerate(keys)}
+    nest = np.array([index[(int(p), str(s))] for p, s in zip(log.placement, log.socket)])
+    ids = np.array([BAR_ID * p + sockets.index(s) for p, s in keys])
+    lengths = [(index[(p, a)], index[(p, b)], length) for (a, b), length in campaign.bar.items()
+               for p in dict.fromkeys(int(v) for v in log.placement)
+               if (p, a) in index and (p, b) in index]
+    return Measurements(log.q, np.full((len(nest), 3), np.nan), ids[nest], True,
+                        Samples.of_log(arm, log), np.full(len(nest), SIGMA_SOCKET), nest,
+                        np.full(len(keys), SOCKET_PRIOR),
+                        tuple((int(i), f"bar{p}{s}") for i, (p, s) in zip(ids, keys)),
+                        lengths=np.array(lengths, dtype=float).reshape(-1, 3))
+
+
+def _join(parts: list[Measurements], arm: Arm) -> Measurements:
+    """One measurement set of several kinds: rows stacked, nests and frames renumbered."""
+    n = [len(p.q) for p in parts]
+    nest, lengths, offset = [], [], 0
+    for p in parts:
+        nest.append(np.full(len(p.q), -1) if p.nest is None else
+                    np.where(p.nest >= 0, p.nest + offset, -1))
+        lengths.append(p.lengths + [offset, offset, 0.0])
+        offset += p.nest_sigma.size
+    frame, frames, f_off = [], [], 0
+    for p in parts:
+        frame.append(np.full(len(p.q), -1) if p.frame is None else
+                     np.where(p.frame >= 0, p.frame + f_off, -1))
+        frames += list(p.frame_groups)
+        f_off += len(p.frame_groups)
+    # stated noise: the R-Test's (NaN, set by identify) for SPAT, the default for points without
+    sigma = np.concatenate([p.sigma if p.sigma is not None else
+                            np.full(k, np.nan if p.nest is not None else SIGMA_POINT)
+                            for k, p in zip(n, parts)])
+    s = [p.samples for p in parts]
+    temp = None if any(x.temp is None for x in s) else np.concatenate([x.temp for x in s])
+    t = None if any(x.t is None for x in s) else np.concatenate([x.t for x in s])
+    disp = np.concatenate([np.zeros((x.n, 3)) if x.displacement is None else x.displacement
+                           for x in s])
+    q = np.concatenate([p.q for p in parts])
+    return Measurements(q, np.concatenate([p.measured for p in parts]),
+                        np.concatenate([p.group for p in parts]), any(p.nests for p in parts),
+                        Samples(arm, q, temp, t, disp), sigma, np.concatenate(nest),
+                        np.concatenate([p.nest_sigma for p in parts]),
+                        tuple(k for p in parts for k in p.nest_keys), np.concatenate(frame),
+                        tuple(frames), np.concatenate(lengths))
+
+
+def measurements(campaign: Campaign, arm: Arm, use_rtest: bool, use_bar: bool = False
+                 ) -> Measurements:
     """Return what an identification of ``campaign`` fits (checked; see :class:`Measurements`).
 
-    SPAT campaigns: the measured sphere centres (Eq. 3), the R-Test locations, whose nest offsets
-    are estimated. Point campaigns (no SPAT): the measured tool points and their instrument group.
+    SPAT: the measured sphere centres (Eq. 3), the R-Test locations, whose nest offsets are
+    estimated. Points: the measured tool points and their instrument group; without SPAT the
+    first group's frame is the main one (X0 and translation), every other group has a frame of
+    its own. ``use_bar``: the length-bar readouts too, each socket a nest whose position is
+    estimated, the calibrated distances between a placement's sockets as length rows.
     """
+    parts = []
     if campaign.spat is not None or campaign.points is None:
-        spat = check_campaign(campaign, arm)
-        return Measurements(spat.q, measured_positions(campaign, use_rtest), spat.location, True,
-                            Samples.of_spat(arm, spat), None)
-    points = check_points(campaign, arm)
-    return Measurements(points.q, points.point, points.group, False, Samples.of_log(arm, points),
-                        points.sigma)
+        parts.append(_spat_part(campaign, arm, use_rtest))
+    if campaign.points is not None:
+        points = check_points(campaign, arm)
+        ids = np.unique(points.group)
+        own = ids if parts else ids[1:]  # groups with a frame of their own
+        frame = np.where(np.isin(points.group, own), np.searchsorted(own, points.group), -1)
+        parts.append(Measurements(points.q, points.point, points.group if not parts
+                                  else -points.group, False, Samples.of_log(arm, points),
+                                  points.sigma, frame=frame if own.size else None,
+                                  frame_groups=tuple(int(g) for g in own)))
+    if use_bar:
+        parts.append(_bar_part(campaign, arm))
+    if len(parts) == 1 and not use_bar:
+        part = parts[0]
+        if part.frame is None and part.nest is not None:  # SPAT alone: as before
+            return part._replace(sigma=None)
+        return part
+    return _join(parts, arm)
+
+
+def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return R (3, 3), t (3,) minimising |R a + t - b| over point pairs a, b (N, 3)."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((b - cb).T @ (a - ca))
+    rot = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    return rot, cb - rot @ ca
 
 
 def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndarray,
@@ -264,17 +387,47 @@ def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndar
         p_mt = np.array([measured[group == m].mean(axis=0) for m in ids])
     else:  # one group of absolute points: every point
         p_r, p_mt = pred, measured
-    a, b = p_r - p_r.mean(axis=0), p_mt - p_mt.mean(axis=0)
+    a = p_r - p_r.mean(axis=0)
     if len(p_r) < 3 or np.linalg.matrix_rank(a, tol=1e-3) < 2:
         return start.replace(translation=p_mt.mean(axis=0) - p_r.mean(axis=0))
-    u, _, vt = np.linalg.svd(b.T @ a)
-    rot = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt  # maps r-CS to MT-CS
+    rot, trans = _kabsch(p_r, p_mt)  # maps r-CS to MT-CS
     # rot = Ry(beta) Rx(alpha) Rz(gamma): row 1 is (ca sg, ca cg, -sa)
     alpha = np.arctan2(-rot[1, 2], np.hypot(rot[1, 0], rot[1, 1]))
     gamma = np.arctan2(rot[1, 0], rot[1, 1])
     beta = np.arctan2(rot[0, 2], rot[2, 2])
-    return start.replace(rotation_abc=[alpha, beta, gamma],
-                         translation=p_mt.mean(axis=0) - rot @ p_r.mean(axis=0))
+    return start.replace(rotation_abc=[alpha, beta, gamma], translation=trans)
+
+
+def _nuisance(arm: Arm, start: Parameters, meas: Measurements, sigma_class: float,
+              sigma_location: float) -> tuple[Nuisance, np.ndarray, list[UnknownKey]]:
+    """Return the problem's nests, frames and lengths, measured points and nuisance keys.
+
+    The measured points are completed with the bar sockets' start positions (the mean of their
+    readouts' start-model points); the frames start from a Kabsch fit to the start model.
+    """
+    measured = meas.measured.copy()
+    socket = np.isnan(measured[:, 0])
+    frame_start = np.zeros((len(meas.frame_groups), 3, 4))
+    if socket.any() or meas.frame_groups:
+        assert meas.nest is not None or not socket.any()
+        pred = stylus_positions(arm, start, meas.q, frame="mt")
+        if meas.nest is not None:
+            for j in np.unique(meas.nest[socket]):
+                rows = meas.nest == j
+                measured[rows] = pred[rows].mean(axis=0)
+        assert meas.frame is not None or not meas.frame_groups
+        for f in range(len(meas.frame_groups)):
+            assert meas.frame is not None
+            rows = meas.frame == f
+            rot, trans = _kabsch(measured[rows], pred[rows])
+            frame_start[f] = np.column_stack([rot, trans])
+    nest_sigma = np.where(meas.nest_sigma > 0, meas.nest_sigma, sigma_location)
+    keys: list[UnknownKey] = [NestKey(m, c, label) for m, label in meas.nest_keys for c in "xyz"]
+    keys += [FrameKey(g, c) for g in meas.frame_groups for c in ("rx", "ry", "rz", "tx", "ty", "tz")]
+    nuisance = Nuisance(nest=meas.nest, nest_sigma=nest_sigma, frame=meas.frame,
+                        frame_start=frame_start, lengths=meas.lengths,
+                        length_weight=sigma_class / SIGMA_BAR)
+    return nuisance, measured, keys
 
 
 def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed",
@@ -282,7 +435,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
              sigma_location: float = SIGMA_LOCATION, max_nfev: int = 200, jac: str = "analytic",
-             progress: bool = False, extensions: tuple[Term, ...] = ()) -> Calibration:
+             progress: bool = False, extensions: tuple[Term, ...] = (),
+             use_bar: bool = False) -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
     Args:
@@ -309,6 +463,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         progress: show a progress bar.
         extensions: further terms of the effect library (:mod:`aacmm_pin.effects`) to estimate
             (angle, scale or measurement kind; map terms are ``map_axes``).
+        use_bar: fit the length-bar readouts too (a calibration input, not only a check): every
+            socket's position is estimated from its readouts and the calibrated distances
+            between a placement's sockets are residuals (stated noise ``units.SIGMA_SOCKET`` per
+            readout coordinate, ``units.SIGMA_BAR`` per length).
 
     Returns:
         The calibration; ``success`` is False (with a message) when the solver did not converge.
@@ -323,8 +481,11 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
     tic = time.perf_counter()
     arm = arm or load_arm()
-    q, measured, group, nests, samples, stated = measurements(campaign, arm, use_rtest)
-    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q, measured, group)
+    meas = measurements(campaign, arm, use_rtest, use_bar)
+    q, group, samples, stated = meas.q, meas.group, meas.samples, meas.sigma
+    main = ~np.isnan(meas.measured[:, 0]) & (True if meas.frame is None else meas.frame < 0)
+    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q[main],
+                                    meas.measured[main], group[main])
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
                              tuple(t for t in extensions if t.kind is not Kind.MAP), samples)
@@ -334,11 +495,15 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     _, jac_now = unknowns.jacobian(x_arm, q)
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
-    sigma_class = sigma or (SIGMA_RTEST if nests else SIGMA_POINT if stated is None
+    has_spat = campaign.spat is not None or campaign.points is None
+    sigma_class = sigma or (SIGMA_RTEST if has_spat else SIGMA_POINT if stated is None
                             else float(np.median(stated)))
+    if stated is not None:  # SPAT rows of a joint problem: the R-Test's noise
+        stated = np.where(np.isnan(stated), sigma_class, stated)
+    nuisance, measured, nuisance_keys = _nuisance(arm, start, meas, sigma_class, sigma_location)
     n = len(q)
     scale = f_scale or 3 * sigma_class
-    x_loc = np.zeros(3 * np.unique(group).size if nests else 0)
+    x_loc = np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)
     nfev = 0
     settings = SolverSettings(loss=loss, f_scale=scale, max_nfev=max_nfev)
     with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
@@ -353,9 +518,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
             x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
             x_now = np.concatenate([x_arm, x_loc])
-            problem = Problem(unknowns, q, measured, group if nests else None, constraints, obs.scale,
-                              x_start, x_now, sigma_class, sigma_location,
-                              None if stated is None else sigma_class / stated)
+            problem = Problem(unknowns, q, measured, nuisance, constraints, obs.scale, x_start,
+                              x_now, sigma_class, None if stated is None else sigma_class / stated)
             z0 = problem.z(x_now)
             res = problem.solve(z0, settings, jac, on_evaluation=bar.update)
             nfev += res.nfev
@@ -368,7 +532,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     residual = data_res if problem.row_weight is None else data_res / problem.row_weight
     sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
     covariance = problem.covariance(x_full, sig)
-    names = unknowns.names + [str(k) for k in (nest_keys(group) if nests else [])]
+    names = unknowns.names + [str(k) for k in nuisance_keys]
     params = unknowns.parameters(x_arm)
     lines = ident.describe(unknowns, unvisited, obs)
     if gauges:
@@ -391,7 +555,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                        raw=OptimizeResult({k: v for k, v in res.items() if k != "jac"}),
                        unknowns=final_u,
                        constraints=constraints, identifiable=obs.identifiable, q=q,
-                       problem=problem, settings=settings)
+                       problem=problem, settings=settings, nuisance_keys=tuple(nuisance_keys),
+                       inputs=tuple(k for k, on in (("spat", has_spat),
+                                                    ("points", campaign.points is not None),
+                                                    ("bar", use_bar)) if on))
 
 
 def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> float:

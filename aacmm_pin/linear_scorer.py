@@ -74,9 +74,9 @@ class LinearScorer:
         if bar is not None and bar.n:
             # bar errors whitened by their predicted covariance (posterior of this model + what
             # the SPATs leave unknown): e^T C^-1 e = |L^-1 e|^2
-            p_loc = problem.p[problem.n_arm:]
+            p_loc = problem.p[problem.n_arm:problem.n_arm + problem.n_loc]
             info = (sum(g for g, _ in self._base_grams[:-1]) + self.ridge) / self.sigma ** 2
-            info += p_loc.T @ p_loc / problem.sigma_location ** 2  # the nests' own prior
+            info += p_loc.T @ (p_loc / problem.nest_sigma[:, None] ** 2)  # the nests' own prior
             cov = bar.covariance(info, self.jac[:self.n_data], self.sigma)
             chol = np.linalg.cholesky(cov + 1e-12 * np.trace(cov) / bar.n * np.eye(bar.n))
             self._bar_white = (chol, sla.solve_triangular(chol, bar.errors, lower=True),

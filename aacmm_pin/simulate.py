@@ -68,6 +68,8 @@ class SimulationConfig:
     """Std of each of alpha0, beta0, gamma0 (a few tenths of a degree)."""
     samples_per_socket: int = 40
     """Length-bar postures per socket."""
+    sigma_socket: float = 0.0
+    """Scatter of the stylus centre seated in a bar socket, per coordinate (0: exact)."""
     bar_placements: int = 7
     """Length-bar placements around the arm."""
     dh_sigma_length: float = 1e-4
@@ -309,6 +311,8 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
             n = config.samples_per_socket
             temp = temps(n)
             targets.append(np.tile(pos, (n, 1)))
+            if config.sigma_socket > 0:  # drawn only then: other campaigns stay as they were
+                targets[-1] = targets[-1] + rng.normal(0.0, config.sigma_socket, (n, 3))
             if "backlash" not in config.effects:
                 q_bar.append(true_arm.solve_ik(targets[-1], rng, temp))
             placement.append(np.full(n, k))

@@ -23,6 +23,15 @@ SIGMA_LOCATION = 3e-6
 SIGMA_POINT = 20e-6
 """Default standard uncertainty of an absolute tool point per coordinate, m: a laser tracker's
 stated accuracy over a robot's workspace (e.g. 15 um + 6 um/m); a ``sigma_um`` column overrides it."""
+SIGMA_SOCKET = 2e-6
+"""Standard uncertainty of a stylus centre seated in a length-bar socket, per coordinate, m (the
+arm's readout noise at a fixed point, as for an R-Test reading); used when the bar is a
+calibration input."""
+SIGMA_BAR = 1e-6
+"""Standard uncertainty of a calibrated length-bar distance, m (a calibrated bar: ~1 um)."""
+SOCKET_PRIOR = 1.0
+"""Prior standard deviation of a length-bar socket's position per coordinate, m: unknown, so
+loose (the socket's own readouts and the bar's lengths determine it)."""
 STEP_DEG = 5.0
 """Encoder map node step, deg (nodes at -180, -175, ..., 175 deg)."""
 REFERENCE_TEMPERATURE_C = 20.0

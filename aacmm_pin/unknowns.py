@@ -47,17 +47,32 @@ class NestKey(NamedTuple):
     """One coordinate of an R-Test nest's offset; ``str()`` gives its name, e.g. ``location2_dx``."""
 
     location: int
-    """R-Test location."""
+    """R-Test location (or the id of another nest, e.g. a length-bar socket)."""
     coordinate: str
     """``"x"``, ``"y"`` or ``"z"`` (MT-CS)."""
+    label: str = ""
+    """Name of a nest that is not an R-Test location, e.g. ``bar3A`` (placement 3, socket A)."""
 
     def __str__(self) -> str:
-        return f"location{self.location}_d{self.coordinate}"
+        return f"{self.label or f'location{self.location}'}_d{self.coordinate}"
 
 
-UnknownKey: TypeAlias = "str | NodeKey | NestKey"
+class FrameKey(NamedTuple):
+    """One of an instrument frame's six unknowns; ``str()`` gives its name, e.g. ``group2_rx``."""
+
+    group: int
+    """Instrument group (``group`` column of points.csv)."""
+    component: str
+    """``rx``, ``ry``, ``rz`` (rotation vector, rad) or ``tx``, ``ty``, ``tz`` (translation, m)."""
+
+    def __str__(self) -> str:
+        return f"group{self.group}_{self.component}"
+
+
+UnknownKey: TypeAlias = "str | NodeKey | NestKey | FrameKey"
 """What an estimated entry is: a named parameter (``dx21``, ``tool_x``, a term's parameter), a
-map node or a nest offset coordinate. ``str(key)`` is its name in files and reports."""
+map node, a nest offset coordinate or an instrument frame's unknown. ``str(key)`` is its name in
+files and reports."""
 
 
 @dataclass(frozen=True)

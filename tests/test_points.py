@@ -129,17 +129,16 @@ def test_points_are_weighted_by_their_stated_noise():
     assert better < 0.6 * worse  # GLS against OLS: the 10 um points carry the fit
 
 
-def test_several_instrument_groups_are_refused():
-    """Two groups (two tracker stations) are refused with a message, not mixed into one frame."""
+def test_a_group_too_small_for_its_own_frame_is_refused():
+    """Each group has a frame of its own: 3 points of group 2 cannot fix it; the message names it."""
     arm = ap.load_arm(UR5)
     c = _points_campaign(arm, _truth(arm, 0), 40, 0)
     pts = c.points
     assert pts is not None
     two = ap.Campaign(spat=None, locations={}, lengthbar=None, bar={}, points=PointLog(
-        group=np.repeat([1, 2], 20), q=pts.q, point=pts.point))
-    with pytest.raises(ap.IdentificationError, match="2 groups"):
+        group=np.r_[np.ones(37, dtype=np.int64), [2, 2, 2]], q=pts.q, point=pts.point))
+    with pytest.raises(ap.IdentificationError, match="group 2 .3 points"):
         ap.identify(two, arm, model="dh")
-
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="../shared/real-data is not beside the project")
 def test_ur5_and_wam_real_tracker_data(tmp_path):

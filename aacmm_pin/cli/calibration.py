@@ -71,7 +71,7 @@ def _identify(args: argparse.Namespace) -> int:
     cal = identify(read_campaign(args.campaign), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   max_nfev=args.max_nfev, progress=sys.stderr.isatty())
+                   max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar)
     write_calibration(cal, arm, args.out)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
@@ -80,12 +80,14 @@ def _identify(args: argparse.Namespace) -> int:
 def _print_calibration(cal: Calibration, out: Path) -> None:
     """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
     state = "converged" if cal.success else "DID NOT CONVERGE"
-    by_loc = ", ".join(f"{m}: {v * 1e6:.2f}" for m, v in cal.fit_rms_by_location().items())
-    data = (f"{'with' if cal.use_rtest else 'without'} R-Test" if cal.problem.n_loc
-            else "absolute points")
+    by_loc = ", ".join(f"{cal.group_label(m)}: {v * 1e6:.2f}"
+                       for m, v in cal.fit_rms_by_location().items())
+    kinds = {"spat": f"SPAT {'with' if cal.use_rtest else 'without'} R-Test",
+             "points": "absolute points", "bar": "length bar"}
+    data = " + ".join(kinds[k] for k in cal.inputs)
     print(f"{cal.model} model ({data}): {state} ({cal.nfev} evaluations), "
           f"{cal.n_determined} parameters determined, fit RMS {cal.fit_rms * 1e6:.2f} um "
-          f"(by {'location' if cal.problem.n_loc else 'group'} {by_loc}), "
+          f"(by {'location' if 'spat' in cal.inputs else 'group'} {by_loc}), "
           f"{cal.runtime_s:.1f} s -> {out}")
     for line in cal.unidentifiable:
         print(f"  not identifiable: {line}")
@@ -284,6 +286,10 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--max-nfev", type=int, default=200,
                    help="most residual evaluations per solve (the solve stops at its tolerance; "
                         "the count used is printed and in report.json)")
+    p.add_argument("--use-bar", action="store_true",
+                   help="fit the length-bar readouts too (a calibration input: socket positions "
+                        "estimated, calibrated lengths as residuals); validate then on another "
+                        "bar placement set")
     p.set_defaults(handler=_identify)
 
     p = add_command(subparsers, "discover", "find what a model is missing: name the effect, add "
