@@ -24,6 +24,7 @@ from scipy.optimize import OptimizeResult
 from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
+from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign, PointLog, SpatLog
 from aacmm_pin.effects import Kind, Term
@@ -479,8 +480,17 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"jac: choose 'analytic', '2-point' or '3-point', got {jac!r}")
     if model not in MODELS:
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
+    with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
+        return _identify(campaign, arm or load_arm(), model, use_rtest, start, step_deg, map_axes,
+                         loss, f_scale, sigma, sigma_location, max_nfev, jac, progress,
+                         extensions, use_bar)
+
+
+def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: Parameters | None,
+              step_deg: float, map_axes: tuple[int, ...] | None, loss: str, f_scale: float | None,
+              sigma: float | None, sigma_location: float, max_nfev: int, jac: str, progress: bool,
+              extensions: tuple[Term, ...], use_bar: bool) -> Calibration:
     tic = time.perf_counter()
-    arm = arm or load_arm()
     meas = measurements(campaign, arm, use_rtest, use_bar)
     q, group, samples, stated = meas.q, meas.group, meas.samples, meas.sigma
     main = ~np.isnan(meas.measured[:, 0]) & (True if meas.frame is None else meas.frame < 0)
