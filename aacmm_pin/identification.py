@@ -45,6 +45,9 @@ from aacmm_pin.units import (
 from aacmm_pin.unknowns import FrameKey, NestKey, NodeKey, UnknownKey, Unknowns
 
 MODELS = ("dh", "proposed")
+MIN_DOF_FRACTION = 0.1
+"""An identification whose degrees of freedom are fewer than this fraction of its residual
+coordinates reports ``success`` False: its residual cannot estimate the noise."""
 BAR_ID = 100_000
 """A length-bar socket used as a nest has id ``BAR_ID * placement + socket index`` (sorted names)."""
 
@@ -540,7 +543,11 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
     obs = used
     data_res = res.fun[:3 * n]  # weighted: the noise in units of sigma_class
     residual = data_res if problem.row_weight is None else data_res / problem.row_weight
-    sig = _sigma(data_res, problem.n_arm - obs.hold.shape[0] - len(gauges), sigma)
+    n_det = problem.n_arm - obs.hold.shape[0] - len(gauges) + problem.n_frame
+    dof = data_res.size + problem.n_lengths - n_det
+    enough = dof >= MIN_DOF_FRACTION * data_res.size
+    # too few residuals: the residual says nothing about the noise; the stated noise stands
+    sig = _sigma(data_res, n_det, sigma) if enough else float(sigma or sigma_class)
     covariance = problem.covariance(x_full, sig)
     names = unknowns.names + [str(k) for k in nuisance_keys]
     params = unknowns.parameters(x_arm)
@@ -556,6 +563,14 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
     node_ok = {a: identifiable[final_u.map_slice(a)].copy() for a in final_u.map_axes}
     success = bool(res.success)  # the last round's: earlier ones only set the held directions
     message = res.message if success else f"did not converge: {res.message}"
+    if not enough:
+        more = int(np.ceil((n_det / (1 - MIN_DOF_FRACTION) - data_res.size) / 3))
+        success = False
+        message = (f"too few samples: {data_res.size} residual coordinates for {n_det} determined "
+                   f"parameters ({dof} degrees of freedom, fewer than "
+                   f"{MIN_DOF_FRACTION:.0%} of the residuals), so neither the noise nor the "
+                   f"uncertainty can be estimated from the fit (the stated noise "
+                   f"{sig * 1e6:.2g} um is used); measure at least about {more} more postures")
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
                        x=x_full, covariance=covariance, sigma=sig,
                        fun=residual.reshape(n, 3), location=group.copy(), success=success,

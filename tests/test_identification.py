@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import yourdfpy
 
+import aacmm_pin as ap
 from aacmm_pin.arm import load_arm
 from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
 from aacmm_pin.cli import main
@@ -201,3 +203,28 @@ def test_nan_through_the_api_is_refused(runs, arm):
     q[3, 2] = np.nan
     with pytest.raises(IdentificationError, match="non-finite"):
         identify(camp.with_spat(q=q), arm)
+
+
+def test_too_few_postures_is_not_a_confident_calibration():
+    """10 postures per location for the proposed model: as many parameters as residuals.
+
+    Reported ``success`` False with how many postures to add, and the uncertainty from the stated
+    noise, never ~0 (the fit RMS is ~0 because the model can follow every coordinate).
+    """
+    arm = ap.load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=0, samples_per_location=10,
+                                                  bar_placements=2, samples_per_socket=5))
+    cal = ap.identify(sim.campaign, arm, "proposed")
+    assert cal.fit_rms < 0.2e-6  # the fit follows the noise
+    assert not cal.success
+    more = int(re.search(r"measure at least about (\d+) more postures", cal.message).group(1))
+    assert more > 0
+    assert cal.sigma == pytest.approx(ap.units.SIGMA_RTEST)
+    for axis, ok in cal.node_identifiable.items():
+        if ok.any():
+            assert np.nanmin(cal.node_std(axis)[ok]) > 0.1 * ap.units.ARCSEC
+    # a campaign with 4x the postures can estimate its noise (new postures also visit new nodes:
+    # the count in the message is a lower bound)
+    bigger = simulate_campaign(arm, SimulationConfig(seed=0, samples_per_location=40,
+                                                     bar_placements=2, samples_per_socket=5))
+    assert ap.identify(bigger.campaign, arm, "proposed").success
