@@ -211,6 +211,7 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
                                   f"{arm.n_axes} ({arm.source})")
     if not (np.all(np.isfinite(points.q)) and np.all(np.isfinite(points.point))):
         raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
+    _check_point_tools(points, arm)
     groups = np.unique(points.group)
     if groups.size != 1:
         raise IdentificationError(
@@ -220,6 +221,25 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
         raise IdentificationError("the measured points lie on a line or a plane: they cannot fix "
                                   "the instrument's frame")
     return points
+
+
+def _check_point_tools(points: PointLog, arm: Arm) -> None:
+    """Raise IdentificationError if the points' tools are missing (several tools) or unknown."""
+    listing = ", ".join(arm.tool_names)
+    if points.tool is None:
+        if arm.n_tools > 1:
+            raise IdentificationError(f"points.csv: line 1: column 'tool': missing; the arm has "
+                                      f"{arm.n_tools} tools ({listing}): say which one each point "
+                                      "measures")
+        return
+    known = set(arm.tool_names) | set(arm.tool_joints)
+    bad = [k for k, name in enumerate(points.tool.tolist()) if name not in known]
+    if bad:
+        k = bad[0]
+        line = f"line {points.lines[k]}" if points.lines is not None else f"row {k + 1}"
+        raise IdentificationError(f"points.csv: {line}: column 'tool': unknown tool "
+                                  f"'{points.tool[k]}' ({len(bad)} such points); the arm's tools: "
+                                  f"{listing}")
 
 
 class Measurements(NamedTuple):
@@ -255,10 +275,10 @@ def measurements(campaign: Campaign, arm: Arm, use_rtest: bool) -> Measurements:
 
 
 def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndarray,
-                   group: np.ndarray) -> Parameters:
+                   group: np.ndarray, samples: Samples) -> Parameters:
     """Return start parameters with X0 and translation from a Kabsch fit of the group centres."""
     ids = np.unique(group)
-    pred = stylus_positions(arm, start, q, frame="r")
+    pred = stylus_positions(arm, start, q, frame="r", samples=samples)
     if ids.size > 1:
         p_r = np.array([pred[group == m].mean(axis=0) for m in ids])
         p_mt = np.array([measured[group == m].mean(axis=0) for m in ids])
@@ -324,7 +344,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     tic = time.perf_counter()
     arm = arm or load_arm()
     q, measured, group, nests, samples, stated = measurements(campaign, arm, use_rtest)
-    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q, measured, group)
+    start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q, measured, group,
+                                    samples)
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
                              tuple(t for t in extensions if t.kind is not Kind.MAP), samples)
