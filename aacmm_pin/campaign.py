@@ -545,6 +545,26 @@ def read_readout_columns(path: str | Path, arm: Arm | None = None
     return fields["q"], fields["temp"], fields["t"]
 
 
+def read_tool_column(path: str | Path, arm: Arm) -> np.ndarray | None:
+    """Read the ``tool`` column of a readouts file (e.g. predict's input), checked against the arm.
+
+    Returns:
+        The tool name of each row, shape (N,), str, or None if the file has no ``tool`` column.
+
+    Raises:
+        CampaignFormatError: for an unknown tool (line and column), or no column while the arm has
+            several tools.
+    """
+    problems: list[Problem] = []
+    table = _read_table(Path(path), (), True, ("tool", *_OPTIONAL), problems, others_allowed=True,
+                        axis_names=arm.axis_names)
+    if table is not None and table.lines:
+        _check_tools(table, arm, problems)
+    if problems or table is None:
+        raise CampaignFormatError(problems)
+    return np.array(table.cols["tool"], dtype=str) if "tool" in table.cols else None
+
+
 def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
     """Write named columns of cells (floats with 9 decimals) under a header row."""
     cells = [[f"{v:.9f}" if isinstance(v, float) else str(v) for v in c] for c in columns.values()]

@@ -322,6 +322,27 @@ def test_axes_command_prints_tools(capsys):
     assert "left         joint tool_left" in out and "tool_right_x" in out
 
 
+def test_predict_command_reads_joint_names_and_tools(tmp_path, torso, capsys):
+    """`aacmm-pin predict` on a tree: <joint>_deg columns and a tool column give each row's tool
+    point (as predict()); without the tool column it stops with file, line and column."""
+    params = _truth(torso, 4, compliant=False).replace(arm=str(TORSO))
+    ap.write_parameters(params, tmp_path / "parameters.json")
+    rng = np.random.default_rng(7)
+    q = rng.uniform(-1.5, 1.5, (6, 15))
+    tools = ["left", "right", "right", "left", "left", "right"]
+    order = rng.permutation(15)
+    header = ["tool", *(f"{torso.axis_names[k]}_deg" for k in order)]
+    rows = [[t, *(f"{np.degrees(qi[k]):.12f}" for k in order)] for t, qi in zip(tools, q)]
+    (tmp_path / "q.csv").write_text("\n".join(",".join(r) for r in [header, *rows]) + "\n")
+    out = tmp_path / "points.csv"
+    assert cli.main(["predict", str(tmp_path), str(tmp_path / "q.csv"), "--out", str(out)]) == 0
+    got = np.loadtxt(out, delimiter=",", skiprows=1) * 1e-3
+    np.testing.assert_allclose(got, kinematics.predict(torso, params, q, tool=tools), atol=1e-11)
+    (tmp_path / "q.csv").write_text("\n".join(",".join(r[1:]) for r in [header, *rows]) + "\n")
+    assert cli.main(["predict", str(tmp_path), str(tmp_path / "q.csv"), "--out", str(out)]) == 2
+    assert "q.csv:1: column 'tool': missing column" in capsys.readouterr().err
+
+
 # ------------------------------------------------------------------------------- round trip
 def _round_trip(torso: ap.Arm, seed: int, n: int) -> tuple[np.ndarray, list[int], tuple[float, ...]]:
     """Identify and discover on simulated points; return z-scores, named axes, held-out RMS."""

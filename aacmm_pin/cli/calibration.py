@@ -46,7 +46,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_readout_columns, write_points
+    from aacmm_pin.campaign import read_readout_columns, read_tool_column, write_points
     from aacmm_pin.kinematics import predict
     from aacmm_pin.parameters import check_against_arm, read_parameters
     from aacmm_pin.samples import Samples
@@ -55,7 +55,9 @@ def _predict(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm or params.arm)
     check_against_arm(params, arm)
     q, temp, t = read_readout_columns(args.readouts, arm)
-    points = predict(arm, params, q, Samples(arm, q, temp, t), tool=args.tool)
+    tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
+        args.readouts, arm)
+    points = predict(arm, params, q, Samples(arm, q, temp, t), tool=tool)
     write_points(args.out, points)
     print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS) to {args.out}")
     return 0
@@ -277,7 +279,8 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("readouts", type=Path,
                    help="CSV with columns q1_deg..qn_deg (or one <joint>_deg per axis)")
     p.add_argument("--tool", default=None,
-                   help="the tool whose point to predict, for an arm with several (see axes)")
+                   help="the tool whose point to predict, for an arm with several (see axes); "
+                        "default: the readouts' tool column")
     p.set_defaults(handler=_predict)
 
     p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
