@@ -317,7 +317,7 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         add(top, first_q, f"mixes q<n>_deg and joint-name readout columns ({by_name[0]}): "
                           "use q1_deg..qn_deg or one <joint name>_deg column per axis")
     q_columns = by_name and named or _q_names(max(q_found, default=0))
-    wanted = [*required, *(q_columns or ["q1_deg"] if has_q else [])]
+    wanted = [*required, *(q_columns or ["q1_deg"] if has_q and not q_missing else [])]
     for name in (missing := [name for name in wanted if name not in index]):
         if name in named:
             add(top, name, "missing column: joint-name readout columns need one per axis "

@@ -211,7 +211,8 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
                                   f"{arm.n_axes} ({arm.source})")
     if not (np.all(np.isfinite(points.q)) and np.all(np.isfinite(points.point))):
         raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
-    _check_point_tools(points, arm)
+    _check_point_tools(points, arm, "points.csv" if campaign.source is None
+                       else str(campaign.source / "points.csv"))
     groups = np.unique(points.group)
     if groups.size != 1:
         raise IdentificationError(
@@ -223,12 +224,12 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
     return points
 
 
-def _check_point_tools(points: PointLog, arm: Arm) -> None:
+def _check_point_tools(points: PointLog, arm: Arm, path: str) -> None:
     """Raise IdentificationError if the points' tools are missing (several tools) or unknown."""
     listing = ", ".join(arm.tool_names)
     if points.tool is None:
         if arm.n_tools > 1:
-            raise IdentificationError(f"points.csv: line 1: column 'tool': missing; the arm has "
+            raise IdentificationError(f"{path}: line 1: column 'tool': missing; the arm has "
                                       f"{arm.n_tools} tools ({listing}): say which one each point "
                                       "measures")
         return
@@ -237,7 +238,7 @@ def _check_point_tools(points: PointLog, arm: Arm) -> None:
     if bad:
         k = bad[0]
         line = f"line {points.lines[k]}" if points.lines is not None else f"row {k + 1}"
-        raise IdentificationError(f"points.csv: {line}: column 'tool': unknown tool "
+        raise IdentificationError(f"{path}: {line}: column 'tool': unknown tool "
                                   f"'{points.tool[k]}' ({len(bad)} such points); the arm's tools: "
                                   f"{listing}")
 
