@@ -136,6 +136,21 @@ def _chains(robot: yourdfpy.Robot, path: Path | str) -> dict[str, list[yourdfpy.
     return out
 
 
+def _next_axis(joints: list[yourdfpy.Joint]) -> np.ndarray | None:
+    """Return the axis of the first revolute joint of ``joints`` in the frame before them.
+
+    The origins on the way (nominal geometry, and the revolute's own) rotate it.
+    """
+    rot = np.eye(3)
+    for joint in joints:
+        if joint.origin is not None:
+            rot = rot @ np.asarray(joint.origin, dtype=float)[:3, :3]
+        if joint.type in _MOVABLE:
+            axis: np.ndarray = rot @ np.asarray(joint.axis, dtype=float)
+            return axis
+    return None
+
+
 def _tree_order(robot: yourdfpy.Robot) -> dict[str, int]:
     """Return joint name -> rank in the depth-first order in which Pinocchio numbers the tree."""
     model = pin.buildModelFromXML(_to_xml(robot))
@@ -204,8 +219,8 @@ class Arm:
         for chain in chains.values():
             for i, joint in enumerate(chain):
                 if joint.type == "fixed" and ERROR_FRAME_PATTERN.match(joint.name):
-                    nxt = next((j for j in chain[i + 1:] if j.type in _MOVABLE), None)
-                    axis = None if nxt is None else np.asarray(nxt.axis, dtype=float)
+                    is_dth = joint.name.startswith("dth")  # only its axis is the next one's
+                    axis = _next_axis(chain[i + 1:]) if is_dth else None
                     seen = next_axis.setdefault(joint.name, axis)
                     if (seen is None) != (axis is None) or (
                             seen is not None and axis is not None and not np.allclose(seen, axis)):

@@ -85,6 +85,34 @@ def test_tree_axes_tools_and_error_frames(torso):
     assert np.allclose(torso.error_frame("dth9").axis, [0, 0, 1])
 
 
+def _two_branch_urdf(right_rpy: str) -> str:
+    """A root error frame dth1, then two branches of one axis each (about z of a mount frame)."""
+    def branch(side: str, rpy: str) -> str:
+        return (f'<joint name="{side}_mount" type="fixed"><parent link="f1"/><child link="{side}0"/>'
+                f'<origin xyz="0 0 0" rpy="{rpy}"/></joint><link name="{side}0"/>'
+                f'<joint name="{side}_A" type="revolute"><parent link="{side}0"/>'
+                f'<child link="{side}1"/><origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>'
+                '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+                f'<link name="{side}1"/><joint name="tool_{side}" type="fixed">'
+                f'<parent link="{side}1"/><child link="{side}_tip"/>'
+                f'<origin xyz="0.1 0 0" rpy="0 0 0"/></joint><link name="{side}_tip"/>')
+    return ('<?xml version="1.0"?><robot name="two"><link name="base"/>'
+            '<joint name="dth1" type="fixed"><parent link="base"/><child link="f1"/></joint>'
+            f'<link name="f1"/>{branch("left", "1.5707963267948966 0 0")}'
+            f'{branch("right", right_rpy)}</robot>')
+
+
+def test_axis_offset_turns_about_the_next_axis_of_every_branch(tmp_path):
+    """dth before a branch point: the next axes (through the mounts' rotations) must agree."""
+    path = tmp_path / "two.urdf"
+    path.write_text(_two_branch_urdf("1.5707963267948966 0 0"))
+    arm = ap.load_arm(path)
+    np.testing.assert_allclose(arm.error_frame("dth1").axis, [0, -1, 0], atol=1e-15)
+    path.write_text(_two_branch_urdf("0 0 0"))
+    with pytest.raises(ap.ArmModelError, match="'dth1' sits before a branch"):
+        ap.load_arm(path)
+
+
 def test_single_tool_arms_keep_their_names(arm):
     """The default arm: one tool `tool`, unknowns tool_x/y/z, parameters.json with `tool` only."""
     assert arm.tool_joints == ["tool"] and arm.tool_names == ["tool"]
