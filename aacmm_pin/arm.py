@@ -18,7 +18,8 @@ does too):
   below (they do not move any tool), so that the configuration is exactly the n readouts.
 * **Error frames.** A fixed joint named ``dx<ij>``, ``dy<ij>``, ``dz<ij>`` (translation along x/y/z of
   its parent frame), ``a<ij>``, ``b<ij>``, ``c<ij>`` (right-handed rotation about x/y/z) or
-  ``dth<i>0`` (rotation about the axis of the next revolute joint down its branch: the axis offset)
+  ``dth<i>0`` (rotation about the axis of the next revolute joint down its branch, through the
+  rotations on the way: the axis offset; before a branch point, the same axis on every branch)
   holds one elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
   Error frames are the ones on the tools' chains, in the same depth-first order as the axes.
 * Every other fixed joint is nominal geometry (e.g. ``L2z``).
