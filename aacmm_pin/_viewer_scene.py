@@ -134,7 +134,7 @@ class ArmPoser:
     """Placements of the arm's URDF visuals for encoder readouts (maps applied)."""
 
     def __init__(self, arm: Arm, params: Parameters):
-        xml = arm.urdf_string(params.dh, params.tool)
+        xml = arm.urdf_string(params.dh, tools=params.tool_vectors(arm))
         self.model = pin.buildModelFromXML(xml)
         self.visual = pin.buildGeomFromUrdfString(self.model, xml, pin.GeometryType.VISUAL,
                                                   package_dirs=[str(Path(arm.source).parent)])

@@ -3,14 +3,25 @@ r"""The arm: a URDF following aacmm_pin's conventions, read with yourdfpy, run o
 Conventions (the default arm ``urdf/aacmm7.urdf`` follows them; a user's arm is another URDF that
 does too):
 
-* **Axes.** The revolute joints on the chain from the root link to the stylus are the encoder
-  axes A1..An, numbered in chain order.
+* **Tools.** A fixed joint named ``tool`` carries the stylus sphere centre (the tool vector
+  :math:`{}^7p`) in its parent frame (the last axis' frame); its child link is the stylus. A tree
+  (e.g. a torso with two arms, a marker on each hand) has several tools instead, fixed joints named
+  ``tool_<name>`` (``tool_left``, ``tool_right``): either one ``tool`` or ``tool_<name>`` joints. A
+  tool's *name* (``tool_names``, the ``tool`` column of ``points.csv``) is ``<name>``, or ``tool``
+  for the single ``tool`` joint; its vector's unknowns are ``<joint>_x``, ``<joint>_y``,
+  ``<joint>_z`` (``tool_x``, ``tool_left_x``).
+* **Axes.** The revolute (or continuous) joints on the union of the chains from the root link to
+  the tools are the encoder axes A1..An, in the depth-first order of the kinematic tree in which
+  Pinocchio numbers the joints of the URDF (for a serial arm: root to tool, chain order); this is
+  the order of the readout columns ``q1_deg..qn_deg`` (``aacmm-pin axes URDF`` prints it). Tools
+  are in that order too. Movable joints on no tool's chain are held fixed at zero in the models
+  below (they do not move any tool), so that the configuration is exactly the n readouts.
 * **Error frames.** A fixed joint named ``dx<ij>``, ``dy<ij>``, ``dz<ij>`` (translation along x/y/z of
   its parent frame), ``a<ij>``, ``b<ij>``, ``c<ij>`` (right-handed rotation about x/y/z) or
-  ``dth<i>0`` (rotation about the axis of the next revolute joint: the axis offset) holds one
-  elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
-* **Tool.** The fixed joint ``tool`` carries the stylus sphere centre (the tool vector
-  :math:`{}^7p`) in the last axis' frame; its child link is the stylus.
+  ``dth<i>0`` (rotation about the axis of the next revolute joint down its branch, through the
+  rotations on the way: the axis offset; before a branch point, the same axis on every branch)
+  holds one elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
+  Error frames are the ones on the tools' chains, in the same depth-first order as the axes.
 * Every other fixed joint is nominal geometry (e.g. ``L2z``).
 
 Two Pinocchio views of one arm:
@@ -20,7 +31,8 @@ Two Pinocchio views of one arm:
 * the *identification* model (:attr:`Arm.identification`): every error frame, the tool vector and
   the r-CS -> MT-CS transform (paper Eq. 4, :math:`D_b(\beta_0) D_a(\alpha_0) D_c(\gamma_0)` plus a
   translation) are 1-DOF joints, so that Pinocchio's frame Jacobian of the stylus gives
-  d(stylus)/d(every parameter) analytically.
+  d(stylus)/d(every parameter) analytically (of each tool's frame: the joints not on its chain,
+  e.g. the other tools' vectors, have zero columns).
 """
 
 from __future__ import annotations
@@ -45,9 +57,13 @@ from aacmm_pin.errors import ArmModelError, FrameNotFound
 DEFAULT_ARM = "aacmm7"
 ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
 TOOL_JOINT = "tool"
+TOOL_PATTERN = re.compile(r"^tool(?:_([A-Za-z0-9][A-Za-z0-9_]*))?$")
+"""Names of the tool joints: ``tool`` or ``tool_<name>``."""
+_MOVABLE = ("revolute", "continuous")
 BASE_JOINTS = ("mt_x", "mt_y", "mt_z", "beta0", "alpha0", "gamma0")
 """Identification-model joints of the r-CS -> MT-CS transform, root first (Eq. 4)."""
 TOOL_JOINTS = ("tool_x", "tool_y", "tool_z")
+"""Identification-model joints of the tool vector of the single ``tool`` joint."""
 _UNIT = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
 _ROT_LETTER = {"a": "x", "b": "y", "c": "z"}
 _TOL = 1e-12
@@ -100,19 +116,47 @@ def resolve_arm_path(arm: str | Path) -> Path:
                              f"(embedded: {', '.join(EMBEDDED)})")
 
 
-def _chain(robot: yourdfpy.Robot, path: Path | str) -> list[yourdfpy.Joint]:
-    """Return the joints from the root link to the tool joint, root first."""
+def _chains(robot: yourdfpy.Robot, path: Path | str) -> dict[str, list[yourdfpy.Joint]]:
+    """Return tool joint name -> the joints from the root link to that tool joint, root first."""
     by_child = {j.child: j for j in robot.joints}
-    tool = [j for j in robot.joints if j.name == TOOL_JOINT]
-    if not tool:
-        raise ArmModelError(path, f"no fixed joint named '{TOOL_JOINT}' carrying the stylus "
-                                  f"(joints: {', '.join(j.name for j in robot.joints)})")
-    chain = [tool[0]]
-    while chain[-1].parent in by_child:
-        chain.append(by_child[chain[-1].parent])
-        if len(chain) > len(robot.joints):
-            raise ArmModelError(path, "the joints form a loop")
-    return chain[::-1]
+    tools = [j for j in robot.joints if j.type == "fixed" and TOOL_PATTERN.match(j.name)]
+    if not tools:
+        raise ArmModelError(path, f"no fixed joint named '{TOOL_JOINT}' (or 'tool_<name>') carrying "
+                                  f"the stylus (joints: {', '.join(j.name for j in robot.joints)})")
+    if len(tools) > 1 and any(j.name == TOOL_JOINT for j in tools):
+        raise ArmModelError(path, f"tool joints {', '.join(j.name for j in tools)}: name one tool "
+                                  f"'{TOOL_JOINT}', or several 'tool_<name>', not both")
+    out = {}
+    for tool in tools:
+        chain = [tool]
+        while chain[-1].parent in by_child:
+            chain.append(by_child[chain[-1].parent])
+            if len(chain) > len(robot.joints):
+                raise ArmModelError(path, "the joints form a loop")
+        out[tool.name] = chain[::-1]
+    return out
+
+
+def _next_axis(joints: list[yourdfpy.Joint]) -> np.ndarray | None:
+    """Return the axis of the first revolute joint of ``joints`` in the frame before them.
+
+    The origins on the way (nominal geometry, and the revolute's own) rotate it.
+    """
+    rot = np.eye(3)
+    for joint in joints:
+        if joint.origin is not None:
+            rot = rot @ np.asarray(joint.origin, dtype=float)[:3, :3]
+        if joint.type in _MOVABLE:
+            axis: np.ndarray = rot @ np.asarray(joint.axis, dtype=float)
+            return axis
+    return None
+
+
+def _tree_order(robot: yourdfpy.Robot) -> dict[str, int]:
+    """Return joint name -> rank in the depth-first order in which Pinocchio numbers the tree."""
+    model = pin.buildModelFromXML(_to_xml(robot))
+    kinds = (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)
+    return {f.name: k for k, f in enumerate(model.frames) if f.type in kinds}
 
 
 def _error_frame(joint: yourdfpy.Joint, next_axis: np.ndarray | None, path: Path | str
@@ -157,29 +201,50 @@ class Arm:
         self.name = name
         """Arm name as given by the user: an embedded arm's name or a URDF path."""
         self._robot = urdf.robot
-        chain = _chain(self._robot, source)
-        self._chain_joints = chain
-        self.axis_names: list[str] = [j.name for j in chain if j.type in ("revolute", "continuous")]
-        """Revolute joints (encoder axes) in chain order: axis n is ``axis_names[n - 1]``."""
+        chains = _chains(self._robot, source)
+        rank = _tree_order(self._robot)
+        on_chain = {j.name: j for chain in chains.values() for j in chain}
+        joints = sorted(on_chain.values(), key=lambda j: rank[j.name])
+        self._joints = {j.name: j for j in self._robot.joints}
+        self.axis_names: list[str] = [j.name for j in joints if j.type in _MOVABLE]
+        """Encoder axes (revolute joints on the tools' chains) in tree order (see the module
+        docstring): axis n is ``axis_names[n - 1]``, readout column ``q<n>_deg``."""
         if not self.axis_names:
             raise ArmModelError(source, "no revolute joint between the root link and the tool")
-        frames = []
-        for i, joint in enumerate(chain):
-            if joint.type == "fixed" and ERROR_FRAME_PATTERN.match(joint.name):
-                nxt = next((j for j in chain[i + 1:] if j.type in ("revolute", "continuous")), None)
-                frames.append(_error_frame(joint, None if nxt is None else
-                                           np.asarray(nxt.axis, dtype=float), source))
-            elif joint.type not in ("fixed", "revolute", "continuous"):
-                raise ArmModelError(source, f"joint '{joint.name}' is {joint.type}; an AACMM chain "
-                                            "holds only revolute and fixed joints")
-        self.error_frames: list[ErrorFrame] = frames
-        """The DH error parameters in chain order."""
-        tool_origin = chain[-1].origin if chain[-1].origin is not None else np.eye(4)
-        self.nominal_tool: np.ndarray = np.asarray(tool_origin, dtype=float)[:3, 3].copy()
-        """Tool vector held by the URDF, shape (3,), in m, in the last axis' frame."""
-        self.stylus_link: str = chain[-1].child
-        """Name of the stylus link (child of the tool joint)."""
-        self.root_link: str = chain[0].parent
+        self.tool_joints: list[str] = sorted(chains, key=rank.__getitem__)
+        """The tool joints (``tool`` or ``tool_<name>``), in tree order."""
+        self.off_chain: list[str] = [j.name for j in self._robot.joints
+                                     if j.type != "fixed" and j.name not in on_chain]
+        """Movable joints on no tool's chain: held fixed at zero in the Pinocchio models."""
+        next_axis: dict[str, np.ndarray | None] = {}
+        for chain in chains.values():
+            for i, joint in enumerate(chain):
+                if joint.type == "fixed" and ERROR_FRAME_PATTERN.match(joint.name):
+                    is_dth = joint.name.startswith("dth")  # only its axis is the next one's
+                    axis = _next_axis(chain[i + 1:]) if is_dth else None
+                    seen = next_axis.setdefault(joint.name, axis)
+                    if (seen is None) != (axis is None) or (
+                            seen is not None and axis is not None and not np.allclose(seen, axis)):
+                        raise ArmModelError(source, f"error frame '{joint.name}' sits before a "
+                                                    "branch whose next revolute axes differ")
+                elif joint.type not in ("fixed", *_MOVABLE):
+                    raise ArmModelError(source, f"joint '{joint.name}' is {joint.type}; an AACMM "
+                                                "chain holds only revolute and fixed joints")
+        self.error_frames: list[ErrorFrame] = [_error_frame(j, next_axis[j.name], source)
+                                               for j in joints if j.name in next_axis]
+        """The DH error parameters in tree order (chain order for a serial arm)."""
+        self.nominal_tools: dict[str, np.ndarray] = {
+            name: (np.eye(4) if chains[name][-1].origin is None
+                   else np.asarray(chains[name][-1].origin, dtype=float))[:3, 3].copy()
+            for name in self.tool_joints}
+        """Tool joint -> tool vector held by the URDF, shape (3,), in m, in its parent's frame."""
+        self.nominal_tool: np.ndarray = self.nominal_tools[self.tool_joints[0]]
+        """Tool vector of the first (for a serial arm: the only) tool, shape (3,), in m."""
+        self.tool_links: list[str] = [chains[name][-1].child for name in self.tool_joints]
+        """The tools' links (children of the tool joints), in tool order."""
+        self.stylus_link: str = self.tool_links[0]
+        """Name of the (first) stylus link (child of the tool joint)."""
+        self.root_link: str = joints[0].parent
         """Name of the root link (the reference CS, r-CS)."""
 
     def __reduce__(self) -> tuple[Callable[[str, str], Arm], tuple[str, str]]:
@@ -191,6 +256,40 @@ class Arm:
     def n_axes(self) -> int:
         """Number of encoder axes."""
         return len(self.axis_names)
+
+    @property
+    def n_tools(self) -> int:
+        """Number of tools (measured points)."""
+        return len(self.tool_joints)
+
+    @property
+    def tool_names(self) -> list[str]:
+        """The tools' names, in tool order: ``<name>`` of ``tool_<name>``, or ``tool``."""
+        return [m.group(1) or n for n in self.tool_joints if (m := TOOL_PATTERN.match(n))]
+
+    @property
+    def tool_unknowns(self) -> list[str]:
+        """Names of the tool vectors' entries, ``<tool joint>_x/_y/_z`` per tool, tool order."""
+        return [f"{name}_{c}" for name in self.tool_joints for c in "xyz"]
+
+    def tool_index(self, tool: str | int | np.ndarray | list[str] | list[int]) -> np.ndarray:
+        """Return the 0-based tool index of each entry of ``tool`` (names, joint names or indices).
+
+        Raises:
+            ValueError: naming an unknown tool and listing the arm's tools.
+        """
+        arr = np.atleast_1d(np.asarray(tool))
+        if arr.dtype.kind in "iu":
+            if arr.size and (arr.min() < 0 or arr.max() >= self.n_tools):
+                raise ValueError(f"tool: indices 0..{self.n_tools - 1} expected, got "
+                                 f"{sorted(set(arr.tolist()))}")
+            return arr.astype(np.int64)
+        lookup = {**{n: k for k, n in enumerate(self.tool_joints)},
+                  **{n: k for k, n in enumerate(self.tool_names)}}
+        if bad := sorted({str(v) for v in arr.tolist()} - lookup.keys()):
+            raise ValueError(f"tool: unknown tool {', '.join(map(repr, bad))}; the arm's tools: "
+                             f"{', '.join(self.tool_names)}")
+        return np.array([lookup[str(v)] for v in arr.tolist()], dtype=np.int64)
 
     @property
     def error_names(self) -> list[str]:
@@ -218,51 +317,60 @@ class Arm:
         """Lower and upper readout limits of each axis, shape (n_axes, 2), in rad."""
         out = np.tile([-np.pi, np.pi], (self.n_axes, 1))
         for i, name in enumerate(self.axis_names):
-            joint = next(j for j in self._chain_joints if j.name == name)
+            joint = self._joints[name]
             if joint.type == "revolute" and joint.limit is not None:
                 out[i] = [joint.limit.lower, joint.limit.upper]
         return out
 
     # ------------------------------------------------------------------ URDF views
-    def urdf_robot(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None
-                   ) -> yourdfpy.Robot:
-        """Return a copy of the URDF description with error frames and tool set to these values.
+    def urdf_robot(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                   tools: dict[str, np.ndarray] | None = None) -> yourdfpy.Robot:
+        """Return a copy of the URDF description with error frames and tools set to these values.
 
         Args:
             dh: error frame name -> value (m or rad); missing names keep the URDF's values.
-            tool: tool vector, shape (3,), in m; None keeps the URDF's.
+            tool: the first (for a serial arm: the only) tool's vector, shape (3,), in m; None
+                keeps the URDF's.
+            tools: tool joint name -> tool vector, shape (3,), in m (any tools; over ``tool``).
 
         Raises:
-            FrameNotFound: if ``dh`` names a parameter the arm does not have.
+            FrameNotFound: if ``dh`` or ``tools`` names a parameter the arm does not have.
         """
         dh = dict(dh or {})
         for name in dh:
             if name not in self.error_names:
                 raise FrameNotFound(name, self.error_names)
+        vectors = {} if tool is None else {self.tool_joints[0]: tool}
+        for name, value in (tools or {}).items():
+            if name not in self.tool_joints:
+                raise FrameNotFound(name, self.tool_joints)
+            vectors[name] = value
         robot = copy.deepcopy(self._robot)
         for joint in robot.joints:
             if joint.name in dh:
                 joint.origin = self.error_frame(joint.name).transform(dh[joint.name])
-            elif joint.name == TOOL_JOINT and tool is not None:
+            elif joint.name in vectors:
                 origin = np.eye(4) if joint.origin is None else np.array(joint.origin, dtype=float)
-                origin[:3, 3] = np.asarray(tool, dtype=float).reshape(3)
+                origin[:3, 3] = np.asarray(vectors[joint.name], dtype=float).reshape(3)
                 joint.origin = origin
         return robot
 
-    def urdf_string(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None
-                    ) -> str:
-        """Return the URDF text with error frames and tool set to these values."""
-        return _to_xml(self.urdf_robot(dh, tool))
+    def urdf_string(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                    tools: dict[str, np.ndarray] | None = None) -> str:
+        """Return the URDF text with error frames and tools set to these values."""
+        return _to_xml(self.urdf_robot(dh, tool, tools))
 
-    def runtime_model(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None
-                      ) -> pin.Model:
+    def runtime_model(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                      tools: dict[str, np.ndarray] | None = None) -> pin.Model:
         """Return the runtime Pinocchio model: error frames fixed at these values.
 
-        Its configuration is the n_axes true joint angles (readouts already corrected by the
-        encoder maps, see :func:`aacmm_pin.encoder_map.correct_readouts`); frame ``stylus_link``
-        is the stylus sphere centre.
+        Its configuration is the n_axes true joint angles in axis order (readouts already corrected
+        by the encoder maps, see :func:`aacmm_pin.encoder_map.correct_readouts`); the frames
+        ``tool_links`` are the tool points. Movable joints on no tool's chain are fixed at zero.
         """
-        return pin.buildModelFromXML(self.urdf_string(dh, tool))
+        robot = self.urdf_robot(dh, tool, tools)
+        _fix_joints(robot, self.off_chain)
+        return pin.buildModelFromXML(_to_xml(robot))
 
     @cached_property
     def identification(self) -> IdentificationModel:
@@ -274,8 +382,9 @@ class IdentificationModel:
     """Pinocchio model in which every parameter is a 1-DOF joint along its own axis.
 
     Joint order (root first): the r-CS -> MT-CS translation ``mt_x, mt_y, mt_z`` and rotation
-    ``beta0, alpha0, gamma0`` (Eq. 4), then the arm's chain with axes and error frames, then the
-    tool vector ``tool_x, tool_y, tool_z``. Every joint has one configuration entry, so ``nq == nv``.
+    ``beta0, alpha0, gamma0`` (Eq. 4), then the arm's tree with axes and error frames, then each
+    tool's vector (``tool_x, tool_y, tool_z``; ``tool_left_x`` ...). Every joint has one
+    configuration entry, so ``nq == nv``.
     """
 
     def __init__(self, arm: Arm):
@@ -291,17 +400,20 @@ class IdentificationModel:
                 joint.limit = big
             elif joint.type in ("revolute", "continuous"):
                 joint.type, joint.limit = "revolute", big
-        tool = next(j for j in robot.joints if j.name == TOOL_JOINT)
-        robot.joints.remove(tool)
-        parent = tool.parent
-        for i, name in enumerate(TOOL_JOINTS):
-            child = tool.child if i == 2 else f"{name}_frame"
-            robot.joints.append(yourdfpy.Joint(name=name, type="prismatic", parent=parent,
-                                               child=child, origin=np.eye(4),
-                                               axis=np.eye(3)[i], limit=big))
-            if i < 2:
-                robot.links.append(yourdfpy.Link(name=child))
-            parent = child
+        _fix_joints(robot, arm.off_chain)
+        for tool_name in arm.tool_joints:
+            tool = next(j for j in robot.joints if j.name == tool_name)
+            robot.joints.remove(tool)
+            parent = tool.parent
+            for i, c in enumerate("xyz"):
+                name = f"{tool_name}_{c}"
+                child = tool.child if i == 2 else f"{name}_frame"
+                robot.joints.append(yourdfpy.Joint(name=name, type="prismatic", parent=parent,
+                                                   child=child, origin=np.eye(4),
+                                                   axis=np.eye(3)[i], limit=big))
+                if i < 2:
+                    robot.links.append(yourdfpy.Link(name=child))
+                parent = child
         parent = "mt"
         robot.links.append(yourdfpy.Link(name="mt"))
         for i, name in enumerate(BASE_JOINTS):
@@ -316,8 +428,10 @@ class IdentificationModel:
         self.model: pin.Model = pin.buildModelFromXML(_to_xml(robot))
         """The Pinocchio model."""
         self._local = threading.local()
-        self.stylus_frame: int = self.model.getFrameId(arm.stylus_link)
-        """Pinocchio frame id of the stylus sphere centre."""
+        self.tool_frames: list[int] = [self.model.getFrameId(link) for link in arm.tool_links]
+        """Pinocchio frame ids of the tool points, in tool order."""
+        self.stylus_frame: int = self.tool_frames[0]
+        """Pinocchio frame id of the (first) stylus sphere centre."""
         idx = {name: self.model.joints[self.model.getJointId(name)].idx_q
                for name in self.model.names[1:]}
         self.base_idx: np.ndarray = np.array([idx[n] for n in BASE_JOINTS])
@@ -326,8 +440,8 @@ class IdentificationModel:
         """Configuration indices of the axes A1..An."""
         self.error_idx: np.ndarray = np.array([idx[n] for n in arm.error_names], dtype=int)
         """Configuration indices of the error frames, in ``arm.error_names`` order."""
-        self.tool_idx: np.ndarray = np.array([idx[n] for n in TOOL_JOINTS])
-        """Configuration indices of the tool vector (x, y, z)."""
+        self.tool_idx: np.ndarray = np.array([idx[n] for n in arm.tool_unknowns])
+        """Configuration indices of the tool vectors (x, y, z per tool, tool order)."""
         assert self.model.nq == self.model.nv == len(idx)
 
     @property
@@ -337,6 +451,13 @@ class IdentificationModel:
         if data is None:
             data = self._local.data = self.model.createData()
         return data
+
+
+def _fix_joints(robot: yourdfpy.Robot, names: list[str]) -> None:
+    """Turn the named joints into fixed joints at zero (their origin kept), in place."""
+    for joint in robot.joints:
+        if joint.name in names:
+            joint.type, joint.axis, joint.limit, joint.mimic = "fixed", None, None, None
 
 
 def _to_xml(robot: yourdfpy.Robot) -> str:

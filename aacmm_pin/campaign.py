@@ -5,6 +5,13 @@ The folder holds ``spat.csv`` + ``locations.csv`` (R-Test SPAT), ``lengthbar.csv
 comma separated with a header row, in mm and degrees (the columns are in
 ``_FILES`` below). Readers check every cell and raise one :class:`CampaignFormatError` listing every
 problem of every file with its line and column. Inside the package everything is SI (m, rad, s).
+
+**Readout columns.** Either ``q1_deg..qn_deg`` (axis order, see :mod:`aacmm_pin.arm`) or, when the
+reader is given the arm, one ``<joint name>_deg`` column per axis (``A1_deg``, ``left_j3_deg``), in
+any column order; not both. The joint names are the arm's, so without the arm only ``q`` columns are
+read. **Tools.** ``points.csv`` may name the tool each point measures in a ``tool`` column (a name of
+``Arm.tool_names``, e.g. ``left``): optional for a single-tool arm, needed for several tools; given
+the arm, the reader checks it (else :func:`aacmm_pin.identification.check_points` does).
 """
 
 from __future__ import annotations
@@ -17,11 +24,14 @@ from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, TypeGuard
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import numpy as np
 
 from aacmm_pin.errors import CampaignFormatError, Problem
+
+if TYPE_CHECKING:  # the arm is only passed through (the campaign layer does not load arms)
+    from aacmm_pin.arm import Arm
 
 MAX_ANGLE_DEG = 720.0
 """Largest encoder readout accepted in a file, in degrees (two turns either way)."""
@@ -34,16 +44,17 @@ _FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
     "locations.csv": (("location", *_XYZ["loc"]), False, ()),
     "lengthbar.csv": (("placement", "socket"), True, _OPTIONAL),
     "bar.csv": (("from", "to", "length_mm"), False, ()),
-    "points.csv": (_XYZ["loc"], True, ("group", "sigma_um", *_OPTIONAL)),
+    "points.csv": (_XYZ["loc"], True, ("group", "tool", "sigma_um", *_OPTIONAL)),
 }
 # Column -> kind of cell; q columns are "angle", any other column "number".
 _KINDS = {"location": "id", "placement": "id", "socket": "text", "from": "text", "to": "text",
-          "length_mm": "length", "group": "id", "sigma_um": "sigma"}
+          "length_mm": "length", "group": "id", "sigma_um": "sigma", "tool": "text"}
 # Log field -> (dtype, shape after the row axis); None: any length.
 _ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
     "location": (np.int64, ()), "placement": (np.int64, ()), "socket": (str, ()),
     "q": (float, (None,)), "displacement": (float, (3,)), "t": (float, ()), "temp": (float, ()),
-    "lines": (np.int64, ()), "group": (np.int64, ()), "point": (float, (3,)), "sigma": (float, ())}
+    "lines": (np.int64, ()), "group": (np.int64, ()), "point": (float, (3,)), "sigma": (float, ()),
+    "tool": (str, ())}
 
 
 class _Log:
@@ -52,7 +63,7 @@ class _Log:
     def __post_init__(self) -> None:
         n_rows = None
         for name, value in list(vars(self).items()):
-            if value is None and name in ("t", "temp", "lines", "sigma"):
+            if value is None and name in ("t", "temp", "lines", "sigma", "tool"):
                 continue
             dtype, trailing = _ARRAYS[name]
             arr = np.array(value, dtype=dtype)
@@ -124,6 +135,9 @@ class PointLog(_Log):
     """Arm temperature at each pose, shape (N,), in deg C, or None."""
     lines: np.ndarray | None = None
     """1-based line of each pose in points.csv, shape (N,), or None when built in code."""
+    tool: np.ndarray | None = None
+    """Name of the tool each point measures (``Arm.tool_names``), shape (N,), str, or None (the
+    arm's only tool)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,12 +233,18 @@ class _Table:
 
     path: Path
     """The file."""
-    n_axes: int
-    """Number n of q1_deg..qn_deg columns; 0 if there are none or they have gaps."""
+    q_columns: list[str]
+    """The readout columns in axis order (``q1_deg..qn_deg`` or ``<joint>_deg``); empty if they
+    are missing or have gaps."""
     lines: list[int]
     """1-based file line of each row kept (rows with the header's number of cells)."""
     cols: dict[str, list[Any]]
     """Parsed cells of each known column, in file units; None where a cell is bad."""
+
+    @property
+    def n_axes(self) -> int:
+        """Number of readout columns (0: missing or with gaps)."""
+        return len(self.q_columns)
 
 
 def _parse(text: str, kind: str) -> tuple[Any, str | None]:
@@ -247,8 +267,12 @@ def _parse(text: str, kind: str) -> tuple[Any, str | None]:
 
 
 def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
-                problems: list[Problem], *, others_allowed: bool = False) -> _Table | None:
-    """Read and check one CSV file, adding its problems; return None if it has no usable header."""
+                problems: list[Problem], *, others_allowed: bool = False,
+                axis_names: list[str] | None = None) -> _Table | None:
+    """Read and check one CSV file, adding its problems; return None if it has no usable header.
+
+    ``axis_names`` (the arm's, when known) allows ``<joint name>_deg`` readout columns.
+    """
 
     def add(line: int | None, column: str | None, reason: str) -> None:
         problems.append(Problem(path, line, column, reason))
@@ -266,10 +290,14 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
             else "empty file: no header row")
         return None
     top, header = rows[0]
+    named = [f"{n}_deg" for n in axis_names or []] if has_q else []
     expected = ", ".join([*required, *(["q1_deg..qn_deg"] if has_q else []), *optional])
+    if named:
+        expected += f" (or {', '.join(named)} instead of q1_deg..q{len(named)}_deg)"
     index: dict[str, int] = {}
     for k, name in enumerate(header):
-        known = name in required or name in optional or bool(has_q and _Q_COLUMN.fullmatch(name))
+        known = (name in required or name in optional or name in named
+                 or bool(has_q and _Q_COLUMN.fullmatch(name)))
         if not name:
             add(top, str(k + 1), "empty column name")
         elif name in index:
@@ -277,17 +305,31 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         elif known:
             index[name] = k
         elif not others_allowed:
-            add(top, name, f"unknown column; expected: {expected}")
+            hint = ("; <joint name>_deg columns are read only with the arm (arm=..., --arm)"
+                    if has_q and not named and name.endswith("_deg") else "")
+            add(top, name, f"unknown column; expected: {expected}{hint}")
     q_found = [int(m[1]) for name in index if (m := _Q_COLUMN.fullmatch(name))] if has_q else []
-    q_names = _q_names(max(q_found, default=0))
-    wanted = [*required, *(q_names or ["q1_deg"] if has_q else [])]
+    by_name = [name for name in named if name in index]
+    q_missing = False
+    if by_name and q_found:
+        q_missing = True
+        first_q = next(name for name in index if _Q_COLUMN.fullmatch(name))
+        add(top, first_q, f"mixes q<n>_deg and joint-name readout columns ({by_name[0]}): "
+                          "use q1_deg..qn_deg or one <joint name>_deg column per axis")
+    q_columns = by_name and named or _q_names(max(q_found, default=0))
+    wanted = [*required, *(q_columns or ["q1_deg"] if has_q and not q_missing else [])]
     for name in (missing := [name for name in wanted if name not in index]):
-        gap = "; q columns run from q1_deg to qn_deg without gaps" if name[0] == "q" else ""
-        add(top, name, f"missing column{gap}")
+        if name in named:
+            add(top, name, "missing column: joint-name readout columns need one per axis "
+                           f"({', '.join(named)})")
+        else:
+            gap = "; q columns run from q1_deg to qn_deg without gaps" if name[0] == "q" else ""
+            add(top, name, f"missing column{gap}")
     if len(rows) == 1:
         add(None, None, "header only: no data rows")
-    n_axes = 0 if any(name[0] == "q" for name in missing) else len(q_names)  # 0: unknown
-    table = _Table(path, n_axes, [], {name: [] for name in index})
+    if q_missing or any(name in q_columns or name == "q1_deg" for name in missing):
+        q_columns = []  # unknown
+    table = _Table(path, q_columns, [], {name: [] for name in index})
     for line, cells in rows[1:]:
         if not any(cells):
             add(line, None, "blank line among the data rows")
@@ -296,7 +338,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         else:
             table.lines.append(line)
             for name, k in index.items():
-                kind = "angle" if name in q_names else _KINDS.get(name, "number")
+                kind = ("angle" if name in q_columns or _Q_COLUMN.fullmatch(name) or name in named
+                        else _KINDS.get(name, "number"))
                 value, reason = _parse(cells[k], kind)
                 table.cols[name].append(value)
                 if reason:
@@ -319,7 +362,7 @@ def _log_fields(table: _Table) -> dict[str, Any]:
     """Return the q (rad), t (s), temp (deg C) and lines fields of a log read from a table."""
     extra = {field: np.array(table.cols[name], dtype=float) if name in table.cols else None
              for field, name in (("t", "t_s"), ("temp", "temp_c"))}
-    return {"q": _matrix(table, _q_names(table.n_axes), math.pi / 180.0), **extra,
+    return {"q": _matrix(table, table.q_columns, math.pi / 180.0), **extra,
             "lines": np.array(table.lines, dtype=np.int64)}
 
 
@@ -378,13 +421,32 @@ def _check_bar(log: _Table, bar: _Table, out: list[Problem]) -> None:
             out.append(Problem(log.path, line, "socket", f"socket '{s}' is not named in bar.csv"))
 
 
-def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> Campaign:
+def _check_tools(points: _Table, arm: Arm, out: list[Problem]) -> None:
+    """Check the ``tool`` column of points.csv against the arm's tools."""
+    names = set(arm.tool_names) | set(arm.tool_joints)
+    listing = ", ".join(arm.tool_names)
+    if "tool" not in points.cols:
+        if arm.n_tools > 1:
+            out.append(Problem(points.path, 1, "tool", f"missing column: the arm has "
+                                                       f"{arm.n_tools} tools ({listing}); say "
+                                                       "which one each point measures"))
+        return
+    for line, name in zip(points.lines, points.cols["tool"]):
+        if name is not None and name not in names:
+            out.append(Problem(points.path, line, "tool",
+                               f"unknown tool '{name}'; the arm's tools: {listing}"))
+
+
+def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
+                  arm: Arm | None = None) -> Campaign:
     """Read and validate a campaign folder.
 
     Args:
         folder: folder holding spat.csv + locations.csv, lengthbar.csv + bar.csv and/or
             points.csv.
         min_samples_per_location: fewest SPAT samples accepted at one R-Test location.
+        arm: the arm, when known: allows ``<joint name>_deg`` readout columns (put in axis order)
+            and checks the ``tool`` column of points.csv against its tools.
 
     Returns:
         The campaign in SI units (m, rad, s), with ``source`` set to the folder.
@@ -404,7 +466,8 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
         if len(found := [name for name in pair if name in present]) == 1:
             problems.append(Problem(paths[(set(pair) - set(found)).pop()], None, None,
                                     f"file not found; {found[0]} needs it (they come in a pair)"))
-    tables = {name: _read_table(paths[name], *_FILES[name], problems)
+    axis_names = None if arm is None else arm.axis_names
+    tables = {name: _read_table(paths[name], *_FILES[name], problems, axis_names=axis_names)
               for name in _FILES if name in present}
     spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
     log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
@@ -413,11 +476,14 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
         _check_locations(spat, locs, min_samples_per_location, problems)
     if _usable(log, "placement", "socket") and _usable(bar, "from", "to"):
         _check_bar(log, bar, problems)
+    if points is not None and arm is not None and points.lines:
+        _check_tools(points, arm, problems)
     first = next((t for t in (spat, log, points) if t and t.n_axes), None)
     for other in (log, points):
         if first and other and other is not first and other.n_axes and other.n_axes != first.n_axes:
             problems.append(Problem(other.path, 1, None,
-                                    f"{other.n_axes} axes (q1_deg..q{other.n_axes}_deg), but "
+                                    f"{other.n_axes} axes ({other.q_columns[0]}.."
+                                    f"{other.q_columns[-1]}), but "
                                     f"{first.path.name} has {first.n_axes}"))
     if problems:
         order: dict[Path | str, int] = {path: k for k, path in enumerate(paths.values())}
@@ -438,13 +504,16 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3) -> C
             group=np.array(points.cols.get("group", [1] * len(points.lines)), dtype=np.int64),
             point=_matrix(points, _XYZ["loc"], 1e-3),
             sigma=(np.array(points.cols["sigma_um"], dtype=float) * 1e-6
-                   if "sigma_um" in points.cols else None), **_log_fields(points)))
+                   if "sigma_um" in points.cols else None),
+            tool=np.array(points.cols["tool"], dtype=str) if "tool" in points.cols else None,
+            **_log_fields(points)))
 
 
-def read_readouts(path: str | Path) -> np.ndarray:
+def read_readouts(path: str | Path, arm: Arm | None = None) -> np.ndarray:
     """Read encoder readouts from a CSV file with columns q1_deg..qn_deg, e.g. a lengthbar.csv.
 
-    Other columns are ignored; the q columns and cells are checked as in :func:`read_campaign`.
+    Other columns are ignored; the q columns and cells are checked as in :func:`read_campaign`
+    (given the arm, ``<joint name>_deg`` columns are read too).
 
     Returns:
         Encoder readouts, shape (N, n), in rad.
@@ -452,12 +521,14 @@ def read_readouts(path: str | Path) -> np.ndarray:
     Raises:
         CampaignFormatError: listing every problem in the q columns, with line and column.
     """
-    return read_readout_columns(path)[0]
+    return read_readout_columns(path, arm)[0]
 
 
-def read_readout_columns(path: str | Path
+def read_readout_columns(path: str | Path, arm: Arm | None = None
                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Read encoder readouts and, when present, the ``temp_c`` and ``t_s`` columns.
+
+    Given the arm, the readouts may be ``<joint name>_deg`` columns (see :func:`read_campaign`).
 
     Returns:
         ``(q, temp, t)``: readouts (N, n) rad, temperature (N,) deg C or None, time (N,) s or None.
@@ -466,11 +537,32 @@ def read_readout_columns(path: str | Path
         CampaignFormatError: listing every problem in these columns, with line and column.
     """
     problems: list[Problem] = []
-    table = _read_table(Path(path), (), True, _OPTIONAL, problems, others_allowed=True)
+    table = _read_table(Path(path), (), True, _OPTIONAL, problems, others_allowed=True,
+                        axis_names=None if arm is None else arm.axis_names)
     if problems or table is None:
         raise CampaignFormatError(problems)
     fields = _log_fields(table)
     return fields["q"], fields["temp"], fields["t"]
+
+
+def read_tool_column(path: str | Path, arm: Arm) -> np.ndarray | None:
+    """Read the ``tool`` column of a readouts file (e.g. predict's input), checked against the arm.
+
+    Returns:
+        The tool name of each row, shape (N,), str, or None if the file has no ``tool`` column.
+
+    Raises:
+        CampaignFormatError: for an unknown tool (line and column), or no column while the arm has
+            several tools.
+    """
+    problems: list[Problem] = []
+    table = _read_table(Path(path), (), True, ("tool", *_OPTIONAL), problems, others_allowed=True,
+                        axis_names=arm.axis_names)
+    if table is not None and table.lines:
+        _check_tools(table, arm, problems)
+    if problems or table is None:
+        raise CampaignFormatError(problems)
+    return np.array(table.cols["tool"], dtype=str) if "tool" in table.cols else None
 
 
 def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
@@ -529,7 +621,10 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
         after = _mm(_XYZ["loc"], pts.point)
         if pts.sigma is not None:
             after["sigma_um"] = (pts.sigma * 1e6).tolist()
-        _write_csv(folder / "points.csv", _file_columns(pts, {"group": pts.group.tolist()}, after))
+        first: dict[str, Any] = {"group": pts.group.tolist()}
+        if pts.tool is not None:
+            first["tool"] = pts.tool.tolist()
+        _write_csv(folder / "points.csv", _file_columns(pts, first, after))
 
 
 def write_points(path: str | Path, points: np.ndarray) -> None:

@@ -2,7 +2,7 @@
 
 ``CALDIR/parameters.json`` names ``calibrated.urdf`` beside it, so the folder is self-contained;
 ``calibrated.urdf`` holds the identified DH values in its error frames and the identified tool vector
-(it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json`` maps first).
+of every tool (it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json`` maps first).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def write_calibration(cal: Calibration, arm: Arm, folder: str | Path) -> Path:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     params = cal.parameters
-    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, params.tool))
+    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)))
     write_parameters(params.replace(arm="calibrated.urdf"), folder / "parameters.json")
     write_maps_csv(cal, folder / "encoder_maps.csv")
     report = cal.report()

@@ -45,7 +45,7 @@ def plausible_sizes(unknowns: Unknowns) -> np.ndarray:
     arm = unknowns.arm
     out = [PLAUSIBLE["base_angle"]] * 3 + [PLAUSIBLE["base_length"]] * 3
     out += [PLAUSIBLE["angle"] if f.is_angle else PLAUSIBLE["length"] for f in arm.error_frames]
-    out += [PLAUSIBLE["length"]] * 3
+    out += [PLAUSIBLE["length"]] * (3 * arm.n_tools)
     out += [float(v) for t in unknowns.terms for v in t.plausible]
     n_nodes = unknowns.free.size - len(out)
     return np.array(out + [PLAUSIBLE["node"]] * n_nodes)

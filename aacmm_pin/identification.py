@@ -236,6 +236,8 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
                                   f"{arm.n_axes} ({arm.source})")
     if not (np.all(np.isfinite(points.q)) and np.all(np.isfinite(points.point))):
         raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
+    _check_point_tools(points, arm, "points.csv" if campaign.source is None
+                       else str(campaign.source / "points.csv"))
     for g in np.unique(points.group):
         pts = points.point[points.group == g]
         if len(pts) < 4 or np.linalg.matrix_rank(pts - pts.mean(axis=0), tol=1e-4) < 3:
@@ -243,6 +245,25 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
                 f"the measured points of group {g} ({len(pts)} points) lie on a line or a plane: "
                 "they cannot fix that instrument's frame (measure 4 or more poses spread in 3-D)")
     return points
+
+
+def _check_point_tools(points: PointLog, arm: Arm, path: str) -> None:
+    """Raise IdentificationError if the points' tools are missing (several tools) or unknown."""
+    listing = ", ".join(arm.tool_names)
+    if points.tool is None:
+        if arm.n_tools > 1:
+            raise IdentificationError(f"{path}: line 1: column 'tool': missing; the arm has "
+                                      f"{arm.n_tools} tools ({listing}): say which one each point "
+                                      "measures")
+        return
+    known = set(arm.tool_names) | set(arm.tool_joints)
+    bad = [k for k, name in enumerate(points.tool.tolist()) if name not in known]
+    if bad:
+        k = bad[0]
+        line = f"line {points.lines[k]}" if points.lines is not None else f"row {k + 1}"
+        raise IdentificationError(f"{path}: {line}: column 'tool': unknown tool "
+                                  f"'{points.tool[k]}' ({len(bad)} such points); the arm's tools: "
+                                  f"{listing}")
 
 
 class Measurements(NamedTuple):
@@ -332,10 +353,12 @@ def _join(parts: list[Measurements], arm: Arm) -> Measurements:
     t = None if any(x.t is None for x in s) else np.concatenate([x.t for x in s])
     disp = np.concatenate([np.zeros((x.n, 3)) if x.displacement is None else x.displacement
                            for x in s])
+    tool = None if all(x.tool is None for x in s) else np.concatenate(
+        [np.zeros(x.n, dtype=np.int64) if x.tool is None else x.tool for x in s])
     q = np.concatenate([p.q for p in parts])
     return Measurements(q, np.concatenate([p.measured for p in parts]),
                         np.concatenate([p.group for p in parts]), any(p.nests for p in parts),
-                        Samples(arm, q, temp, t, disp), sigma, np.concatenate(nest),
+                        Samples(arm, q, temp, t, disp, tool=tool), sigma, np.concatenate(nest),
                         np.concatenate([p.nest_sigma for p in parts]),
                         tuple(k for p in parts for k in p.nest_keys), np.concatenate(frame),
                         tuple(frames), np.concatenate(lengths))
@@ -382,10 +405,13 @@ def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndarray,
-                   group: np.ndarray) -> Parameters:
-    """Return start parameters with X0 and translation from a Kabsch fit of the group centres."""
+                   group: np.ndarray, tool: np.ndarray | None) -> Parameters:
+    """Return start parameters with X0 and translation from a Kabsch fit of the group centres.
+
+    ``tool``: the tool index of every sample, shape (N,), or None (the arm's only tool).
+    """
     ids = np.unique(group)
-    pred = stylus_positions(arm, start, q, frame="r")
+    pred = stylus_positions(arm, start, q, frame="r", tool=tool)
     if ids.size > 1:
         p_r = np.array([pred[group == m].mean(axis=0) for m in ids])
         p_mt = np.array([measured[group == m].mean(axis=0) for m in ids])
@@ -414,7 +440,7 @@ def _nuisance(arm: Arm, start: Parameters, meas: Measurements, sigma_class: floa
     frame_start = np.zeros((len(meas.frame_groups), 3, 4))
     if socket.any() or meas.frame_groups:
         assert meas.nest is not None or not socket.any()
-        pred = stylus_positions(arm, start, meas.q, frame="mt")
+        pred = stylus_positions(arm, start, meas.q, frame="mt", samples=meas.samples)
         if meas.nest is not None:
             for j in np.unique(meas.nest[socket]):
                 rows = meas.nest == j
@@ -498,7 +524,8 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
     q, group, samples, stated = meas.q, meas.group, meas.samples, meas.sigma
     main = ~np.isnan(meas.measured[:, 0]) & (True if meas.frame is None else meas.frame < 0)
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q[main],
-                                    meas.measured[main], group[main])
+                                    meas.measured[main], group[main],
+                                    None if samples.tool is None else samples.tool[main])
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
     unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
                              tuple(t for t in extensions if t.kind is not Kind.MAP), samples)

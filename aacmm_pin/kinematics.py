@@ -10,7 +10,7 @@ with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import NamedTuple, TypeAlias
 
 import numpy as np
 import pinocchio as pin
@@ -38,7 +38,8 @@ class StylusJacobians(NamedTuple):
     dh: np.ndarray
     """d(position)/d(error frame value), shape (N, 3, n_errors), in m/m or m/rad."""
     tool: np.ndarray
-    """d(position)/d(tool vector), shape (N, 3, 3), dimensionless."""
+    """d(position)/d(tool vectors), shape (N, 3, 3 n_tools), dimensionless (zero for the tools a
+    sample does not measure)."""
     rotation: np.ndarray
     """d(position)/d(alpha0, beta0, gamma0), shape (N, 3, 3), in m/rad (zero-sized use in r-CS)."""
     translation: np.ndarray
@@ -62,6 +63,45 @@ def _readouts_2d(readouts: np.ndarray, arm: Arm) -> np.ndarray:
     return q
 
 
+ToolIndex: TypeAlias = "str | int | np.ndarray | list[str] | list[int] | None"
+"""Which tool each sample measures: one name / index for all, or one per sample; None: the
+samples' own (:attr:`Samples.tool`), else the arm's only tool."""
+
+
+def tool_rows(arm: Arm, n: int, tool: ToolIndex = None, samples: Samples | None = None
+              ) -> np.ndarray:
+    """Return the 0-based tool index of each of n samples, shape (n,).
+
+    Args:
+        arm: the arm.
+        n: number of samples.
+        tool: see :data:`ToolIndex`.
+        samples: the samples, whose ``tool`` is used when ``tool`` is None.
+
+    Raises:
+        ValueError: for an unknown tool, a length other than n, or no tool given for an arm with
+            several tools.
+    """
+    if tool is None and samples is not None and samples.tool is not None and samples.n == n:
+        return samples.tool
+    if tool is None:
+        if arm.n_tools > 1:
+            raise ValueError(f"tool: the arm has {arm.n_tools} tools ({', '.join(arm.tool_names)}); "
+                             "say which one each sample measures")
+        return np.zeros(n, dtype=np.int64)
+    idx = arm.tool_index(tool)
+    if idx.size == 1:
+        return np.full(n, idx[0], dtype=np.int64)
+    if idx.size != n:
+        raise ValueError(f"tool: one tool or one per sample ({n}) expected, got {idx.size}")
+    return idx
+
+
+def _tool_values(arm: Arm, params: Parameters) -> np.ndarray:
+    """Return the tool vectors of the identification model's tool joints, shape (3 n_tools,)."""
+    return np.concatenate(list(params.tool_vectors(arm).values()))
+
+
 def extension_effects(arm: Arm, params: Parameters, q_read: np.ndarray,
                       samples: Samples | None) -> tuple[np.ndarray, np.ndarray]:
     """Return the extensions' angle offsets (N, n_axes) rad and length scale (N,).
@@ -74,6 +114,11 @@ def extension_effects(arm: Arm, params: Parameters, q_read: np.ndarray,
     if samples is None or not samples.matches(q_read):
         samples = Samples(arm, q_read)
     return apply_terms(params.extensions, samples, arm.n_axes)
+
+
+def _matching(samples: Samples | None, q: np.ndarray) -> Samples | None:
+    """Return the samples if they describe readouts q, else None."""
+    return samples if samples is not None and samples.matches(q) else None
 
 
 def _scaled(pos: np.ndarray, scale: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -107,12 +152,12 @@ def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndar
         q[:, ident.axis_idx] += offsets
     q[:, ident.error_idx] = [params.dh.get(n, f.nominal) for n, f in
                              zip(arm.error_names, arm.error_frames)]
-    q[:, ident.tool_idx] = params.tool
+    q[:, ident.tool_idx] = _tool_values(arm, params)
     return q
 
 
 def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r",
-                     samples: Samples | None = None) -> np.ndarray:
+                     samples: Samples | None = None, *, tool: ToolIndex = None) -> np.ndarray:
     """Return stylus sphere centres for N readouts, shape (N, 3), in m.
 
     Args:
@@ -121,24 +166,26 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         readouts: encoder readouts, shape (N, n_axes), in rad.
         frame: ``"r"`` (r-CS, the arm's own frame) or ``"mt"`` (the R-Test's MT-CS).
         samples: temperature and motion of the samples, for extensions that need them.
+        tool: which tool each sample measures (see :data:`ToolIndex`).
     """
     ident = arm.identification
-    model, data, fid = ident.model, ident.data, ident.stylus_frame
+    model, data = ident.model, ident.data
     q_read = _readouts_2d(readouts, arm)
+    fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = identification_configuration(arm, params, q_read, frame, offsets)
     out = np.empty((q.shape[0], 3))
     forward, update = pin.forwardKinematics, pin.updateFramePlacement  # bound once: hot loop
     for i, qi in enumerate(q):
         forward(model, data, qi)
-        out[i] = update(model, data, fid).translation
+        out[i] = update(model, data, int(fids[i])).translation
     if params.extensions:
         out = _scaled(out, scale, params.translation if frame == "mt" else np.zeros(3))
     return out
 
 
 def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "mt",
-                     samples: Samples | None = None) -> StylusJacobians:
+                     samples: Samples | None = None, *, tool: ToolIndex = None) -> StylusJacobians:
     """Return stylus centres and their analytic Jacobians for N readouts.
 
     Args:
@@ -147,10 +194,13 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         readouts: encoder readouts, shape (N, n_axes), in rad.
         frame: ``"mt"`` (MT-CS, with X0 and translation) or ``"r"`` (r-CS).
         samples: temperature and motion of the samples, for extensions that need them.
+        tool: which tool each sample measures (see :data:`ToolIndex`); each sample's Jacobian is
+            that of its own tool's frame.
     """
     ident = arm.identification
-    model, data, fid = ident.model, ident.data, ident.stylus_frame
+    model, data = ident.model, ident.data
     q_read = _readouts_2d(readouts, arm)
+    fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = identification_configuration(arm, params, q_read, frame, offsets)
     n = q.shape[0]
@@ -158,6 +208,7 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     jac = np.empty((n, 6, model.nv))
     frame_jacobian, placements = pin.computeFrameJacobian, data.oMf  # bound once: hot loop
     for i, qi in enumerate(q):
+        fid = int(fids[i])
         jac[i] = frame_jacobian(model, data, qi, fid, _WORLD)
         pos[i] = placements[fid].translation
     jac = jac[:, :3]
@@ -183,8 +234,8 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     )
 
 
-def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples | None = None
-            ) -> np.ndarray:
+def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples | None = None,
+            *, tool: ToolIndex = None) -> np.ndarray:
     """Return stylus centres in the r-CS for N readouts with the *runtime* model, shape (N, 3), m.
 
     This is what a robotics stack does with a calibrated arm: wrap the readouts with the encoder
@@ -196,17 +247,19 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
         params: calibrated parameters.
         readouts: encoder readouts, shape (N, n_axes), in rad.
         samples: temperature and motion of the samples, for extensions that need them.
+        tool: which tool each sample measures (see :data:`ToolIndex`).
     """
-    model = arm.runtime_model(params.dh, params.tool)
+    model = arm.runtime_model(params.dh, tools=params.tool_vectors(arm))
     data = model.createData()
-    fid = model.getFrameId(arm.stylus_link)
     q_read = _readouts_2d(readouts, arm)
+    fids = np.array([model.getFrameId(link) for link in arm.tool_links])[
+        tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = correct_readouts(q_read, params.encoder_maps) + offsets
     out = np.empty((q.shape[0], 3))
     for i, qi in enumerate(q):
         pin.forwardKinematics(model, data, qi)
-        out[i] = pin.updateFramePlacement(model, data, fid).translation
+        out[i] = pin.updateFramePlacement(model, data, int(fids[i])).translation
     positions: np.ndarray = out * scale[:, None]
     return positions
 

@@ -5,6 +5,7 @@
     {"arm": "<urdf path or embedded name>", "units": "SI",
      "dh": {"dx21": 0.0, ...},                 # every error frame of the arm, m or rad
      "tool": [x, y, z],                        # tool vector in the last axis' frame, m
+     # or, for an arm with several tools (a tree): "tools": {"tool_left": [x, y, z], ...}
      "base_to_mt": {"rotation_abc": [alpha0, beta0, gamma0], "translation": [x, y, z]},
      "encoder_maps": {"step_deg": 5.0, "axes": {"1": [72 values, rad], ...}},
      "extensions": {"compliance[A2]": [k], "thermal": [alpha], ...}}   # optional, SI
@@ -46,8 +47,9 @@ class Parameters:
     """The arm's URDF path or embedded name, as written in the file."""
     dh: dict[str, float]
     """Error frame name -> value (m or rad), one entry per error frame of the arm."""
-    tool: np.ndarray
-    """Tool vector (stylus centre in the last axis' frame), shape (3,), in m, absolute."""
+    tool: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    """Tool vector (stylus centre in the last axis' frame), shape (3,), in m, absolute; with
+    several tools, the first one's (taken from ``tools`` when not given)."""
     rotation_abc: np.ndarray = field(default_factory=lambda: np.zeros(3))
     """X0 = (alpha0, beta0, gamma0): r-CS -> MT-CS rotation angles (Eq. 4), shape (3,), in rad."""
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -60,8 +62,23 @@ class Parameters:
     """Effect-library term key (e.g. ``compliance[A2]``) -> its parameter values (SI)."""
     extra: dict[str, Any] = field(default_factory=dict)
     """Top-level keys of the file that this class does not interpret, kept as read."""
+    tools: dict[str, np.ndarray] = field(default_factory=dict)
+    """Tool joint name -> tool vector (in its parent's frame), shape (3,), in m, for arms with
+    several tools (every tool, in the arm's tool order); empty for a single-tool arm (``tool``)."""
 
     def __post_init__(self) -> None:
+        tools = {str(k): np.array(v, dtype=float).reshape(-1) for k, v in self.tools.items()}
+        if bad := [k for k, v in tools.items() if v.shape != (3,)]:
+            raise ValueError(f"tools: needs 3 values per tool, not for {bad}")
+        object.__setattr__(self, "tools", tools)
+        if tools and np.all(np.isnan(np.asarray(self.tool, dtype=float))):
+            object.__setattr__(self, "tool", next(iter(tools.values())).copy())
+        elif tools and not np.array_equal(np.asarray(self.tool, dtype=float).reshape(-1),
+                                          next(iter(tools.values()))):
+            raise ValueError("tool: differs from the first entry of tools (give one of them, or "
+                             "both equal)")
+        if np.any(np.isnan(np.asarray(self.tool, dtype=float))):
+            raise ValueError("tool: needs 3 values (or give tools)")
         for name in ("tool", "rotation_abc", "translation"):
             value = np.array(getattr(self, name), dtype=float).reshape(-1)
             if value.shape != (3,):
@@ -78,11 +95,34 @@ class Parameters:
     @classmethod
     def nominal(cls, arm: Arm, step_deg: float = DEFAULT_STEP_DEG) -> Parameters:
         """Return the values the arm's URDF holds, with no maps and identity X0."""
-        return cls(arm=arm.name, dh=arm.nominal_errors, tool=arm.nominal_tool, step_deg=step_deg)
+        return cls(arm=arm.name, dh=arm.nominal_errors, tool=arm.nominal_tool, step_deg=step_deg,
+                   tools=dict(arm.nominal_tools) if arm.n_tools > 1 else {})
 
     def replace(self, **changes: Any) -> Parameters:
-        """Return a copy with some fields changed."""
+        """Return a copy with some fields changed.
+
+        Changing ``tools`` alone sets ``tool`` to its first entry; changing ``tool`` alone (with
+        several tools) changes the first entry of ``tools``.
+        """
+        if "tools" in changes and "tool" not in changes:
+            changes["tool"] = np.full(3, np.nan)
+        elif "tool" in changes and "tools" not in changes and self.tools:
+            first = next(iter(self.tools))
+            changes["tools"] = {**self.tools, first: changes["tool"]}
         return replace(self, **changes)
+
+    def tool_vectors(self, arm: Arm) -> dict[str, np.ndarray]:
+        """Return every tool's vector by tool joint name, in the arm's tool order, m.
+
+        Raises:
+            ValueError: if these parameters do not hold the arm's tools.
+        """
+        if not self.tools and arm.n_tools == 1:
+            return {arm.tool_joints[0]: self.tool}
+        if set(self.tools) != set(arm.tool_joints) or (not self.tools and arm.n_tools > 1):
+            raise ValueError(f"tools: the arm's tools are {', '.join(arm.tool_joints)}; the "
+                             f"parameters hold {', '.join(self.tools) or 'one tool vector'}")
+        return {name: self.tools[name] for name in arm.tool_joints}
 
     def rotation(self) -> np.ndarray:
         """Return the r-CS -> MT-CS rotation matrix, shape (3, 3)."""
@@ -98,7 +138,8 @@ class Parameters:
             "arm": self.arm,
             "units": "SI",
             "dh": dict(self.dh),
-            "tool": self.tool.tolist(),
+            **({"tools": {k: v.tolist() for k, v in self.tools.items()}} if len(self.tools) > 1
+               else {"tool": self.tool.tolist()}),
             "base_to_mt": {"rotation_abc": self.rotation_abc.tolist(),
                            "translation": self.translation.tolist()},
             "encoder_maps": {"step_deg": self.step_deg,
@@ -110,7 +151,7 @@ class Parameters:
         }
 
 
-_KNOWN = ("arm", "units", "dh", "tool", "base_to_mt", "encoder_maps", "extensions")
+_KNOWN = ("arm", "units", "dh", "tool", "tools", "base_to_mt", "encoder_maps", "extensions")
 
 
 def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parameters:
@@ -137,9 +178,11 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
 
     if not isinstance(data, dict):
         raise FileFormatError([Problem(path, None, None, "the top level must be a JSON object")])
-    for key in ("arm", "dh", "tool"):
+    for key in ("arm", "dh"):
         if key not in data:
             bad(key, "missing")
+    if "tool" not in data and "tools" not in data:
+        bad("tool", "missing (or give 'tools': {tool joint: [x, y, z]} for several tools)")
     if data.get("units", "SI") != "SI":
         bad("units", f"must be 'SI', got {data.get('units')!r}")
     dh: dict[str, float] = {}
@@ -157,7 +200,15 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         base = {}
     rot = vector(base.get("rotation_abc", [0, 0, 0]), "base_to_mt.rotation_abc", 3)
     trans = vector(base.get("translation", [0, 0, 0]), "base_to_mt.translation", 3)
-    tool = vector(data.get("tool", [0, 0, 0]), "tool", 3)
+    tools: dict[str, np.ndarray] = {}
+    if isinstance(data.get("tools", {}), dict):
+        tools = {str(k): vector(v, f"tools.{k}", 3) for k, v in data.get("tools", {}).items()}
+    else:
+        bad("tools", "must be an object of tool joint: [x, y, z]")
+    tool = (vector(data["tool"], "tool", 3) if "tool" in data
+            else next(iter(tools.values())) if tools else np.zeros(3))
+    if tools and "tool" in data and not np.array_equal(tool, next(iter(tools.values()))):
+        bad("tool", "differs from the first entry of 'tools' (give one of them)")
     maps_data = data.get("encoder_maps") or {}
     step = maps_data.get("step_deg", DEFAULT_STEP_DEG) if isinstance(maps_data, dict) else None
     maps: dict[int, EncoderMap] = {}
@@ -176,7 +227,7 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
     extensions = _extensions(data.get("extensions") or {}, bad)
     if problems:
         raise FileFormatError(problems)
-    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, rotation_abc=rot,
+    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, tools=tools, rotation_abc=rot,
                       translation=trans, encoder_maps=maps, extensions=extensions,
                       step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
                       extra={k: v for k, v in data.items() if k not in _KNOWN})
@@ -238,7 +289,7 @@ def write_parameters(params: Parameters, path: str | Path) -> None:
 
 
 def check_against_arm(params: Parameters, arm: Arm) -> None:
-    """Check that the parameters name exactly the arm's error frames and axes.
+    """Check that the parameters name exactly the arm's error frames, tools and axes.
 
     Raises:
         FileFormatError: naming the unknown or missing parameters.
@@ -248,6 +299,12 @@ def check_against_arm(params: Parameters, arm: Arm) -> None:
                 for n in params.dh if n not in arm.error_names]
     problems += [Problem(params.arm, None, f"dh.{n}", "missing") for n in arm.error_names
                  if n not in params.dh]
+    if params.tools and set(params.tools) != set(arm.tool_joints):
+        problems.append(Problem(params.arm, None, "tools", f"the arm's tools are "
+                                f"{', '.join(arm.tool_joints)}; got {', '.join(params.tools)}"))
+    elif not params.tools and arm.n_tools > 1:
+        problems.append(Problem(params.arm, None, "tool", f"the arm has {arm.n_tools} tools "
+                                f"({', '.join(arm.tool_joints)}): give 'tools'"))
     problems += [Problem(params.arm, None, f"encoder_maps.axes.{k}",
                          f"the arm has axes 1..{arm.n_axes}")
                  for k in params.encoder_maps if not 1 <= k <= arm.n_axes]

@@ -24,11 +24,15 @@ class Samples:
         temp: arm temperature, shape (N,), deg C, or None.
         t: time stamps, shape (N,), s, or None (row order is then the time order).
         displacement: R-Test displacement less its location's mean, shape (N, 3), m, or None.
+        tool: 0-based index (in ``arm.tool_joints``) of the tool each sample measures, shape (N,),
+            or None (the arm's only tool).
     """
 
     def __init__(self, arm: Arm, q: np.ndarray, temp: np.ndarray | None = None,
-                 t: np.ndarray | None = None, displacement: np.ndarray | None = None):
+                 t: np.ndarray | None = None, displacement: np.ndarray | None = None,
+                 tool: np.ndarray | None = None):
         self.arm = arm
+        self.tool = None if tool is None else np.asarray(tool, dtype=np.int64)
         self.q = np.atleast_2d(np.asarray(q, dtype=float))
         self.temp = None if temp is None else np.asarray(temp, dtype=float)
         self.t = None if t is None else np.asarray(t, dtype=float)
@@ -38,8 +42,14 @@ class Samples:
 
     @classmethod
     def of_log(cls, arm: Arm, log: SpatLog | LengthBarLog | PointLog) -> Samples:
-        """Return the samples of a log's readouts with its temperature and time columns."""
-        return cls(arm, log.q, log.temp, log.t)
+        """Return the samples of a log's readouts with its temperature, time and tool columns.
+
+        Raises:
+            ValueError: if a point names a tool the arm does not have.
+        """
+        tool = getattr(log, "tool", None)
+        return cls(arm, log.q, log.temp, log.t,
+                   tool=None if tool is None else arm.tool_index(tool))
 
     @classmethod
     def of_spat(cls, arm: Arm, spat: SpatLog) -> Samples:
@@ -65,13 +75,18 @@ class Samples:
 
         Minus Pinocchio's generalized gravity (``dV/dq``, the torque the joint must hold) of the
         nominal runtime model (URDF inertias, gravity along -z of the r-CS): a compliant joint
-        deflects by ``k * torque`` with k > 0, i.e. the arm sags.
+        deflects by ``k * torque`` with k > 0, i.e. the arm sags. Every body of the tree loads the
+        axes that carry it (a torso axis carries both arms).
         """
         if self._gravity is None:
             model = self.arm.runtime_model()
             data = model.createData()
-            self._gravity = -np.array([pin.computeGeneralizedGravity(model, data, qi)[:self.arm.n_axes]
-                                       for qi in self.q]).reshape(self.n, self.arm.n_axes)
+            v = [model.joints[model.getJointId(name)].idx_v for name in self.arm.axis_names]
+            q = [model.joints[model.getJointId(name)].idx_q for name in self.arm.axis_names]
+            qs = np.zeros((self.n, model.nq))
+            qs[:, q] = self.q
+            self._gravity = -np.array([pin.computeGeneralizedGravity(model, data, qi)[v]
+                                       for qi in qs]).reshape(self.n, self.arm.n_axes)
         return self._gravity
 
     @property

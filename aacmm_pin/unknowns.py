@@ -2,7 +2,9 @@
 
 Vector layout (paper Eq. 5-6, with the reference-sample differencing replaced by an unknown
 translation): ``[alpha0, beta0, gamma0, mt_x, mt_y, mt_z, <error frames>, tool_x, tool_y, tool_z,
-<extension terms' parameters>, <free nodes of map 1>, <free nodes of map 2>, ...]``. Any entry can be
+<extension terms' parameters>, <free nodes of map 1>, <free nodes of map 2>, ...]``; an arm with
+several tools has each tool's three entries instead of ``tool_x, tool_y, tool_z`` (``tool_left_x``
+..., :attr:`aacmm_pin.arm.Arm.tool_unknowns`). Any entry can be
 held fixed at its start value. Extension terms come from the effect library
 (:mod:`aacmm_pin.effects`); ``samples`` gives what they depend on for the identification's readouts.
 """
@@ -24,6 +26,7 @@ from aacmm_pin.samples import Samples
 
 BASE_NAMES = ("alpha0", "beta0", "gamma0", "mt_x", "mt_y", "mt_z")
 TOOL_NAMES = ("tool_x", "tool_y", "tool_z")
+"""The tool entries of a single-tool arm (``Arm.tool_unknowns`` in general)."""
 
 
 class NodeKey(NamedTuple):
@@ -99,7 +102,7 @@ class Unknowns:
     def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...],
              terms: tuple[Term, ...] = (), samples: Samples | None = None) -> Unknowns:
         """Return the layout with every parameter and every node of ``map_axes`` free."""
-        n = (6 + len(arm.error_names) + 3 + sum(len(t.names) for t in terms)
+        n = (6 + len(arm.error_names) + 3 * arm.n_tools + sum(len(t.names) for t in terms)
              + sum(start.map(a).n_nodes for a in map_axes))
         return cls(arm, start, tuple(map_axes), np.ones(n, dtype=bool), tuple(terms), samples)
 
@@ -112,7 +115,7 @@ class Unknowns:
     @property
     def n_dense(self) -> int:
         """Number of non-map entries in the full layout (X0, translation, DH, tool, extensions)."""
-        return 6 + len(self.arm.error_names) + 3 + self.n_terms
+        return 6 + len(self.arm.error_names) + 3 * self.arm.n_tools + self.n_terms
 
     def with_free(self, free: np.ndarray) -> Unknowns:
         """Return the same layout with another free mask."""
@@ -131,7 +134,7 @@ class Unknowns:
     @property
     def full_keys(self) -> list[UnknownKey]:
         """Keys of every entry of the full layout."""
-        keys: list[UnknownKey] = [*BASE_NAMES, *self.arm.error_names, *TOOL_NAMES]
+        keys: list[UnknownKey] = [*BASE_NAMES, *self.arm.error_names, *self.arm.tool_unknowns]
         keys += [n for t in self.terms for n in t.names]
         for a in self.map_axes:
             keys += [NodeKey.at(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
@@ -160,7 +163,8 @@ class Unknowns:
     def full_vector(self, params: Parameters) -> np.ndarray:
         """Return every entry of the full layout for these parameters."""
         parts = [params.rotation_abc, params.translation,
-                 np.array([params.dh[n] for n in self.arm.error_names]), params.tool]
+                 np.array([params.dh[n] for n in self.arm.error_names]),
+                 *params.tool_vectors(self.arm).values()]
         parts += [params.extensions.get(t.key, np.zeros(len(t.names))) for t in self.terms]
         parts += [params.map(a).values for a in self.map_axes]
         return np.concatenate(parts)
@@ -174,19 +178,22 @@ class Unknowns:
         """Return the parameters with the free entries set from ``x`` (others at start)."""
         full = self.full_vector(self.start)
         full[self.free] = x
-        n_err = len(self.arm.error_names)
+        n_err, n_tool = len(self.arm.error_names), 3 * self.arm.n_tools
         maps = dict(self.start.encoder_maps)
         for a in self.map_axes:
             maps[a] = EncoderMap(full[self.map_slice(a)], self.start.step_deg)
         extensions = dict(self.start.extensions)
-        at = 9 + n_err
+        at = 6 + n_err + n_tool
         for t in self.terms:
             extensions[t.key] = full[at:at + len(t.names)]
             at += len(t.names)
+        tool = full[6 + n_err:6 + n_err + n_tool].reshape(-1, 3)
+        tools = ({} if self.arm.n_tools == 1 and not self.start.tools
+                 else dict(zip(self.arm.tool_joints, tool)))
         return self.start.replace(
             rotation_abc=full[0:3], translation=full[3:6],
             dh=dict(zip(self.arm.error_names, full[6:6 + n_err])),
-            tool=full[6 + n_err:9 + n_err], encoder_maps=maps, extensions=extensions)
+            tool=tool[0], tools=tools, encoder_maps=maps, extensions=extensions)
 
     def _samples(self, q: np.ndarray) -> Samples | None:
         return self.samples if self.samples is not None and self.samples.matches(q) else None

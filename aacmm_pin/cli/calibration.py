@@ -46,7 +46,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_readout_columns, write_points
+    from aacmm_pin.campaign import read_readout_columns, read_tool_column, write_points
     from aacmm_pin.kinematics import predict
     from aacmm_pin.parameters import check_against_arm, read_parameters
     from aacmm_pin.samples import Samples
@@ -54,8 +54,10 @@ def _predict(args: argparse.Namespace) -> int:
     params = read_parameters(args.params)
     arm = load_arm(args.arm or params.arm)
     check_against_arm(params, arm)
-    q, temp, t = read_readout_columns(args.readouts)
-    points = predict(arm, params, q, Samples(arm, q, temp, t))
+    q, temp, t = read_readout_columns(args.readouts, arm)
+    tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
+        args.readouts, arm)
+    points = predict(arm, params, q, Samples(arm, q, temp, t), tool=tool)
     write_points(args.out, points)
     print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS) to {args.out}")
     return 0
@@ -68,7 +70,7 @@ def _identify(args: argparse.Namespace) -> int:
     from aacmm_pin.identification import identify
 
     arm = load_arm(args.arm)
-    cal = identify(read_campaign(args.campaign), arm, model=args.model,
+    cal = identify(read_campaign(args.campaign, arm=arm), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
                    max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar)
@@ -102,7 +104,7 @@ def _discover(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
                                                  if e.strip()]
-    result = discover(read_campaign(args.campaign), arm, args.start, effects=effects,
+    result = discover(read_campaign(args.campaign, arm=arm), arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
                       progress=sys.stderr.isatty())
     write_discovery(result, arm, args.out)
@@ -134,7 +136,7 @@ def _validate(args: argparse.Namespace) -> int:
 
     params = read_parameters(args.caldir)
     arm = load_arm(params.arm)
-    campaign = read_campaign(args.campaign)
+    campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
     if campaign.lengthbar is not None or campaign.points is None:
         result = validate(arm, params, campaign)
@@ -231,9 +233,16 @@ def _axes(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
 
     arm = load_arm(args.arm)
-    print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order")
+    print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order "
+          "(or <joint>_deg, any order)")
     for n, (name, (lo, hi)) in enumerate(zip(arm.axis_names, np.degrees(arm.joint_limits)), 1):
-        print(f"  q{n}_deg  joint {name:<12} limits {lo:8.1f} .. {hi:7.1f} deg")
+        print(f"  {f'q{n}_deg':<7} joint {name:<12} limits {lo:8.1f} .. {hi:7.1f} deg")
+    print(f"tools ({arm.n_tools}; points.csv column 'tool'"
+          f"{', optional' if arm.n_tools == 1 else ''}):")
+    for name, joint, link in zip(arm.tool_names, arm.tool_joints, arm.tool_links):
+        print(f"  {name:<12} joint {joint:<16} link {link:<16} unknowns {joint}_x, _y, _z")
+    if arm.off_chain:
+        print(f"held fixed (on no tool's chain): {', '.join(arm.off_chain)}")
     print(f"error frames ({len(arm.error_names)}): {', '.join(arm.error_names)}")
     return 0
 
@@ -247,8 +256,8 @@ def add_parsers(subparsers: Any) -> None:
     """
     arm = arm_option()
 
-    p = add_command(subparsers, "axes", "list an arm's axes in readout-column order, its limits "
-                    "and its error frames")
+    p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
+                    "over its tree), their limits, its tools and its error frames")
     p.add_argument("arm", nargs="?", default="aacmm7", metavar="URDF",
                    help="URDF path or embedded arm name (aacmm7, ur5, wam7)")
     p.set_defaults(handler=_axes)
@@ -269,7 +278,11 @@ def add_parsers(subparsers: Any) -> None:
                     parents=[out_option(Path("points.csv"), "output CSV"),
                              arm_option(None, "override the URDF named in the parameters")])
     p.add_argument("params", type=Path, help="parameters.json or a calibration folder")
-    p.add_argument("readouts", type=Path, help="CSV with columns q1_deg..qn_deg")
+    p.add_argument("readouts", type=Path,
+                   help="CSV with columns q1_deg..qn_deg (or one <joint>_deg per axis)")
+    p.add_argument("--tool", default=None,
+                   help="the tool whose point to predict, for an arm with several (see axes); "
+                        "default: the readouts' tool column")
     p.set_defaults(handler=_predict)
 
     p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
