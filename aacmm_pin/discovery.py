@@ -70,7 +70,7 @@ def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: boo
 
 def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
              effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
-             alpha: float = ALPHA, progress: bool = False) -> Discovery:
+             alpha: float = ALPHA, max_nfev: int = 200, progress: bool = False) -> Discovery:
     """Find the effects the ``start`` model is missing on a campaign, add them and refit.
 
     Args:
@@ -83,6 +83,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         use_rtest: whether the start model uses each sample's R-Test displacement.
         max_steps: most effects to add.
         alpha: family-wise error rate of a step's significance tests (Bonferroni).
+        max_nfev: most residual evaluations of every fit (a cap: each stops at its tolerance).
         progress: show progress bars.
 
     Returns:
@@ -98,11 +99,12 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     if unknown := [n for n in names if n not in LIBRARY]:
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(LIBRARY)}")
     with single_threaded_blas():  # many small products: threads only spin
-        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, progress)
+        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, max_nfev,
+                         progress)
 
 
 def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
-              max_steps: int, alpha: float, progress: bool) -> Discovery:
+              max_steps: int, alpha: float, max_nfev: int, progress: bool) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
     samples = measurements(campaign, arm, use_rtest).samples
@@ -111,7 +113,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
 
     def fit() -> Calibration:
         cal = identify(campaign, arm, model="proposed" if map_axes else "dh", use_rtest=use_rtest,
-                       map_axes=tuple(map_axes) or None, extensions=tuple(terms))
+                       map_axes=tuple(map_axes) or None, extensions=tuple(terms),
+                       max_nfev=max_nfev)
         if not cal.success:
             raise AacmmError(f"discovery: the fit with {', '.join(t.key for t in terms) or start} "
                              f"did not converge: {cal.message}")

@@ -102,6 +102,15 @@ def no_rtest_option(text: str) -> argparse.ArgumentParser:
     return p
 
 
+def max_nfev_option() -> argparse.ArgumentParser:
+    """``--max-nfev N``: the evaluation cap of every solve (they stop at their tolerance)."""
+    p = _parent()
+    p.add_argument("--max-nfev", type=int, default=200, metavar="N",
+                   help="most residual evaluations per solve (a cap: every solve stops at its "
+                        "tolerance; the count used is printed and in report.json)")
+    return p
+
+
 def nest_option(text: str) -> argparse.ArgumentParser:
     """``--nest FILE``: the R-Test nest's sensor directions."""
     p = _parent()

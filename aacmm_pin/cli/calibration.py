@@ -15,6 +15,7 @@ from aacmm_pin.cli._options import (
     add_command,
     arm_option,
     json_option,
+    max_nfev_option,
     model_option,
     no_rtest_option,
     out_option,
@@ -106,7 +107,7 @@ def _discover(args: argparse.Namespace) -> int:
                                                  if e.strip()]
     result = discover(read_campaign(args.campaign, arm=arm), arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
-                      progress=sys.stderr.isatty())
+                      max_nfev=args.max_nfev, progress=sys.stderr.isatty())
     write_discovery(result, arm, args.out)
     held = result.heldout_rms
     print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
@@ -164,9 +165,9 @@ def _uncertainty(args: argparse.Namespace) -> int:
     from aacmm_pin.uncertainty import monte_carlo, uncertainty_report
 
     arm = load_arm(args.arm)
-    campaign = read_campaign(args.campaign)
+    campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
-                   progress=sys.stderr.isatty())
+                   max_nfev=args.max_nfev, progress=sys.stderr.isatty())
     mc = monte_carlo(cal, campaign, args.trials, sigma_rtest=args.sigma_rtest_um * 1e-6,
                      sigma_location=args.sigma_location_um * 1e-6, workers=args.workers,
                      seed=args.seed, progress=sys.stderr.isatty())
@@ -206,8 +207,9 @@ def _plan(args: argparse.Namespace) -> int:
     from aacmm_pin.planning import plan
 
     arm = load_arm(args.arm)
-    campaign = read_campaign(args.campaign)
-    cal = identify(campaign, arm, model=args.model, progress=sys.stderr.isatty())
+    campaign = read_campaign(args.campaign, arm=arm)
+    cal = identify(campaign, arm, model=args.model, max_nfev=args.max_nfev,
+                   progress=sys.stderr.isatty())
     centre = np.mean(list(campaign.locations.values()), axis=0)
     steps = np.linspace(-args.spacing_mm, args.spacing_mm, args.grid) * 1e-3 if args.grid > 1 \
         else np.zeros(1)
@@ -289,16 +291,14 @@ def add_parsers(subparsers: Any) -> None:
                     parents=[model_option(),
                              no_rtest_option("conventional SPAT: each location's mean "
                                              "displacement for every sample"),
-                             arm, out_option(Path("calibration"), "calibration folder")])
+                             arm, out_option(Path("calibration"), "calibration folder"),
+                             max_nfev_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--loss", default="linear",
                    help="scipy loss: linear, soft_l1, huber, cauchy, arctan")
     p.add_argument("--sigma-um", type=float, default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=float, default=5.0, help="map node step, deg")
-    p.add_argument("--max-nfev", type=int, default=200,
-                   help="most residual evaluations per solve (the solve stops at its tolerance; "
-                        "the count used is printed and in report.json)")
     p.add_argument("--use-bar", action="store_true",
                    help="fit the length-bar readouts too (a calibration input: socket positions "
                         "estimated, calibrated lengths as residuals); validate then on another "
@@ -310,7 +310,8 @@ def add_parsers(subparsers: Any) -> None:
                     parents=[no_rtest_option("start without the R-Test displacements "
                                              "(location means)"),
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
-                                                                "figures, final CALDIR")])
+                                                                "figures, final CALDIR"),
+                             max_nfev_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
@@ -329,7 +330,7 @@ def add_parsers(subparsers: Any) -> None:
                     parents=[model_option(),
                              no_rtest_option("conventional SPAT (location means)"), arm,
                              seed_option("seed of the first trial (trial i uses seed + i)"),
-                             out_option(Path("uncertainty"), "output folder")])
+                             out_option(Path("uncertainty"), "output folder"), max_nfev_option()])
     p.add_argument("campaign", type=Path, help="campaign folder")
     p.add_argument("--trials", type=int, default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
@@ -341,7 +342,7 @@ def add_parsers(subparsers: Any) -> None:
                     parents=[model_option(("proposed",), "the model whose uncertainty is planned "
                                                          "for (DH errors and encoder maps)"),
                              arm, seed_option("seed of the candidate postures' IK starts"),
-                             json_option("the plan")])
+                             json_option("the plan"), max_nfev_option()])
     p.add_argument("campaign", type=Path, help="campaign folder")
     p.add_argument("--grid", type=int, default=3, help="candidate nests per side")
     p.add_argument("--spacing-mm", type=float, default=260.0,
