@@ -162,7 +162,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         new_bar = _linear_bar(arm, new_cal, campaign)
         new_lin = LinearScorer(new_cal, samples, new_bar)
         views = []
-        for t in sorted(new_terms, key=lambda t: t.axes)[:4]:
+        for t in sorted(new_terms, key=lambda t: t.axes):
             label, values = t.variable(samples)
             res_label, before = lin.view(t)
             views.append({"term": t.key, "variable": label, "x": values, "residual": res_label,

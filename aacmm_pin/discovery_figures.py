@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import textwrap
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from aacmm_pin.arm import Arm
 from aacmm_pin.discovery_results import Discovery, Step
 from aacmm_pin.export import write_calibration
 from aacmm_pin.plots import DPI, MODEL_COLOURS, _new_figure
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, np.ndarray]:
@@ -35,10 +38,19 @@ def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, n
 
 def step_figure(step: Step, k: int, path: str | Path) -> None:
     """Write the residuals against each named term's variable, before and after step ``k``."""
+    _step_figure(step, k).savefig(path, dpi=DPI)
+
+
+def _step_figure(step: Step, k: int) -> Figure:
+    """Build the figure of :func:`step_figure`: one panel per named term (up to 3 per row)."""
     views: list[dict[str, Any]] = step.views
-    fig = _new_figure(4.2 * max(len(views), 1), 3.4)
-    axes = fig.subplots(1, max(len(views), 1), squeeze=False)[0]
-    for ax, view in zip(axes, views):
+    ncols = min(max(len(views), 1), 3)
+    nrows = max(1, -(-len(views) // ncols))
+    fig = _new_figure(4.2 * ncols, 0.6 + 3.0 * nrows)
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes[len(views):]:
+        ax.remove()
+    for ax, view in zip(axes, views):  # every named term, one panel each
         x = np.asarray(view["x"], dtype=float)
         for key, colour, label in (("before", MODEL_COLOURS[0], "before"),
                                    ("after", MODEL_COLOURS[3], "after")):
@@ -54,7 +66,7 @@ def step_figure(step: Step, k: int, path: str | Path) -> None:
     fig.suptitle(f"step {k}: {step.effect} {step.axes or ''} - held-out RMS "
                  f"{step.heldout_rms_before * 1e6:.2f} -> {step.heldout_rms_after * 1e6:.2f} um",
                  fontsize=10)
-    fig.savefig(path, dpi=DPI)
+    return fig
 
 
 def gap_figure(result: Discovery, path: str | Path) -> None:

@@ -89,7 +89,6 @@ def _rtest_displacement_figure(campaign: Campaign, location: int | None = None) 
 
 def _rtest_figure(d_um: np.ndarray, location: int) -> Figure:
     """Build the Fig. 5 figure from the displacements of one location, shape (N, 3), in µm."""
-    from matplotlib.collections import LineCollection
     from matplotlib.colors import Normalize
 
     n = len(d_um)
@@ -99,12 +98,10 @@ def _rtest_figure(d_um: np.ndarray, location: int) -> Figure:
     ax_xy, ax_z = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.0, 1.15]})
     fig.suptitle(f"R-Test sphere displacement during the SPAT at location #{location}")
 
-    segments = list(np.stack([d_um[:-1, :2], d_um[1:, :2]], axis=1))
-    path_xy = LineCollection(segments, cmap=cmap, norm=norm, linewidths=0.8, alpha=0.7)
-    path_xy.set_array(sample[:-1])
-    ax_xy.add_collection(path_xy)
+    # the postures are not a path: points only (colour: sample order), the zero on top of them
     points = ax_xy.scatter(d_um[:, 0], d_um[:, 1], c=sample, cmap=cmap, norm=norm, s=9, zorder=3)
-    ax_xy.plot(0, 0, "+", color="black", ms=12, mew=1.4, zorder=2.5)  # under the samples
+    ax_xy.plot(0, 0, "+", color="white", ms=14, mew=3.2, zorder=4)
+    ax_xy.plot(0, 0, "+", color="black", ms=12, mew=1.4, zorder=4.5)
     k = int(np.argmax(np.hypot(d_um[:, 0], d_um[:, 1])))
     r_max = float(np.hypot(d_um[k, 0], d_um[k, 1]))
     ax_xy.plot(d_um[k, 0], d_um[k, 1], "o", ms=11, mfc="none", mec="#d55e00", mew=1.6, zorder=5)
@@ -126,7 +123,6 @@ def _rtest_figure(d_um: np.ndarray, location: int) -> Figure:
     ax_xy.set_title("XY plane (+: R-Test zero)", fontsize="medium")
     ax_xy.grid(True, lw=0.4, alpha=0.5)
 
-    ax_z.plot(sample, d_um[:, 2], color="0.6", lw=0.8, zorder=2)
     ax_z.scatter(sample, d_um[:, 2], c=sample, cmap=cmap, norm=norm, s=9, zorder=3)
     ax_z.axhline(0.0, color="black", lw=0.6)
     ax_z.set_xlabel("sample")
@@ -138,6 +134,9 @@ def _rtest_figure(d_um: np.ndarray, location: int) -> Figure:
 
 
 # --- Fig. 6: encoder error maps ------------------------------------------------------------------
+
+MIN_SPAN_ARCSEC = 1.0
+"""Smallest half-range of a Fig. 6 panel, arcsec: below it an axis shows noise, not an error."""
 
 
 def _per_axis(name: str, table: Mapping[int, Any] | None, n: int, step_deg: float,
@@ -215,15 +214,23 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     grid = np.atleast_1d(fig.subplots(nrows, ncols, sharex=True, squeeze=False)).ravel()
     for ax in grid[len(shown):]:
         ax.remove()
+    errs: list[np.ndarray] = []
     for ax, axis in zip(grid, shown):
         y = values[axis] / ARCSEC
         ok = flags.get(axis, np.ones(n, dtype=bool))
         err = sigma[axis][ok] / ARCSEC if axis in sigma else None
+        top = max(float(np.max(np.abs(y))), MIN_SPAN_ARCSEC)
+        if err is not None and err.size:
+            errs.append(err)
+            top = max(top, float(np.max(np.abs(y[ok]) + err)))
         if axis in true:
-            ax.plot(np.append(x_deg, 180.0), np.append(true[axis], true[axis][0]) / ARCSEC,
-                    color="black", lw=0.8, zorder=2)
-        ax.errorbar(x_deg[ok], y[ok], yerr=err, fmt="o", ms=3.5, color="#0072b2", ecolor="#0072b2",
-                    elinewidth=0.8, capsize=0, zorder=3)
+            t = np.where(np.abs(true[axis]) / ARCSEC < 1e-6, 0.0, true[axis] / ARCSEC)  # rounding
+            top = max(top, float(np.max(np.abs(t))))
+            ax.plot(np.append(x_deg, 180.0), np.append(t, t[0]), color="black", lw=0.8, zorder=2)
+        ax.errorbar(x_deg[ok], y[ok], yerr=err, fmt="o", ms=2.5, color="#0072b2", ecolor="#0072b2",
+                    elinewidth=0.9, capsize=1.5, zorder=3)
+        # at least +-MIN_SPAN_ARCSEC: an axis the data cannot see is flat, not magnified noise
+        ax.set_ylim(-1.12 * top, 1.12 * top)
         ax.plot(x_deg[~ok], y[~ok], "o", ms=4.5, mfc="none", mec="0.55", mew=1.0, zorder=3)
         ax.axhline(0.0, color="0.3", lw=0.5, zorder=1)
         ax.set_title(f"A{axis}-axis", loc="left", fontsize="medium", fontweight="bold")
@@ -237,8 +244,11 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     for ax in grid[len(shown) - ncols:len(shown)]:  # the lowest panel of each column
         ax.set_xlabel("nominal readout (deg)")
 
-    handles = [Line2D([], [], ls="none", marker="o", ms=3.5, color="#0072b2",
-                      label="identified" + (" (error bar: k = 1 uncertainty)" if sigma else ""))]
+    median = float(np.median(np.concatenate(errs))) if errs else None
+    handles = [Line2D([], [], ls="none", marker="o", ms=2.5, color="#0072b2",
+                      label="identified" + ("" if median is None else
+                                            f" (error bar: k = 1 uncertainty, median "
+                                            f"{median:.2g} arcsec)"))]
     if any((~flags.get(a, np.ones(n, dtype=bool))).any() for a in shown):
         handles.append(Line2D([], [], ls="none", marker="o", ms=4.5, mfc="none", mec="0.55",
                               label="not identifiable"))

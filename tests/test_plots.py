@@ -154,6 +154,41 @@ def test_encoder_map_data_in_display_units():
     assert "(arcsec)" in fig.get_supylabel()
 
 
+def test_encoder_map_axis_the_data_cannot_see_is_flat_not_magnified():
+    """An A7 map of numerical noise (1e-12 arcsec) with a 'truth' of rounding noise: the panel
+    spans at least +-1 arcsec, so it reads as zero, and the truth line is exactly 0."""
+    tiny = {7: np.random.default_rng(0).normal(0.0, 1e-17, N_NODES)}
+    fig = _encoder_map_figure(tiny, truth=tiny)
+    low, high = fig.axes[0].get_ylim()
+    assert low <= -1.0 and high >= 1.0
+    truth_line = [ln for ln in fig.axes[0].lines if ln.get_marker() in ("None", "", None)
+                  and len(ln.get_xdata()) == N_NODES + 1]
+    assert truth_line and np.all(truth_line[0].get_ydata() == 0.0)
+    big = _encoder_map_figure({1: np.full(N_NODES, 20 * np.pi / 180 / 3600)})
+    assert big.axes[0].get_ylim()[1] > 20.0  # a real error keeps its own scale
+
+
+def test_encoder_map_error_bars_are_stated():
+    """Error bars smaller than a marker are still stated: the legend gives the median k=1 std."""
+    maps = _maps([1, 2])
+    std = {a: np.full(N_NODES, 0.3 * np.pi / 180 / 3600) for a in maps}
+    fig = _encoder_map_figure(maps, std=std)
+    labels = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
+    assert any("median 0.3 arcsec" in t for t in labels), labels
+
+
+def test_rtest_postures_are_points_not_a_path_and_the_zero_is_on_top():
+    """Fig. 5: samples are separate postures (no line joins them); the zero marker is drawn above."""
+    from matplotlib.collections import LineCollection
+
+    fig = _rtest_displacement_figure(_spat_campaign(), location=1)
+    ax_xy, ax_z = fig.axes[:2]
+    assert not [c for c in ax_xy.collections if isinstance(c, LineCollection)]
+    assert not [ln for ln in ax_z.lines if len(ln.get_xdata()) > 2]  # only the zero line
+    zero = [ln for ln in ax_xy.lines if ln.get_marker() == "+"]
+    assert zero and min(ln.get_zorder() for ln in zero) > max(c.get_zorder() for c in ax_xy.collections)
+
+
 @pytest.mark.parametrize(("kwargs", "name"), [
     ({"maps": {1: np.zeros(N_NODES - 1)}}, "maps"),
     ({"maps": {1: np.zeros(N_NODES)}, "step_deg": 10.0}, "maps"),
@@ -217,3 +252,19 @@ def test_plots_module_does_not_import_matplotlib():
     names = [a.name for n in top if isinstance(n, ast.Import) for a in n.names]
     names += [n.module or "" for n in top if isinstance(n, ast.ImportFrom)]
     assert names and not [n for n in names if n.split(".")[0] == "matplotlib"]
+
+
+def test_discovery_step_figure_draws_every_named_term():
+    """A step that names compliance on six axes draws six panels (not the first four)."""
+    from types import SimpleNamespace
+
+    from aacmm_pin.discovery_figures import _step_figure
+
+    rng = np.random.default_rng(0)
+    views = [{"term": f"compliance[A{a}]", "variable": f"gravity torque on A{a} (N m)",
+              "x": rng.normal(size=50), "residual": "residual along the term (um)",
+              "before": rng.normal(size=50), "after": rng.normal(size=50)} for a in range(1, 7)]
+    step = SimpleNamespace(views=views, effect="compliance", axes=list(range(1, 7)),
+                           heldout_rms_before=3e-6, heldout_rms_after=2e-6)
+    fig = _step_figure(step, 1)
+    assert sorted(ax.get_title() for ax in fig.axes) == [f"compliance[A{a}]" for a in range(1, 7)]
