@@ -627,13 +627,38 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
         _write_csv(folder / "points.csv", _file_columns(pts, first, after))
 
 
-def write_points(path: str | Path, points: np.ndarray) -> None:
+def write_points(path: str | Path, points: np.ndarray,
+                 keep: Mapping[str, list[str]] | None = None) -> None:
     """Write points, shape (N, 3) in m, to a CSV file with columns x_mm,y_mm,z_mm (9 decimals).
 
+    ``keep``: further columns (name -> N cells, as read) written first, e.g. the id columns of
+    the readouts the points were predicted from (:func:`read_id_columns`).
+
     Raises:
-        ValueError: if ``points`` does not have shape (N, 3).
+        ValueError: if ``points`` does not have shape (N, 3) or a kept column another length.
     """
     points = np.asarray(points, dtype=float)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points: shape (N, 3) expected, got {points.shape}")
-    _write_csv(Path(path), _mm(_XYZ["loc"], points))
+    keep = dict(keep or {})
+    if bad := [k for k, v in keep.items() if len(v) != len(points)]:
+        raise ValueError(f"keep: columns {bad} do not have {len(points)} cells")
+    _write_csv(Path(path), {**keep, **_mm(_XYZ["loc"], points)})
+
+
+def read_id_columns(path: str | Path, arm: Arm | None = None) -> dict[str, list[str]]:
+    """Return the columns of a readouts file that are neither readouts nor points, as read.
+
+    E.g. a pose id or a ``tool`` column: what a user wants to find again beside the predicted
+    points. Readout columns are ``q<n>_deg`` and, given the arm, ``<joint name>_deg``; ``x_mm``,
+    ``y_mm``, ``z_mm`` are left out (the prediction replaces them).
+    """
+    with Path(path).open(newline="", encoding="utf-8-sig") as f:
+        rows = [r for r in csv.reader(f) if r and any(c.strip() for c in r)]
+    if not rows:
+        return {}
+    header = [h.strip() for h in rows[0]]
+    joints = {f"{n}_deg" for n in (arm.axis_names if arm is not None else [])}
+    skip = set(_XYZ["loc"]) | joints
+    return {h: [r[i].strip() if i < len(r) else "" for r in rows[1:]]
+            for i, h in enumerate(header) if h and not _Q_COLUMN.fullmatch(h) and h not in skip}

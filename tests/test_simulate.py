@@ -54,6 +54,20 @@ def test_predict_reproduces_simulated_sockets(simulated, tmp_path):
     np.testing.assert_allclose(pred, ref, atol=3e-8)
 
 
+def test_predict_keeps_the_input_id_columns(simulated, tmp_path):
+    """predict's output keeps the readouts file's own columns (placement, socket, t_s...) row by row,
+    so every point can be found again; the readout columns are not repeated."""
+    assert main(["predict", str(simulated / "truth.json"), str(simulated / "lengthbar.csv"),
+                 "--out", str(tmp_path / "p.csv")]) == 0
+    with open(tmp_path / "p.csv") as fh:
+        out = list(csv.DictReader(fh))
+    with open(simulated / "lengthbar.csv") as fh:
+        src = list(csv.DictReader(fh))
+    assert list(out[0])[:2] == ["placement", "socket"] and list(out[0])[-3:] == ["x_mm", "y_mm", "z_mm"]
+    assert not [k for k in out[0] if k.startswith("q")]
+    assert [(r["placement"], r["socket"]) for r in out] == [(r["placement"], r["socket"]) for r in src]
+
+
 def test_campaign_has_the_requested_shape(simulated):
     """4 nests 0.45-0.72 m from A1, 200 samples each, displacement <= 15 um + 2 um noise, 7x3x40 bar."""
     camp = read_campaign(simulated)

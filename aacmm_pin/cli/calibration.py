@@ -47,7 +47,12 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_readout_columns, read_tool_column, write_points
+    from aacmm_pin.campaign import (
+        read_id_columns,
+        read_readout_columns,
+        read_tool_column,
+        write_points,
+    )
     from aacmm_pin.kinematics import predict
     from aacmm_pin.parameters import check_against_arm, read_parameters
     from aacmm_pin.samples import Samples
@@ -59,8 +64,10 @@ def _predict(args: argparse.Namespace) -> int:
     tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
         args.readouts, arm)
     points = predict(arm, params, q, Samples(arm, q, temp, t), tool=tool)
-    write_points(args.out, points)
-    print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS) to {args.out}")
+    keep = read_id_columns(args.readouts, arm)
+    write_points(args.out, points, keep)
+    kept = f" after the input's {', '.join(keep)} columns" if keep else ""
+    print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS){kept} to {args.out}")
     return 0
 
 
