@@ -41,6 +41,7 @@ import pinocchio as pin
 import yourdfpy
 
 from aacmm_pin.errors import ArmModelError, FrameNotFound
+from aacmm_pin.sizes import Sizes, sizes_of_urdf
 
 DEFAULT_ARM = "aacmm7"
 ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
@@ -212,6 +213,18 @@ class Arm:
             if frame.name == name:
                 return frame
         raise FrameNotFound(name, self.error_names)
+
+    @cached_property
+    def sizes(self) -> Sizes:
+        """Plausible sizes of the arm's errors (:mod:`aacmm_pin.sizes`), read once.
+
+        From the sizes file beside the URDF (``<name>.sizes.json``); the default AACMM's where
+        there is none.
+
+        Raises:
+            FileFormatError: if the sizes file is malformed (naming the file and the key).
+        """
+        return sizes_of_urdf(self.source)
 
     @cached_property
     def joint_limits(self) -> np.ndarray:

@@ -98,7 +98,8 @@ class LinearScorer:
 
         Rows: the residual's (data, then prior), then the whitened bar errors (with a bar).
         """
-        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, self.touched)
+        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, self.touched,
+                              self.cal.unknowns.arm.sizes)
         out = np.zeros((len(self._empty()), cols.shape[2]))
         out[:self.n_data] = cols.reshape(self.n_data, -1)
         if self.bar is not None and self._bar_white is not None:
