@@ -41,7 +41,7 @@ import pinocchio as pin
 import yourdfpy
 
 from aacmm_pin.errors import ArmModelError, FrameNotFound
-from aacmm_pin.sizes import Sizes, sizes_of_urdf
+from aacmm_pin.sizes import Sizes, sizes_of_urdf, sizes_path
 
 DEFAULT_ARM = "aacmm7"
 ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
@@ -386,7 +386,9 @@ _LOADED: dict[tuple[str, str, str], Arm] = {}
 
 def _load_named(path: str, name: str) -> Arm:
     """Load (once per process) the arm of a URDF path and keep the user's name for it."""
-    key = (path, name, hashlib.sha1(Path(path).read_bytes()).hexdigest())  # an edited file reloads
+    sizes = sizes_path(path)  # an edited URDF or sizes file reloads
+    data = Path(path).read_bytes() + (sizes.read_bytes() if sizes.is_file() else b"")
+    key = (path, name, hashlib.sha1(data).hexdigest())
     if key not in _LOADED:
         arm = load_arm(path)
         arm.name = name

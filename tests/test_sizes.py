@@ -92,6 +92,14 @@ def test_arm_reads_the_sizes_file_beside_its_urdf(tmp_path):
         _ = ap.load_arm(urdf).sizes
 
 
+def test_embedded_sizes_files_ship_in_the_wheel():
+    """Every embedded arm's sizes file is force-included next to its URDF in the wheel."""
+    text = (ROOT / "pyproject.toml").read_text()
+    for name in ap.arm.EMBEDDED:
+        if sizes_path(ROOT / "urdf" / f"{name}.urdf").is_file():
+            assert f'"urdf/{name}.sizes.json" = "aacmm_pin/urdf/{name}.sizes.json"' in text
+
+
 def _wam_points(arm: ap.Arm, seed: int, n: int, sigma: float) -> ap.Campaign:
     """Points of a simulated WAM with DH errors of its stated sizes and compliance 3e-4 on A2."""
     rng = np.random.default_rng(seed)
