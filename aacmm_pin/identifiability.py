@@ -48,6 +48,18 @@ def plausible_sizes(unknowns: Unknowns) -> np.ndarray:
     return np.array(out + [sizes.map_node] * n_nodes)
 
 
+def plausible_groups(unknowns: Unknowns) -> list[str]:
+    """Return the sizes-file group of every entry of the full layout (as :func:`plausible_sizes`).
+
+    ``x0_angle``, ``x0_translation``, ``dh_angle``, ``dh_length``, ``tool``, ``effects.<name>`` for
+    the terms' parameters and ``map_node``: the entries that share one size of the arm.
+    """
+    out = ["x0_angle"] * 3 + ["x0_translation"] * 3
+    out += ["dh_angle" if f.is_angle else "dh_length" for f in unknowns.arm.error_frames]
+    out += ["tool"] * 3 + [f"effects.{t.effect}" for t in unknowns.terms for _ in t.names]
+    return out + ["map_node"] * (unknowns.free.size - len(out))
+
+
 def unvisited_nodes(unknowns: Unknowns, q: np.ndarray) -> np.ndarray:
     """Return a full-layout mask of the map nodes that no readout touches."""
     mask = np.zeros(unknowns.free.size, dtype=bool)

@@ -82,8 +82,9 @@ def discover_steps(campaign: Path, arm: str, out: Path) -> list[Row]:
         raise SystemExit("discover failed")
     report = json.loads((out / "discovery.json").read_text())
     held, fit = report["gap"]["heldout_rms_um"], report["gap"]["fit_rms_um"]
-    names = ["DH"] + [f"+ {s['effect']} on A{', A'.join(str(a) for a in s['axes'])}"
-                      for s in report["steps"]]
+    names = ["DH"] + [f"+ {s['effect']} on " + ", ".join(sorted(
+        (t[t.index("[") + 1:-1] for t in s["terms"]), key=lambda a: (len(a), a)))
+        for s in report["steps"]]
     return [Row(n, h / 1e3, f / 1e3, None) for n, h, f in zip(names, held, fit)]
 
 
