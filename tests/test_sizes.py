@@ -202,3 +202,4 @@ def test_wam_discovery_names_effects_beyond_dh(tmp_path):
     held = np.array(result.heldout_rms)
     assert np.all(np.diff(held) < 0), held
     assert held[0] < 1.3 * result.fit_rms[0], (held[0], result.fit_rms[0])
+    assert len(result.size_factors) == len(held) and "dh_angle" in result.size_factors[0]
