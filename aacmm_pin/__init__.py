@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
     from aacmm_pin.planning import Plan, plan
     from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.sizes import Sizes, read_sizes, write_sizes
     from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
     from aacmm_pin.validation import ValidationResult, validate
     from aacmm_pin.viewer import View, view
@@ -57,6 +58,7 @@ __all__ = [
     "StylusJacobians", "correct_readouts", "load_arm", "node_angles", "predict",
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
+    "Sizes", "read_sizes", "write_sizes",
 ]
 
 _PUBLIC: dict[str, tuple[str, ...]] = {
@@ -75,6 +77,7 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "kinematics": ("StylusJacobians", "predict", "stylus_jacobians", "stylus_positions"),
     "parameters": ("Parameters", "read_parameters", "write_parameters"),
     "planning": ("Plan", "plan"),
+    "sizes": ("Sizes", "read_sizes", "write_sizes"),
     "simulate": ("Simulation", "SimulationConfig", "simulate_campaign", "write_simulation"),
     "uncertainty": ("MonteCarloResult", "monte_carlo"),
     "validation": ("ValidationResult", "validate"),

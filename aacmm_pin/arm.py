@@ -53,6 +53,7 @@ import pinocchio as pin
 import yourdfpy
 
 from aacmm_pin.errors import ArmModelError, FrameNotFound
+from aacmm_pin.sizes import Sizes, sizes_of_urdf, sizes_path
 
 DEFAULT_ARM = "aacmm7"
 ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
@@ -313,6 +314,18 @@ class Arm:
         raise FrameNotFound(name, self.error_names)
 
     @cached_property
+    def sizes(self) -> Sizes:
+        """Plausible sizes of the arm's errors (:mod:`aacmm_pin.sizes`), read once.
+
+        From the sizes file beside the URDF (``<name>.sizes.json``); the default AACMM's where
+        there is none.
+
+        Raises:
+            FileFormatError: if the sizes file is malformed (naming the file and the key).
+        """
+        return sizes_of_urdf(self.source)
+
+    @cached_property
     def joint_limits(self) -> np.ndarray:
         """Lower and upper readout limits of each axis, shape (n_axes, 2), in rad."""
         out = np.tile([-np.pi, np.pi], (self.n_axes, 1))
@@ -494,7 +507,9 @@ _LOADED: dict[tuple[str, str, str], Arm] = {}
 
 def _load_named(path: str, name: str) -> Arm:
     """Load (once per process) the arm of a URDF path and keep the user's name for it."""
-    key = (path, name, hashlib.sha1(Path(path).read_bytes()).hexdigest())  # an edited file reloads
+    sizes = sizes_path(path)  # an edited URDF or sizes file reloads
+    data = Path(path).read_bytes() + (sizes.read_bytes() if sizes.is_file() else b"")
+    key = (path, name, hashlib.sha1(data).hexdigest())
     if key not in _LOADED:
         arm = load_arm(path)
         arm.name = name

@@ -31,11 +31,12 @@ from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import Kind, Term, term_columns
 from aacmm_pin.encoder_map import EncoderMap, node_count, touched_nodes
-from aacmm_pin.identifiability import PLAUSIBLE, plausible_sizes
+from aacmm_pin.identifiability import plausible_sizes
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
+from aacmm_pin.sizes import Sizes
 from aacmm_pin.unknowns import Unknowns
 from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
 
@@ -185,14 +186,15 @@ class LinearBar:
         Raises:
             AacmmError: if the term needs a column the bar readouts lack (e.g. ``temp_c``).
         """
-        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, touched)
+        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, touched,
+                              self.arm.sizes)
         out: np.ndarray = self.w @ cols.reshape(3 * self.samples.n, -1)
         return out
 
 
 def scaled_columns(term: Term, samples: Samples, stylus: StylusJacobians, params: Parameters,
-                   touched: np.ndarray) -> np.ndarray:
-    """Return d(points)/d(term parameters scaled by their plausible sizes), shape (N, 3, k), m.
+                   touched: np.ndarray, sizes: Sizes) -> np.ndarray:
+    """Return d(points)/d(term parameters scaled by the arm's plausible sizes), shape (N, 3, k), m.
 
     Args:
         term: a candidate term of the effect library.
@@ -201,6 +203,7 @@ def scaled_columns(term: Term, samples: Samples, stylus: StylusJacobians, params
         params: the parameters the model is linearised at.
         touched: map nodes the SPAT readouts touch, shape (n_axes, n_nodes): a map term's
             parameters.
+        sizes: the arm's plausible sizes (:attr:`aacmm_pin.Arm.sizes`).
     """
-    sizes = PLAUSIBLE["node"] if term.kind is Kind.MAP else np.asarray(term.plausible)
-    return term_columns(term, samples, stylus, params, touched) * sizes
+    scale = sizes.map_node if term.kind is Kind.MAP else sizes.term(term)
+    return term_columns(term, samples, stylus, params, touched) * scale

@@ -125,6 +125,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     lin = LinearScorer(cal, samples, bar_now)
     steps: list[Step] = []
     held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [bar_now]
+    factors = [lin.size_factors]
     n_candidates: list[int] = []
     stopped, missing = "", []
     ticker = tqdm(total=max_steps, desc="discover", unit="step", disable=not progress, leave=False)
@@ -186,6 +187,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         steps.append(step)
         cal, lin, bar_now = new_cal, new_lin, new_bar
         held.append(lin.heldout_rms)
+        factors.append(lin.size_factors)
         fits.append(cal.fit_rms)
         bars.append(bar_now)
         ticker.update(1)
@@ -204,7 +206,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      bar_normalised=[None if b is None else lin.bar_normalised(b.errors) for b in bars],
                      bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
                      noise=cal.sigma, n_candidates=n_candidates,
-                     runtime_s=time.perf_counter() - tic)
+                     runtime_s=time.perf_counter() - tic, size_factors=factors)
 
 
 def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float

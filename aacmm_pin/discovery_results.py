@@ -157,6 +157,9 @@ class Discovery:
     """Noise level (sigma per coordinate) of the final model, m."""
     n_candidates: list[int]
     runtime_s: float
+    size_factors: list[dict[str, float]] = field(default_factory=list)
+    """Per model (start, then after every step): the groups of the arm's sizes its fit rejected
+    and the factor the held-out prior widened them by (:func:`aacmm_pin.linear_scorer.size_factors`)."""
 
     @property
     def named(self) -> list[tuple[str, list[int]]]:
@@ -174,7 +177,8 @@ class Discovery:
                     "bar_rms_um": [_um(v) for v in self.bar_rms],
                     "bar_covered_rms_um": [_um(v) for v in self.bar_covered_rms],
                     "bar_normalised": self.bar_normalised,
-                    "bar_covered_fraction": self.bar_covered_fraction},
+                    "bar_covered_fraction": self.bar_covered_fraction,
+                    "size_factors": self.size_factors},
             "final": {"extensions": sorted(cal.parameters.extensions),
                       "map_axes": list(cal.unknowns.map_axes),
                       "noise_um": self.noise * 1e6},

@@ -86,7 +86,8 @@ class Term:
     names: tuple[str, ...]
     """Names of the parameters, e.g. ``compliance[A2].k``."""
     plausible: tuple[float, ...]
-    """Plausible size of every parameter (SI): the scale of its prior."""
+    """Plausible size of every parameter on the default arm (SI): the scale of its prior, unless
+    the arm's sizes name the term's effect (:meth:`aacmm_pin.sizes.Sizes.term`)."""
     description: str
     """Plain-language description."""
     basis_of: Callable[[Samples], np.ndarray] = field(repr=False)

@@ -2,7 +2,8 @@
 
 ``CALDIR/parameters.json`` names ``calibrated.urdf`` beside it, so the folder is self-contained;
 ``calibrated.urdf`` holds the identified DH values in its error frames and the identified tool vector
-of every tool (it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json`` maps first).
+of every tool (it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json``
+maps first); ``calibrated.sizes.json`` beside it carries the arm's plausible sizes, if it has any.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 from aacmm_pin.arm import Arm
 from aacmm_pin.identification import Calibration
 from aacmm_pin.parameters import write_parameters
+from aacmm_pin.sizes import sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC
 
 
@@ -41,12 +43,16 @@ def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray
 def write_calibration(cal: Calibration, arm: Arm, folder: str | Path) -> Path:
     """Write a calibration folder and return its path.
 
-    Files: ``parameters.json``, ``calibrated.urdf``, ``encoder_maps.csv``, ``report.json``.
+    Files: ``parameters.json``, ``calibrated.urdf``, ``encoder_maps.csv``, ``report.json``, and
+    ``calibrated.sizes.json`` when the arm has a sizes file (:mod:`aacmm_pin.sizes`), so that the
+    folder's arm keeps its plausible sizes.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     params = cal.parameters
     (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)))
+    if sizes_path(arm.source).is_file():
+        write_sizes(arm.sizes, sizes_path(folder / "calibrated.urdf"))
     write_parameters(params.replace(arm="calibrated.urdf"), folder / "parameters.json")
     write_maps_csv(cal, folder / "encoder_maps.csv")
     report = cal.report()

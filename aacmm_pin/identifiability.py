@@ -12,11 +12,11 @@ stated rule, and every one is listed in the report:
    its free nodes (a hard constraint) and the constant is carried by the other parameters.
 3. **Undetermined directions** (e.g. the A7 map when the stylus sits on the A7 axis, or an axis
    offset that map shapes can imitate): with every column scaled by a plausible size of its
-   parameter (:data:`PLAUSIBLE`), the singular value of a direction is how far a change of that
-   size moves the data (m, norm over all samples). Rule: a direction whose singular value is below
-   ``2 sigma`` (sigma: the R-Test noise) is *not determined*; its component is held at the start
-   value by a constraint row (truncated SVD). A parameter or node is *identifiable* when more than
-   half of its scaled unit vector lies in the determined subspace.
+   parameter (the arm's :class:`aacmm_pin.sizes.Sizes`), the singular value of a direction is how
+   far a change of that size moves the data (m, norm over all samples). Rule: a direction whose
+   singular value is below ``2 sigma`` (sigma: the R-Test noise) is *not determined*; its
+   component is held at the start value by a constraint row (truncated SVD). A parameter or node
+   is *identifiable* when more than half of its scaled unit vector lies in the determined subspace.
 """
 
 from __future__ import annotations
@@ -29,10 +29,6 @@ import scipy.sparse as sp
 from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.unknowns import BlockJacobian, NodeKey, UnknownKey, Unknowns
 
-PLAUSIBLE = {"angle": 3.5e-4, "length": 1e-4, "node": 1e-4, "base_angle": 1e-2,
-             "base_length": 1e-2}
-"""Plausible sizes (rad or m) that scale the Jacobian's columns: DH angles (0.02 deg), DH lengths
-and tool (0.1 mm), map nodes (~20 arcsec), X0 angles and the r-CS -> MT-CS translation."""
 GAUGE_TOL = 1e-6
 GAUGE_WEIGHT = 1e3
 """Weight of a gauge or hold row, m per unit: 1e-9 of violation costs as much as 1 um of data."""
@@ -41,14 +37,28 @@ DETERMINED_K = 2.0
 
 
 def plausible_sizes(unknowns: Unknowns) -> np.ndarray:
-    """Return the plausible size of every entry of the full layout (rad or m)."""
+    """Return the plausible size of every entry of the full layout (rad or m), the arm's sizes."""
     arm = unknowns.arm
-    out = [PLAUSIBLE["base_angle"]] * 3 + [PLAUSIBLE["base_length"]] * 3
-    out += [PLAUSIBLE["angle"] if f.is_angle else PLAUSIBLE["length"] for f in arm.error_frames]
-    out += [PLAUSIBLE["length"]] * (3 * arm.n_tools)
-    out += [float(v) for t in unknowns.terms for v in t.plausible]
+    sizes = arm.sizes
+    out = [sizes.x0_angle] * 3 + [sizes.x0_translation] * 3
+    out += [sizes.dh_angle if f.is_angle else sizes.dh_length for f in arm.error_frames]
+    out += [sizes.tool] * (3 * arm.n_tools)
+    out += [float(v) for t in unknowns.terms for v in sizes.term(t)]
     n_nodes = unknowns.free.size - len(out)
-    return np.array(out + [PLAUSIBLE["node"]] * n_nodes)
+    return np.array(out + [sizes.map_node] * n_nodes)
+
+
+def plausible_groups(unknowns: Unknowns) -> list[str]:
+    """Return the sizes-file group of every entry of the full layout (as :func:`plausible_sizes`).
+
+    ``x0_angle``, ``x0_translation``, ``dh_angle``, ``dh_length``, ``tool``, ``effects.<name>`` for
+    the terms' parameters and ``map_node``: the entries that share one size of the arm.
+    """
+    out = ["x0_angle"] * 3 + ["x0_translation"] * 3
+    out += ["dh_angle" if f.is_angle else "dh_length" for f in unknowns.arm.error_frames]
+    out += ["tool"] * (3 * unknowns.arm.n_tools)
+    out += [f"effects.{t.effect}" for t in unknowns.terms for _ in t.names]
+    return out + ["map_node"] * (unknowns.free.size - len(out))
 
 
 def unvisited_nodes(unknowns: Unknowns, q: np.ndarray) -> np.ndarray:

@@ -1,10 +1,11 @@
 r"""A calibration linearised at its solution, for scoring candidate terms on its residuals.
 
 :class:`LinearScorer` works in the identification's reduced coordinates (:class:`aacmm_pin.solver.Problem`:
-constraints met, columns preconditioned) with a Gaussian prior of the plausible sizes on the arm
-directions, and scores a candidate term of the effect library by its leave-one-location-out
-held-out gain, the F test of its fit improvement, its BIC change and, with a length bar, the
-linearised change of the normalised bar errors (:mod:`aacmm_pin.bar_linear`). The loop that uses
+constraints met, columns preconditioned) with a Gaussian prior of the arm's plausible sizes on the
+arm directions (widened where the fit rejects them, :func:`size_factors`), and scores a candidate
+term of the effect library by its leave-one-location-out held-out gain, the F test of its fit
+improvement, its BIC change and, with a length bar, the linearised change of the normalised bar
+errors (:mod:`aacmm_pin.bar_linear`). The loop that uses
 it is :func:`aacmm_pin.discover`.
 """
 
@@ -16,15 +17,48 @@ from scipy import stats
 
 from aacmm_pin.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.discovery_results import Score
-from aacmm_pin.effects import Term, residual_along
+from aacmm_pin.effects import Kind, Term, residual_along
 from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.errors import AacmmError
+from aacmm_pin.identifiability import plausible_groups, plausible_sizes
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.samples import Samples
 
 FOLDS = 5
 """Folds of the held-out score for absolute points (k-fold over the samples)."""
+SIZE_ALPHA = 1e-3
+"""A group of the arm's plausible sizes is rejected by its fit when the fitted values' sum of
+squares (in sizes) exceeds the chi-square quantile 1 - SIZE_ALPHA of a right size."""
+
+
+def size_factors(cal: Calibration) -> dict[str, float]:
+    r"""Return, per group of the arm's sizes that the fit rejects, how much larger its errors are.
+
+    Under the arm's sizes (:mod:`aacmm_pin.sizes`) a fitted value :math:`\hat x_i` (from the
+    start) of an identifiable entry of size :math:`s_i` and linearised variance :math:`v_i` is
+    about :math:`N(0, s_i^2 + v_i)`, so :math:`\sum_i \hat x_i^2 / (s_i^2 + v_i)` over a group's n
+    entries is chi-square with n degrees of freedom. Where it exceeds the 1 - :data:`SIZE_ALPHA`
+    quantile the stated size is too small for this arm, and the group's factor is the size the
+    data show, :math:`\sqrt{\sum_i (\hat x_i^2 - v_i) / \sum_i s_i^2}` (empirical Bayes; at least
+    1). Groups the fit does not reject are left out (factor 1).
+
+    Args:
+        cal: a calibration (its layout, start values, covariance and identifiable entries).
+    """
+    problem, u = cal.problem, cal.unknowns
+    n_arm = problem.n_arm
+    size2 = plausible_sizes(u)[u.free] ** 2  # as the identification scaled its columns
+    value2 = (cal.x[:n_arm] - problem.x_ref[:n_arm]) ** 2
+    var = np.clip(np.diag(cal.covariance)[:n_arm], 0.0, None)
+    groups = np.array(plausible_groups(u))[u.free]
+    out = {}
+    for group in dict.fromkeys(groups.tolist()):
+        sel = (groups == group) & cal.identifiable
+        n = int(sel.sum())
+        if n and np.sum(value2[sel] / (size2[sel] + var[sel])) > stats.chi2.ppf(1 - SIZE_ALPHA, n):
+            out[group] = float(np.sqrt(max(np.sum(value2[sel] - var[sel]) / np.sum(size2[sel]), 1.0)))
+    return out
 
 
 class LinearScorer:
@@ -33,9 +67,18 @@ class LinearScorer:
     All in the identification's reduced coordinates (constraints met, columns preconditioned) with
     a Gaussian prior of the plausible sizes on the arm directions (and the nest offsets' own prior
     rows): held-out refits are then well posed even where one location alone saw a direction.
+
+    Args:
+        cal: the calibration to linearise.
+        samples: its samples (readouts, temperature, motion, displacement).
+        bar: the linearised length bar, or None.
+        widen_sizes: widen each group of the arm's sizes that the fit rejects to the scale the
+            data show (:func:`size_factors`), for the prior and for the candidates of its effect;
+            False keeps the arm's sizes.
     """
 
-    def __init__(self, cal: Calibration, samples: Samples, bar: LinearBar | None = None):
+    def __init__(self, cal: Calibration, samples: Samples, bar: LinearBar | None = None, *,
+                 widen_sizes: bool = True):
         problem = cal.problem
         z = problem.z(cal.x)
         self.cal, self.samples = cal, samples
@@ -47,8 +90,19 @@ class LinearScorer:
         # coordinates, z = R y), centred at the start values, not at this fit: a left-out
         # location's refit must not keep what only that location determined; the nest offsets
         # have their own prior rows in the residual already
+        # where the fit rejects a group of the arm's sizes, that group's prior is its fitted scale
+        self.size_factors = size_factors(cal) if widen_sizes else {}
+        """Group of the arm's sizes -> factor its prior (and its candidates') is widened by."""
         arm_rows = problem.r_inv[:problem.n_arm_y]
-        self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
+        if self.size_factors:
+            groups = np.array(plausible_groups(cal.unknowns))[cal.unknowns.free]
+            factor = np.array([self.size_factors.get(g, 1.0) for g in groups])
+            scale = plausible_sizes(cal.unknowns)[cal.unknowns.free]
+            null = problem.basis[:problem.n_arm, :problem.n_arm_y] / scale[:, None]  # orthonormal
+            cov_y = null.T @ (factor[:, None] ** 2 * null)  # prior of y: sizes x factors
+            self.ridge = self.sigma ** 2 * (arm_rows.T @ np.linalg.solve(cov_y, arm_rows))
+        else:
+            self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
         self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
         # held-out groups: the R-Test locations (each left-out SPAT less its mean: its nest offset
         # is unknown); absolute points (no nests): FOLDS folds of the samples, seeded
@@ -98,12 +152,15 @@ class LinearScorer:
 
         Rows: the residual's (data, then prior), then the whitened bar errors (with a bar).
         """
-        cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, self.touched)
+        factor = self.size_factors.get("map_node" if term.kind is Kind.MAP else
+                                       f"effects.{term.effect}", 1.0)
+        cols = factor * scaled_columns(term, self.samples, self.stylus, self.cal.parameters,
+                                       self.touched, self.cal.unknowns.arm.sizes)
         out = np.zeros((len(self._empty()), cols.shape[2]))
         out[:self.n_data] = cols.reshape(self.n_data, -1)
         if self.bar is not None and self._bar_white is not None:
             try:
-                out[len(self.r):] = sla.solve_triangular(
+                out[len(self.r):] = factor * sla.solve_triangular(
                     self._bar_white[0], self.bar.columns(term, self.touched), lower=True)
             except AacmmError:  # e.g. thermal without temp_c in lengthbar.csv: the bar abstains
                 out[len(self.r):] = np.nan

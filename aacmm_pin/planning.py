@@ -2,7 +2,7 @@ r"""Where to measure next: the SPAT that would shrink the worst map uncertainty 
 
 Information model (stated): the current campaign's data information :math:`J^T J / \sigma^2` over
 every parameter and *every* map node (visited or not), plus a prior of the plausible sizes
-(:data:`aacmm_pin.identifiability.PLAUSIBLE`: 20 arcsec for a node, so an unvisited node's
+(the arm's :class:`aacmm_pin.sizes.Sizes`: 20 arcsec for a node of the default arm, so an unvisited node's
 uncertainty is finite and equals it), plus the map-mean gauge; nest offsets are marginalised with
 their prior (sigma 3 um). A candidate SPAT (an R-Test location and a posture family, postures found
 by IK on the calibrated model) adds its rows; the predicted covariance follows by a low-rank

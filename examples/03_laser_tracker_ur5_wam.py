@@ -9,15 +9,18 @@ tool points, one instrument frame) and calibrates the makers' DH models (``urdf/
 ``urdf/wam7.urdf``, written by ``urdf/make_serial_dh.py``):
 
 * UR5: ``aacmm-pin identify`` on the 1000 grid poses (DH model) and ``aacmm-pin discover`` (what
-  the DH model misses, step by step), each validated by ``aacmm-pin validate`` on the 20 random
-  poses never used for calibration;
+  the DH model misses, step by step), the DH model, every step's model (refitted on the grid) and
+  the final one validated on the 20 random poses never used for calibration (``aacmm-pin
+  validate``);
 * WAM (grid poses only): the DH model's error on held-out poses by 5-fold cross-validation, and
   ``aacmm-pin discover`` (its k-fold held-out RMS per step).
 
-It prints the mean position error uncalibrated and calibrated, beside the thesis' figures, and the
-discovery steps.
+Each robot's plausible sizes (the priors of discovery's held-out scores) are its own,
+``urdf/<robot>.sizes.json``. It prints the mean position error uncalibrated and calibrated, beside
+the thesis' figures, then the README's table: uncalibrated, DH and every discovery step with its
+k-fold held-out RMS, fit RMS and test error.
 
-Run: ``python examples/03_laser_tracker_ur5_wam.py [--data DIR] [--out DIR]`` (a few seconds).
+Run: ``python examples/03_laser_tracker_ur5_wam.py [--data DIR] [--out DIR]`` (about 20 s).
 """
 
 from __future__ import annotations
@@ -26,12 +29,14 @@ import argparse
 import csv
 import dataclasses
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 import aacmm_pin as ap
 from aacmm_pin.cli import main
+from aacmm_pin.validation import validate_points
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"
@@ -57,18 +62,48 @@ def write_points_campaign(source: Path, folder: Path) -> float:
     return float(np.mean(np.linalg.norm(dif, axis=1)))
 
 
-def discover_steps(campaign: Path, arm: str, out: Path) -> list[str]:
-    """Run ``aacmm-pin discover`` from the DH model; return one line per step (k-fold held out)."""
+@dataclass(frozen=True)
+class Row:
+    """One model of a robot's table: what it adds and its errors, mm (None: not measured)."""
+
+    model: str
+    """``uncalibrated``, ``DH`` or ``+ <effect> on A<n>, ...`` (a discovery step)."""
+    heldout_mm: float | None
+    """k-fold held-out RMS per coordinate over the grid poses (discovery's score)."""
+    fit_mm: float | None
+    """Fit RMS per coordinate on the grid poses."""
+    test_mm: float | None
+    """Mean position error on poses never used for calibration."""
+
+
+def discover_steps(campaign: Path, arm: str, out: Path) -> list[Row]:
+    """Run ``aacmm-pin discover`` from the DH model; return the DH row and one row per step."""
     if main(["discover", str(campaign), "--arm", arm, "--start", "dh", "--out", str(out)]):
         raise SystemExit("discover failed")
     report = json.loads((out / "discovery.json").read_text())
-    return [f"{s['effect']} on A{', A'.join(str(a) for a in s['axes'])}: k-fold held-out RMS "
-            f"{s['heldout_rms_before_um'] / 1e3:.4f} -> {s['heldout_rms_after_um'] / 1e3:.4f} mm"
-            for s in report["steps"]]
+    held, fit = report["gap"]["heldout_rms_um"], report["gap"]["fit_rms_um"]
+    names = ["DH"] + [f"+ {s['effect']} on " + ", ".join(sorted(
+        (t[t.index("[") + 1:-1] for t in s["terms"]), key=lambda a: (len(a), a)))
+        for s in report["steps"]]
+    return [Row(n, h / 1e3, f / 1e3, None) for n, h, f in zip(names, held, fit)]
 
 
-def ur5(data: Path, out: Path) -> tuple[float, float, float, list[str]]:
-    """Return the UR5's mean error on the random poses, mm: uncalibrated, DH, discovered model."""
+def step_models(out: Path) -> list[tuple[tuple[int, ...], tuple[ap.effects.Term, ...]]]:
+    """Return the (map axes, extension terms) of the model after every discovery step."""
+    report = json.loads((out / "discovery.json").read_text())
+    models, keys = [], []
+    for step in report["steps"]:
+        keys += step["terms"]
+        maps = tuple(int(k[len("encoder_map[A"):-1]) for k in keys if k.startswith("encoder_map["))
+        terms = tuple(ap.effects.term_from_key(k) for k in keys if not k.startswith("encoder_map[")
+                      and not (k.startswith("encoder_harmonic") and ap.effects.term_from_key(k).axis
+                               in maps))
+        models.append((maps, terms))
+    return models
+
+
+def ur5(data: Path, out: Path) -> list[Row]:
+    """Return the UR5's rows: uncalibrated, DH and every discovery step (20 random test poses)."""
     write_points_campaign(data / "UR5" / "3D_UR5_uncalibrated_grid_cleaned.csv", out / "ur5_grid")
     before = write_points_campaign(data / "UR5" / "3D_UR5_uncalibrated_random_cleaned.csv",
                                    out / "ur5_random")
@@ -79,15 +114,24 @@ def ur5(data: Path, out: Path) -> tuple[float, float, float, list[str]]:
     main(["validate", str(out / "ur5_dh"), str(out / "ur5_random"),
           "--json", str(out / "ur5_random_errors.json")])
     after = json.loads((out / "ur5_random_errors.json").read_text())["points"]["mean_mm"]
-    steps = discover_steps(out / "ur5_grid", "ur5", out / "ur5_discovered")
+    rows = discover_steps(out / "ur5_grid", "ur5", out / "ur5_discovered")
+    arm = ap.load_arm("ur5")
+    grid, test = ap.read_campaign(out / "ur5_grid"), ap.read_campaign(out / "ur5_random")
+    tests = [float(after)]
+    for maps, terms in step_models(out / "ur5_discovered"):  # each step's model on the test poses
+        cal = ap.identify(grid, arm, model="proposed" if maps else "dh", map_axes=maps or None,
+                          extensions=terms)
+        tests.append(validate_points(arm, cal.parameters, test).mean * 1e3)
     main(["validate", str(out / "ur5_discovered"), str(out / "ur5_random"),
           "--json", str(out / "ur5_random_errors_discovered.json")])
     found = json.loads((out / "ur5_random_errors_discovered.json").read_text())["points"]["mean_mm"]
-    return before, float(after), float(found), steps
+    tests[-1] = float(found)  # the CLI's final model (a refit of the same model agrees to 0.2 um)
+    return [Row("uncalibrated", None, None, before)] + [dataclasses.replace(r, test_mm=t)
+                                                         for r, t in zip(rows, tests)]
 
 
-def wam(data: Path, out: Path) -> tuple[float, float, float, list[str]]:
-    """Return the WAM's mean error, mm: uncalibrated, and DH-calibrated on held-out folds."""
+def wam(data: Path, out: Path) -> list[Row]:
+    """Return the WAM's rows: uncalibrated, DH (test: 5-fold refits) and every discovery step."""
     before = write_points_campaign(data / "WAM" / "3D_WAM_uncalibrated_grid_cleaned.csv",
                                    out / "wam_grid")
     arm = ap.load_arm(ROOT / "urdf" / "wam7.urdf")
@@ -103,14 +147,35 @@ def wam(data: Path, out: Path) -> tuple[float, float, float, list[str]]:
         cal = ap.identify(dataclasses.replace(campaign, points=part), arm, model="dh")
         pred = ap.stylus_positions(arm, cal.parameters, points.q[test], frame="mt")
         errors.append(np.linalg.norm(pred - points.point[test], axis=1))
-    steps = discover_steps(out / "wam_grid", "wam7", out / "wam_discovered")
-    return before, float(np.mean(np.concatenate(errors)) * 1e3), float("nan"), steps
+    rows = discover_steps(out / "wam_grid", "wam7", out / "wam_discovered")
+    rows[0] = dataclasses.replace(rows[0], test_mm=float(np.mean(np.concatenate(errors)) * 1e3))
+    return [Row("uncalibrated", None, None, before), *rows]
 
 
-def run(data: Path, out: Path) -> dict[str, tuple[float, float, float, list[str]]]:
-    """Calibrate both robots; return robot -> (uncalibrated, DH, discovered) mean error, mm, and
-    the discovery steps (the WAM's discovered model has no test poses: NaN)."""
+def run(data: Path, out: Path) -> dict[str, list[Row]]:
+    """Calibrate both robots; return robot -> rows (uncalibrated, DH, each discovery step)."""
     return {"UR5": ur5(data, out), "WAM": wam(data, out)}
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
+def table(results: dict[str, list[Row]]) -> str:
+    """Return the README's table (Markdown) of every robot's models beside the thesis' figures."""
+    test = {"UR5": "mean error on the 20 random test poses",
+            "WAM": f"mean error: uncalibrated on the grid, DH on {FOLDS}-fold refits"}
+    lines = ["| robot | model | k-fold held-out RMS (mm) | fit RMS (mm) | test error (mm) | "
+             "thesis: uncalibrated -> MDH + GNN (mm) |", "|---|---|---|---|---|---|"]
+    for robot, rows in results.items():
+        for i, row in enumerate(rows):
+            thesis = (f"{PUBLISHED[robot][0]:.4f} -> {PUBLISHED[robot][1]:.4f}"
+                      + ("" if robot == "UR5" else " (its random poses)")) if i == 0 else ""
+            lines.append(f"| {robot if i == 0 else ''} | {row.model} | {_mm(row.heldout_mm)} | "
+                         f"{_mm(row.fit_mm)} | {_mm(row.test_mm)} | {thesis} |")
+    lines.append(f"\nTest error: UR5 {test['UR5']}; WAM {test['WAM']} (no random test file "
+                 "is shared for the WAM).")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
@@ -122,10 +187,9 @@ if __name__ == "__main__":
     results = run(args.data, args.out)
     print("\nmean position error (mm)   uncalibrated   DH model   discovered | thesis: uncalibrated"
           "  MDH + GNN")
-    for robot, (before, after, found, _) in results.items():
+    for robot, rows in results.items():
         test = "20 random poses" if robot == "UR5" else f"{FOLDS}-fold held-out grid poses"
-        print(f"{robot:<4} ({test:<27}) {before:>8.4f}   {after:>8.4f}   {found:>8.4f}   | "
-              f"{PUBLISHED[robot][0]:>10.4f}  {PUBLISHED[robot][1]:>10.4f}")
-    for robot, (*_, steps) in results.items():
-        print(f"{robot} discovery from the DH model:", *(f"\n  step {k}: {s}"
-                                                       for k, s in enumerate(steps, 1)) or " none")
+        found = rows[-1].test_mm if robot == "UR5" and len(rows) > 2 else float("nan")
+        print(f"{robot:<4} ({test:<27}) {rows[0].test_mm:>8.4f}   {rows[1].test_mm:>8.4f}   "
+              f"{found:>8.4f}   | {PUBLISHED[robot][0]:>10.4f}  {PUBLISHED[robot][1]:>10.4f}")
+    print("\n" + table(results))

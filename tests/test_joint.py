@@ -46,11 +46,12 @@ def test_two_tracker_stations_are_fitted_jointly_and_recover_the_truth():
     cal = ap.identify(campaign, arm, model="dh")
     assert cal.success
     assert cal.fit_rms < 1.3 * SIGMA
-    # the arm, moved into the fit's gauge: every determined entry within 4.5 std
+    # the arm, moved into the fit's gauge: every identified entry within 4.5 std (held ones have
+    # no variance: they are where the gauge puts them)
     moved, _ = cal.equivalent(truth)
     std = np.sqrt(np.diag(cal.covariance))[:len(cal.unknowns.names)]
-    z = (cal.x[:len(std)] - cal.unknowns.vector(moved)) / std
-    assert np.all(np.abs(z) < 4.5), np.round(z, 1)
+    z = ((cal.x[:len(std)] - cal.unknowns.vector(moved)) / std)[cal.identifiable]
+    assert z.size >= 15 and np.all(np.abs(z) < 4.5), np.round(z, 1)
     # the second frame, in the problem's coordinates (exp(w) R0, t0 + t): within 4.5 std too
     frame_keys = [i for i, k in enumerate(cal.keys) if isinstance(k, FrameKey)]
     assert [str(cal.keys[i]) for i in frame_keys] == [f"group2_{c}" for c in

@@ -53,6 +53,7 @@ i+1 on ``link<i>``) and one cylinder along each nonzero d_i and a_i, plus the st
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from dataclasses import dataclass, field
@@ -114,6 +115,9 @@ class SerialArm:
     """RGBA of the links."""
     extra_comments: tuple[str, ...] = field(default_factory=tuple)
     """Further lines for the URDF's header comment."""
+    sizes: dict[str, object] = field(default_factory=dict)
+    """Plausible sizes of its errors, SI, with their ``source`` (``<name>.sizes.json`` beside the
+    URDF, read by ``aacmm_pin.sizes``); empty: no sizes file (the default AACMM's sizes)."""
 
 
 def cylinder_inertia(mass: float, radius: float, length: float, axis: str
@@ -179,6 +183,20 @@ UR5 = SerialArm(
     colour=(0.62, 0.66, 0.72, 1.0),
     extra_comments=("Tool: SMR centre 31 mm along z6 (laser-tracker data set jacobi2025, whose commanded "
                     "positions use d5 = 0.09456 m: dz5 = -0.00009 m reproduces them).",),
+    sizes={
+        "source": (
+            "Physics and makers' figures, not fitted to any data. Cast and machined aluminium "
+            "links on the nominal DH table (not UR's per-robot factory calibration): DH angle "
+            "errors of about 0.06 deg (1e-3 rad) and lengths of about 0.5 mm; the SMR adapter is "
+            "not a calibrated tool (1 mm). Harmonic drive joints: transmission error and lost "
+            "motion of about 1 arcmin peak to peak, so about 30 arcsec (1.5e-4 rad) for a map "
+            "node, an encoder harmonic and backlash, 20 arcsec (1e-4 rad) for crosstalk; "
+            "torsional stiffness of the drives and bearings of order 3e4 N m/rad, compliance "
+            "3e-5 rad/(N m) (3x the AACMM's: about 0.1 deg under the shoulder's 50 N m of "
+            "gravity torque). Instrument frame: the default sizes."),
+        "dh_angle": 1e-3, "dh_length": 5e-4, "tool": 1e-3, "map_node": 1.5e-4,
+        "effects": {"compliance": 3e-5, "backlash": 1.5e-4, "crosstalk": 1e-4, "encoder": 1.5e-4},
+    },
 )
 
 # --------------------------------------------------------------------------------------- WAM
@@ -233,6 +251,22 @@ WAM7 = SerialArm(
     base_height=0.346,
     colour=(0.78, 0.78, 0.8, 1.0),
     extra_comments=("Tool: SMR centre 44 mm along z7 beyond d7 (laser-tracker data set jacobi2025).",),
+    sizes={
+        "source": (
+            "Physics and makers' figures, not fitted to any data. A cable-driven arm: joint "
+            "zeros are set by homing against hand-positioned references and the links are "
+            "assembled aluminium tubes, so DH angle errors of about 0.1 deg (1.75e-3 rad) and "
+            "lengths of about 1 mm; the SMR adapter on the wrist is not a calibrated tool (2 mm). "
+            "The encoders sit on the motors before the cable transmissions (ratios of about 10 to 42) and "
+            "differentials (J2/J3, J5/J6), so capstan and pulley runout, cable slack and "
+            "friction hysteresis show as angle errors that follow the joint angle, the direction "
+            "of motion and the coupled joint, of about 0.06 deg (1e-3 rad) each; cable "
+            "stretch makes the joints compliant: stiffness of order 3e3 N m/rad, compliance "
+            "3e-4 rad/(N m) (10x a UR5's harmonic drives), i.e. about 0.5 deg under the "
+            "shoulder's 30 N m of gravity torque. Instrument frame: the default sizes."),
+        "dh_angle": 1.75e-3, "dh_length": 1e-3, "tool": 2e-3, "map_node": 1e-3,
+        "effects": {"compliance": 3e-4, "backlash": 1e-3, "crosstalk": 1e-3, "encoder": 1e-3},
+    },
 )
 
 ROBOTS = {arm.name: arm for arm in (UR5, WAM7)}
@@ -384,6 +418,10 @@ def main(argv: list[str]) -> None:
         out = Path(__file__).with_name(f"{name}.urdf")
         out.write_text(make_urdf(ROBOTS[name]))
         print(f"wrote {out}")
+        if ROBOTS[name].sizes:
+            sizes = out.with_name(f"{name}.sizes.json")
+            sizes.write_text(json.dumps({"units": "SI", **ROBOTS[name].sizes}, indent=2) + "\n")
+            print(f"wrote {sizes}")
 
 
 if __name__ == "__main__":

@@ -119,6 +119,10 @@ def _discover(args: argparse.Namespace) -> int:
     held = result.heldout_rms
     print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
           f"{result.fit_rms[0] * 1e6:.2f} um")
+    widened = result.size_factors[0] if result.size_factors else {}
+    if widened:
+        print("  the fit rejects the arm's sizes of " + ", ".join(
+            f"{g} (x{f:.3g})" for g, f in widened.items()) + ": held-out priors widened")
     for k, step in enumerate(result.steps, start=1):
         axes = f" on {', '.join(f'A{a}' for a in step.axes)}" if step.axes else ""
         print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
