@@ -61,7 +61,9 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
     for folder, cal in calibrations.items():
         print(f"  {labels[folder]:<20} fit RMS {cal.fit_rms * 1e6:6.2f} um, "
               f"{cal.n_determined} parameters, {cal.runtime_s:.1f} s, "
-              f"{'converged' if cal.success else 'NOT converged'} -> {out / folder}")
+              f"{'converged' if cal.success else 'NOT converged'}, nests "
+              f"{cal.nests.split(':')[0].replace(' at their measured positions', '')} "
+              f"-> {out / folder}")
     print(f"figures: {out}/fig5_rtest_displacement.png, fig6_encoder_maps.png, "
           f"fig9_length_errors.png ({time.perf_counter() - tic:.0f} s in all)")
     return results

@@ -114,7 +114,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     def fit() -> Calibration:
         cal = identify(campaign, arm, model="proposed" if map_axes else "dh", use_rtest=use_rtest,
                        map_axes=tuple(map_axes) or None, extensions=tuple(terms),
-                       max_nfev=max_nfev)
+                       max_nfev=max_nfev, nests="estimate")  # one treatment for every model
         if not cal.success:
             raise AacmmError(f"discovery: the fit with {', '.join(t.key for t in terms) or start} "
                              f"did not converge: {cal.message}")

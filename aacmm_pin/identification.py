@@ -15,7 +15,7 @@ data cannot determine.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -45,6 +45,10 @@ from aacmm_pin.units import (
 from aacmm_pin.unknowns import FrameKey, NestKey, NodeKey, UnknownKey, Unknowns
 
 MODELS = ("dh", "proposed")
+NESTS = ("auto", "estimate", "fixed")
+"""How :func:`identify` treats the R-Test nests' offsets."""
+NOISE_P = 1e-3
+"""A residual whose chi-square p-value against the stated noise is below this does not match it."""
 MIN_DOF_FRACTION = 0.1
 """An identification whose degrees of freedom are fewer than this fraction of its residual
 coordinates reports ``success`` False: its residual cannot estimate the noise."""
@@ -111,6 +115,8 @@ class Calibration:
     """What each entry of ``x`` after the arm's is: nest offsets, then instrument frames."""
     inputs: tuple[str, ...] = ("spat",)
     """The measurement kinds fitted: ``"spat"``, ``"points"``, ``"bar"`` (the length bar)."""
+    nests: str = ""
+    """How the R-Test nests' offsets were treated (estimated or fixed) and why; empty without."""
 
     def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
         """Return ``other`` (e.g. the truth) moved into this calibration's gauge and held values.
@@ -169,6 +175,7 @@ class Calibration:
         """Return the ``report.json`` content."""
         return {
             "model": self.model, "use_rtest": self.use_rtest, "inputs": list(self.inputs),
+            "nests": self.nests,
             "n_samples": int(len(self.fun)),
             "n_parameters": self.n_determined, "n_unknowns": int(len(self.x)),
             "fit_rms_um": self.fit_rms * 1e6,
@@ -428,6 +435,24 @@ def _initial_frame(arm: Arm, start: Parameters, q: np.ndarray, measured: np.ndar
     return start.replace(rotation_abc=[alpha, beta, gamma], translation=trans)
 
 
+def _without_rtest_nests(meas: Measurements) -> Measurements:
+    """Return the measurements with the R-Test nests held at their measured positions.
+
+    The R-Test locations' offsets are no longer unknowns (their samples keep their measured zero
+    positions); other nests (length-bar sockets, whose positions are unknown) stay.
+    """
+    if meas.nest is None:
+        return meas
+    keep = meas.nest_sigma > 0  # R-Test nests carry 0: their prior is sigma_location
+    index = np.cumsum(keep) - 1
+    nest = np.where((meas.nest >= 0) & keep[np.maximum(meas.nest, 0)], index[meas.nest], -1)
+    lengths = meas.lengths.copy()
+    lengths[:, :2] = index[lengths[:, :2].astype(int)]
+    return meas._replace(nest=nest if keep.any() else None, nest_sigma=meas.nest_sigma[keep],
+                         nest_keys=tuple(k for k, on in zip(meas.nest_keys, keep) if on),
+                         lengths=lengths)
+
+
 def _nuisance(arm: Arm, start: Parameters, meas: Measurements, sigma_class: float,
               sigma_location: float) -> tuple[Nuisance, np.ndarray, list[UnknownKey]]:
     """Return the problem's nests, frames and lengths, measured points and nuisance keys.
@@ -466,7 +491,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              f_scale: float | None = None, sigma: float | None = None,
              sigma_location: float = SIGMA_LOCATION, max_nfev: int = 200, jac: str = "analytic",
              progress: bool = False, extensions: tuple[Term, ...] = (),
-             use_bar: bool = False) -> Calibration:
+             use_bar: bool = False, nests: str = "auto") -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
     Args:
@@ -493,6 +518,11 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         progress: show a progress bar.
         extensions: further terms of the effect library (:mod:`aacmm_pin.effects`) to estimate
             (angle, scale or measurement kind; map terms are ``map_axes``).
+        nests: the R-Test nests' offsets: ``"estimate"`` (each with the prior
+            ``sigma_location``), ``"fixed"`` (held at the measured positions) or ``"auto"``:
+            estimated only when the model's residual matches the stated R-Test noise (chi-square,
+            p >= 0.001; ``sigma`` or 2 um), else fixed, since the offsets of an incomplete model
+            take up its error (the choice and why are in :attr:`Calibration.nests`).
         use_bar: fit the length-bar readouts too (a calibration input, not only a check): every
             socket's position is estimated from its readouts and the calibrated distances
             between a placement's sockets are residuals (stated noise ``units.SIGMA_SOCKET`` per
@@ -509,18 +539,57 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         raise ValueError(f"jac: choose 'analytic', '2-point' or '3-point', got {jac!r}")
     if model not in MODELS:
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
+    if nests not in NESTS:
+        raise ValueError(f"nests: choose from {', '.join(NESTS)}, got {nests!r}")
+    arm = arm or load_arm()
+
+    def fit(fixed: bool) -> Calibration:
+        return _identify(campaign, arm, model, use_rtest, start, step_deg, map_axes, loss, f_scale,
+                         sigma, sigma_location, max_nfev, jac, progress, extensions, use_bar, fixed)
+
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
-        return _identify(campaign, arm or load_arm(), model, use_rtest, start, step_deg, map_axes,
-                         loss, f_scale, sigma, sigma_location, max_nfev, jac, progress,
-                         extensions, use_bar)
+        cal = fit(nests == "fixed")
+        rtest_nests = "spat" in cal.inputs
+        if not rtest_nests:
+            return cal
+        if nests != "auto":
+            return replace(cal, nests=f"{nests} (asked)")
+        p_value, ratio = _noise_consistency(cal, sigma or SIGMA_RTEST)
+        if p_value >= NOISE_P:
+            return replace(cal, nests=f"estimated: the fit's residual matches the stated R-Test "
+                                      f"noise (RMS {ratio:.2f} x, p = {p_value:.2g})")
+        fixed = fit(True)
+        return replace(fixed, nests=(
+            f"fixed at their measured positions: the model's residual is {ratio:.1f} x the stated "
+            f"R-Test noise (p = {p_value:.2g}), so nest offsets estimated with it would take up "
+            "model error"))
+
+
+def _noise_consistency(cal: Calibration, stated: float) -> tuple[float, float]:
+    """Return the chi-square p-value of the residual against the stated noise, and RMS/noise.
+
+    ``stated``: the R-Test noise per coordinate, m; other kinds (points, bar sockets) count with
+    their own stated noise relative to it (the row weights). Degrees of freedom: the residual
+    coordinates less the determined parameters.
+    """
+    from scipy.stats import chi2
+
+    res = cal.fun.ravel() / stated
+    if cal.problem.row_weight is not None:  # weight = (the solve's sigma) / (the row's noise)
+        res = res * cal.problem.row_weight * stated / cal.problem.sigma_class
+    dof = max(res.size - cal.n_determined, 1)
+    stat = float(np.sum(res ** 2))
+    return float(chi2.sf(stat, dof)), float(np.sqrt(stat / res.size))
 
 
 def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: Parameters | None,
               step_deg: float, map_axes: tuple[int, ...] | None, loss: str, f_scale: float | None,
               sigma: float | None, sigma_location: float, max_nfev: int, jac: str, progress: bool,
-              extensions: tuple[Term, ...], use_bar: bool) -> Calibration:
+              extensions: tuple[Term, ...], use_bar: bool, fixed_nests: bool) -> Calibration:
     tic = time.perf_counter()
     meas = measurements(campaign, arm, use_rtest, use_bar)
+    if fixed_nests:
+        meas = _without_rtest_nests(meas)
     q, group, samples, stated = meas.q, meas.group, meas.samples, meas.sigma
     main = ~np.isnan(meas.measured[:, 0]) & (True if meas.frame is None else meas.frame < 0)
     start = start or _initial_frame(arm, Parameters.nominal(arm, step_deg), q[main],

@@ -149,6 +149,8 @@ class Problem:
     """Weight of each nest offset's prior row in the residual, ``sigma / nest sigma``, (n_loc,)."""
     nest_sigma: np.ndarray
     """Prior standard deviation of each nest offset entry, shape (n_loc,), m."""
+    sigma_class: float
+    """The noise per coordinate the solve assumes, m (a row of weight 1 has this noise)."""
     x_ref: np.ndarray
     """Full vector at z = 0, shape (n_x,)."""
     basis: np.ndarray
@@ -183,6 +185,7 @@ class Problem:
         self.row_weight = None if weight is None else np.repeat(np.asarray(weight, float), 3)
         if self.row_weight is not None:
             self.nest = sp.csr_matrix(sp.diags(self.row_weight) @ self.nest)
+        self.sigma_class = sigma
         self.nest_sigma = np.repeat(np.asarray(nuisance.nest_sigma, dtype=float), 3)
         self.prior = sigma / self.nest_sigma
         self.x_ref = x_ref

@@ -26,7 +26,7 @@ def sim(arm: ap.Arm) -> ap.Simulation:
 
 @pytest.fixture(scope="module")
 def cal(arm: ap.Arm, sim: ap.Simulation) -> ap.Calibration:
-    return ap.identify(sim.campaign, arm, "proposed")
+    return ap.identify(sim.campaign, arm, "proposed", nests="estimate")  # as discovery compares
 
 
 def test_errors_are_the_validation_errors(arm: ap.Arm, sim: ap.Simulation,
@@ -68,7 +68,7 @@ def test_linearised_term_change_matches_a_refit(arm: ap.Arm, sim: ap.Simulation,
     lin = LinearScorer(cal, Samples.of_spat(arm, sim.campaign.spat), bar)
     terms = (compliance(2), compliance(4))
     predicted = lin.evaluate(np.hstack([lin.columns(t) for t in terms]))["bar_chi2"]
-    refit = ap.identify(sim.campaign, arm, "proposed", extensions=terms)
+    refit = ap.identify(sim.campaign, arm, "proposed", extensions=terms, nests="estimate")
     after = LinearBar(refit, sim.campaign, arm)
     measured = (lin.bar_normalised(after.errors) or 0.0) ** 2 * after.n
     before = (lin.bar_normalised(bar.errors) or 0.0) ** 2 * bar.n
@@ -93,7 +93,7 @@ def test_predicted_covariance_covers_the_errors_of_a_right_model(arm: ap.Arm) ->
         config = ap.SimulationConfig(seed=seed, effects=("dh", "encoder", "rtest"),
                                      samples_per_location=150, bar_placements=4)
         campaign = ap.simulate_campaign(arm, config).campaign
-        cal = ap.identify(campaign, arm, "proposed")
+        cal = ap.identify(campaign, arm, "proposed", nests="estimate")
         bar = LinearBar(cal, campaign, arm)
         assert not bar.covered.all()  # the bar visits A4 below the SPATs' range
         lin = LinearScorer(cal, Samples.of_spat(arm, campaign.spat), bar)

@@ -74,7 +74,7 @@ def test_joint_problem_jacobian_matches_finite_differences():
     point = ap.stylus_positions(arm, truth, q, frame="r") @ pin.exp3(np.array([0.1, -0.2, 0.3])).T
     points = PointLog(group=np.repeat([4, 7], 20), q=q, point=point + [1.0, 2.0, -0.5])
     campaign = replace(sim.campaign, points=points)
-    cal = ap.identify(campaign, arm, model="proposed", use_bar=True, max_nfev=3)
+    cal = ap.identify(campaign, arm, model="proposed", use_bar=True, max_nfev=3, nests="estimate")
     problem = cal.problem
     assert problem.n_frame == 12 and problem.n_lengths == 4 and problem.n_loc == 3 * (4 + 6)
     z = problem.z(cal.x) + rng.normal(0.0, 1e-3, problem.p.shape[1])

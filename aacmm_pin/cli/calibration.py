@@ -81,7 +81,8 @@ def _identify(args: argparse.Namespace) -> int:
     cal = identify(read_campaign(args.campaign, arm=arm), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar)
+                   max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar,
+                   nests=args.nests)
     write_calibration(cal, arm, args.out)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
@@ -99,6 +100,8 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
           f"{cal.n_determined} parameters determined, fit RMS {cal.fit_rms * 1e6:.2f} um "
           f"(by {'location' if 'spat' in cal.inputs else 'group'} {by_loc}), "
           f"{cal.runtime_s:.1f} s -> {out}")
+    if cal.nests:
+        print(f"  R-Test nests {cal.nests}")
     for line in cal.unidentifiable:
         print(f"  not identifiable: {line}")
 
@@ -310,6 +313,10 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--sigma-um", type=float, default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=float, default=5.0, help="map node step, deg")
+    p.add_argument("--nests", choices=("auto", "estimate", "fixed"), default="auto",
+                   help="R-Test nest offsets: estimated with their 3 um prior, fixed at the "
+                        "measured positions, or auto: estimated only when the model's residual "
+                        "matches the stated R-Test noise")
     p.add_argument("--use-bar", action="store_true",
                    help="fit the length-bar readouts too (a calibration input: socket positions "
                         "estimated, calibrated lengths as residuals); validate then on another "
