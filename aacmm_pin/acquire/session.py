@@ -304,16 +304,16 @@ def _record(cfg: AcquisitionConfig, lock: CampaignLock, stop: threading.Event,
         if what == "data":
             counts.lines += len(event[3])
             if event[2] == "arm":
-                for t, (counter, q) in event[3]:
+                for t, (counter, q), u in event[3]:
                     if counter is not None and last_counter is not None:
                         gap = (counter - last_counter - 1) % COUNTER_MODULUS
                         # a counter that goes back (device restarted) is no gap of ~2**32
                         summary.missed_samples += gap if gap < COUNTER_MODULUS // 2 else 0
                     last_counter = counter if counter is not None else last_counter
-                    pairer.add_arm(t, q)
+                    pairer.add_arm(t, q, u)
             else:
-                for t, (channel, value) in event[3]:
-                    pairer.add_gauge(channel, t, value)
+                for t, (channel, value), u in event[3]:
+                    pairer.add_gauge(channel, t, value, u)
         elif what == "fault":
             counts.add(event[2])
         elif what == "reconnect":
