@@ -206,10 +206,11 @@ def test_urdf_entities_are_refused(tmp_path):
     """An internal XML entity in a URDF (it could move a link unseen) is refused, with its line."""
     text = resolve_arm_path("aacmm7").read_text()
     head, rest = text.split("<robot", 1)
-    doctype = '<!DOCTYPE robot [<!ENTITY off "0.1">]>\n'
+    rest = rest.replace('<origin xyz="0 0 0.1"', '<origin xyz="0 0 &off;"', 1)  # a link moves
     path = tmp_path / "entity.urdf"
-    path.write_text(head + doctype + "<robot" + rest)
-    with pytest.raises(ArmModelError, match="entity 'off' is declared"):
+    path.write_text(head + '<!DOCTYPE robot [<!ENTITY off "0.2">]>\n<robot' + rest)
+    with pytest.raises(ArmModelError, match=r"line \d+, column \d+: the XML entity 'off' is "
+                                            "declared"):
         ap.load_arm(path)
 
 
