@@ -479,6 +479,26 @@ def _to_xml(robot: yourdfpy.Robot) -> str:
     return text.decode() if isinstance(text, bytes) else text
 
 
+def _refuse_entities(path: str | Path) -> None:
+    """Raise if the URDF declares an XML entity (an entity could move a link unseen).
+
+    Raises:
+        ArmModelError: naming the entity, its line and column.
+    """
+    from xml.parsers import expat
+
+    parser = expat.ParserCreate()
+
+    def declared(name: str, *_: object) -> None:
+        raise ArmModelError(path, f"line {parser.CurrentLineNumber}, column "
+                                  f"{parser.CurrentColumnNumber + 1}: the XML entity '{name}' is "
+                                  "declared; entities are not expanded: write the values out")
+
+    parser.EntityDeclHandler = declared
+    with open(path, "rb") as f:
+        parser.ParseFile(f)
+
+
 def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
     """Load an arm from a URDF path or an embedded arm's name (default: ``aacmm7``).
 
@@ -492,6 +512,7 @@ def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
     except ElementTree.ParseError as exc:
         line, column = exc.position
         raise ArmModelError(path, f"line {line}, column {column + 1}: invalid XML: {exc}") from None
+    _refuse_entities(path)  # neither ElementTree nor yourdfpy's lxml then sees one expanded
     try:
         urdf = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
                                   build_collision_scene_graph=False, load_collision_meshes=False)

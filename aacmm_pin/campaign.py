@@ -36,6 +36,10 @@ if TYPE_CHECKING:  # the arm is only passed through (the campaign layer does not
 MAX_ANGLE_DEG = 720.0
 """Largest encoder readout accepted in a file, in degrees (two turns either way)."""
 _Q_COLUMN = re.compile(r"q([1-9][0-9]*)_deg")
+MAX_FILE_BYTES = 256 * 2**20
+"""Largest campaign or readouts CSV read, bytes (about 2 million SPAT rows)."""
+MAX_COLUMNS = 256
+"""Most columns of a CSV header (and the highest q<n>_deg readout column)."""
 _XYZ = {"spat": ("dx_mm", "dy_mm", "dz_mm"), "loc": ("x_mm", "y_mm", "z_mm")}
 _OPTIONAL = ("t_s", "temp_c")
 # File -> (required columns besides q, has q1_deg..qn_deg, optional columns), in file order.
@@ -278,10 +282,17 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         problems.append(Problem(path, line, column, reason))
 
     try:
-        reader = csv.reader(io.StringIO(path.read_text(encoding="utf-8-sig")))
+        with path.open("rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)  # bounded: a huge file or /dev/zero fails fast
+        if len(data) > MAX_FILE_BYTES:
+            add(None, None, f"larger than {MAX_FILE_BYTES // 2**20} MiB: split the campaign or "
+                            "decimate it")
+            return None
+        reader = csv.reader(io.StringIO(data.decode("utf-8-sig")))
         rows = [(reader.line_num, [c.strip() for c in row]) for row in reader]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        add(None, None, "file not found" if isinstance(exc, FileNotFoundError) else f"{exc}")
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else f"{exc}"
+        add(None, None, "file not found" if isinstance(exc, FileNotFoundError) else why)
         return None
     while rows and not any(rows[-1][1]):
         rows.pop()  # blank trailing lines
@@ -290,6 +301,9 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
             else "empty file: no header row")
         return None
     top, header = rows[0]
+    if len(header) > MAX_COLUMNS:
+        add(top, None, f"{len(header)} columns in the header; at most {MAX_COLUMNS} are read")
+        return None
     named = [f"{n}_deg" for n in axis_names or []] if has_q else []
     expected = ", ".join([*required, *(["q1_deg..qn_deg"] if has_q else []), *optional])
     if named:
@@ -302,6 +316,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
             add(top, str(k + 1), "empty column name")
         elif name in index:
             add(top, name, f"duplicated column (columns {index[name] + 1} and {k + 1})")
+        elif has_q and (m := _Q_COLUMN.fullmatch(name)) and int(m[1]) > MAX_COLUMNS:
+            add(top, name, f"readout column beyond q{MAX_COLUMNS}_deg")
         elif known:
             index[name] = k
         elif not others_allowed:

@@ -35,13 +35,13 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
     arm = load_arm()
     print(f"aacmm-pin demo: simulating a campaign on the default arm (seed {seed}) ...")
     sim = simulate_campaign(arm, SimulationConfig(seed=seed))
-    write_simulation(sim, out / "campaign")
+    write_simulation(sim, out / "campaign", force=True)  # the demo redoes its own output
     campaign = read_campaign(out / "campaign")  # what a user has: the files, not the truth
     results: dict[str, ValidationResult] = {}
     calibrations = {}
     for folder, label, model, use_rtest in tqdm(MODELS, desc="identify", unit="model"):
         cal = identify(campaign, arm, model=model, use_rtest=use_rtest)
-        write_calibration(cal, arm, out / folder)
+        write_calibration(cal, arm, out / folder, force=True)
         results[folder] = validate(arm, cal.parameters, campaign)
         calibrations[folder] = cal
         (out / folder / "validation.json").write_text(

@@ -15,7 +15,8 @@ import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.discovery_results import Discovery, Step
-from aacmm_pin.export import write_calibration
+from aacmm_pin.export import write_calibration_files
+from aacmm_pin.output_folder import output_folder
 from aacmm_pin.plots import DPI, MODEL_COLOURS, _new_figure
 
 if TYPE_CHECKING:
@@ -104,17 +105,21 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
     fig.savefig(path, dpi=DPI)
 
 
-def write_discovery(result: Discovery, arm: Arm, folder: str | Path) -> Path:
+def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False) -> Path:
     """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
 
     Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
     the named effect's variable before and after), and the CALDIR files of
-    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...).
+    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...). The folder
+    is written whole (:func:`~aacmm_pin.output_folder.output_folder`).
+
+    Raises:
+        OutputExistsError: if ``folder`` holds files and not ``force``.
     """
-    folder = Path(folder)
-    write_calibration(result.calibration, arm, folder)
-    (folder / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
-    gap_figure(result, folder / "discovery_gap.png")
-    for k, step in enumerate(result.steps, start=1):
-        step_figure(step, k, folder / f"discovery_step{k}.png")
-    return folder
+    with output_folder(folder, force) as tmp:
+        write_calibration_files(result.calibration, arm, tmp)
+        (tmp / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        gap_figure(result, tmp / "discovery_gap.png")
+        for k, step in enumerate(result.steps, start=1):
+            step_figure(step, k, tmp / f"discovery_step{k}.png")
+    return Path(folder)

@@ -15,6 +15,7 @@ import numpy as np
 
 from aacmm_pin.arm import Arm
 from aacmm_pin.identification import Calibration
+from aacmm_pin.output_folder import output_folder
 from aacmm_pin.parameters import write_parameters
 from aacmm_pin.sizes import sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC
@@ -40,15 +41,23 @@ def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray
     Path(path).write_text("\n".join(rows) + "\n")
 
 
-def write_calibration(cal: Calibration, arm: Arm, folder: str | Path) -> Path:
-    """Write a calibration folder and return its path.
+def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: bool = False) -> Path:
+    """Write a calibration folder whole (:func:`~aacmm_pin.output_folder.output_folder`); return it.
 
     Files: ``parameters.json``, ``calibrated.urdf``, ``encoder_maps.csv``, ``report.json``, and
     ``calibrated.sizes.json`` when the arm has a sizes file (:mod:`aacmm_pin.sizes`), so that the
     folder's arm keeps its plausible sizes.
+
+    Raises:
+        OutputExistsError: if ``folder`` holds files and not ``force``.
     """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    with output_folder(folder, force) as tmp:
+        write_calibration_files(cal, arm, tmp)
+    return Path(folder)
+
+
+def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
+    """Write the files of a calibration folder into an existing ``folder`` (not atomically)."""
     params = cal.parameters
     (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)))
     if sizes_path(arm.source).is_file():
@@ -58,4 +67,3 @@ def write_calibration(cal: Calibration, arm: Arm, folder: str | Path) -> Path:
     report = cal.report()
     report["arm"] = arm.name
     (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
-    return folder

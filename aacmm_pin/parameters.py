@@ -20,6 +20,7 @@ not know (e.g. ``effects`` in a simulator's truth) are kept in ``extra`` and wri
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -259,10 +260,32 @@ def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
     return out
 
 
+MAX_PARAMETERS_BYTES = 16 * 2**20
+"""Largest parameters.json read, bytes."""
+MAX_JSON_DEPTH = 8
+"""Deepest nesting of objects and lists in parameters.json (it needs 4)."""
+
+
+def _depth(value: Any) -> int:
+    """Return the nesting depth of JSON ``value`` (a scalar: 0), without recursion."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        item, level = stack.pop()
+        if isinstance(item, (dict, list)):
+            deepest = max(deepest, level + 1)
+            if level + 1 > MAX_JSON_DEPTH:
+                break
+            stack.extend((v, level + 1) for v in (item.values() if isinstance(item, dict) else item))
+    return deepest
+
+
 def read_parameters(path: str | Path) -> Parameters:
     """Read ``parameters.json`` (or a calibration folder holding one).
 
-    A relative ``arm`` path is taken relative to the file's folder.
+    A relative ``arm`` path (a ``.urdf`` name or one with a folder in it) is taken relative to the
+    file's folder, never the current directory: a calibration folder names its own
+    ``calibrated.urdf``, and a missing one is an error naming that path, not another arm's URDF
+    that happens to be in the current directory. Embedded arm names (``aacmm7``) stay names.
 
     Raises:
         FileFormatError: for unreadable JSON (with line and column) or bad fields.
@@ -271,15 +294,28 @@ def read_parameters(path: str | Path) -> Parameters:
     if path.is_dir():
         path = path / "parameters.json"
     try:
-        data = json.loads(path.read_text())
+        with path.open("rb") as f:
+            raw = f.read(MAX_PARAMETERS_BYTES + 1)  # bounded: a huge file or /dev/zero fails fast
+        if len(raw) > MAX_PARAMETERS_BYTES:
+            raise FileFormatError([Problem(path, None, None, f"larger than "
+                                           f"{MAX_PARAMETERS_BYTES // 2**20} MiB: not a "
+                                           "parameters file")])
+        data = json.loads(raw.decode("utf-8-sig"))
     except FileNotFoundError:
         raise FileFormatError([Problem(path, None, None, "no such file")]) from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError([Problem(path, None, None, f"not UTF-8 text: {exc}")]) from None
     except json.JSONDecodeError as exc:
         raise FileFormatError([Problem(path, exc.lineno, f"char {exc.colno}", exc.msg)]) from None
+    except RecursionError:
+        raise FileFormatError([Problem(path, None, None, "JSON nested too deeply")]) from None
+    if _depth(data) > MAX_JSON_DEPTH:
+        raise FileFormatError([Problem(path, None, None, f"JSON nested deeper than "
+                                       f"{MAX_JSON_DEPTH} levels: not a parameters file")])
     params = parameters_from_dict(data, path)
-    arm_path = path.parent / params.arm
-    if params.arm.endswith(".urdf") and not Path(params.arm).is_absolute() and arm_path.is_file():
-        params = params.replace(arm=str(arm_path))
+    is_path = params.arm.endswith(".urdf") or "/" in params.arm or os.sep in params.arm
+    if is_path and not Path(params.arm).is_absolute():
+        params = params.replace(arm=str(path.parent / params.arm))
     return params
 
 

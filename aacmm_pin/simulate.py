@@ -347,12 +347,25 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
     return Simulation(campaign, truth, np.concatenate(sphere_all), sockets)
 
 
-def write_simulation(sim: Simulation, folder: str | Path) -> None:
-    """Write the campaign files, ``truth.json`` and the true points (``truth_*.csv``, mm)."""
+def write_simulation(sim: Simulation, folder: str | Path, force: bool = False) -> None:
+    """Write the campaign files, ``truth.json`` and the true points (``truth_*.csv``, mm).
+
+    The folder is written whole (:func:`~aacmm_pin.output_folder.output_folder`).
+
+    Raises:
+        OutputExistsError: if ``folder`` holds files and not ``force``.
+    """
+    from aacmm_pin.output_folder import output_folder
+
+    with output_folder(folder, force) as tmp:
+        _write_simulation_files(sim, tmp)
+
+
+def _write_simulation_files(sim: Simulation, folder: Path) -> None:
+    """Write the files of :func:`write_simulation` into an existing folder."""
     from aacmm_pin.campaign import write_campaign
     from aacmm_pin.parameters import write_parameters
 
-    folder = Path(folder)
     write_campaign(sim.campaign, folder)
     write_parameters(sim.truth, folder / "truth.json")
     assert sim.campaign.spat is not None

@@ -63,7 +63,7 @@ for axis in sorted({int(a) for a in true} | {int(key[len("compliance[A"):-1]) fo
     print(f"  A{axis}                  {'-' if t is None else f'{t:.3e}':>10}  "
           f"{'-' if f is None else f'{float(f[0]):.3e}':>10}")
 
-out = write_discovery(result, arm, args.out)
+out = write_discovery(result, arm, args.out, force=True)  # a rerun replaces its output
 print(f"wrote {out} ({result.runtime_s:.1f} s of discovery)")
 if not result.steps or result.steps[0].effect != "compliance":
     named = result.steps[0].effect if result.steps else "nothing"

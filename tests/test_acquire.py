@@ -284,3 +284,16 @@ def test_missing_port_stops_before_writing(tmp_path):
     args = parser.parse_args(["acquire", str(tmp_path), "--arm-port", "x", "--gauge",
                               "heidenhain:1=y", "--location", "1"])
     assert args.handler(args) == 2  # only channel 1: refused before opening anything
+
+
+def test_pairer_leaves_samples_of_unknown_age_unpaired():
+    """A reading whose arrival is uncertain beyond max_skew (a reader's backlog) pairs nothing."""
+    pairer = Pairer((1,), max_skew=0.01, latency=0.0)
+    pairer.add_gauge(1, 0.000, 1.0)
+    pairer.add_arm(0.002, [0.1])  # 2 ms away, known to 1 ms: paired
+    pairer.add_arm(0.004, [0.2], u=0.1)  # read from a backlog: anywhere within 0.1 s
+    pairer.add_gauge(1, 0.010, 2.0, u=0.009)
+    pairer.add_arm(0.011, [0.3])  # 1 ms from a reading known to 9 ms only: 10 ms
+    pairer.add_arm(0.012, [0.4])  # 2 + 9 > 10 ms: unpaired
+    pairs = pairer.pop(now=1.0)
+    assert [p.q for p in pairs] == [[0.1], [0.3]] and pairer.unpaired == 2

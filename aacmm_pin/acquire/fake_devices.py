@@ -8,8 +8,10 @@ location's SPAT on real pseudo-terminals (``os.openpty``), in the line formats o
 * the arm streams ``nmea`` lines at ``rate`` lines per second, holding each simulated posture for
   ``dwell`` seconds and cycling through them (it jumps between postures: a real operator moves
   continuously, which the simulator's postures do not describe);
-* the gauges answer the reading of the current posture: ``heidenhain`` (one pty per gauge, one
-  reply line per request byte) or ``mitutoyo`` (one pty streaming the three channels at ``rate``).
+* the gauges answer the reading of the posture of the arm's last line written (the sphere is where
+  the arm is, whatever the scheduling of the threads under load): ``heidenhain`` (one pty per
+  gauge, one reply line per request byte) or ``mitutoyo`` (one pty streaming the three channels at
+  ``rate``).
   The reading of gauge k is the simulator's R-Test displacement projected on the nest's direction
   k, so acquire must recover the simulator's displacement.
 
@@ -158,6 +160,7 @@ class FakeDevices:
         self.gauges: list[GaugeSpec] = []
         """Gauge ports as acquire takes them (after :meth:`start`)."""
         self._t0 = 0.0
+        self._shown = 0  # posture of the arm's last line written: where the sphere is
 
     def posture(self, t: float) -> int:
         """Return the index of the posture played at monotonic time ``t``."""
@@ -278,11 +281,12 @@ class FakeDevices:
         counter, silent = 0, self._silences(rng)
         for now, n in self._ticks(period):
             chunk = []
+            k = self.posture(time.monotonic())
             for _ in range(n):
                 counter += 1
                 if silent(now):
                     continue
-                line = format_arm_line(counter, self.q_deg[self.posture(now)], ARM_DECIMALS)
+                line = format_arm_line(counter, self.q_deg[k], ARM_DECIMALS)
                 r = rng.random()
                 if r < cfg.garbage:
                     line = self._garbage(line, rng)
@@ -295,11 +299,12 @@ class FakeDevices:
                 chunk.append(line)
             self.lines_sent += n
             self._write(fd, b"".join(chunk))
+            self._shown = k
 
     def _gauge_line(self, channel: int, rng: np.random.Generator) -> bytes:
         """Return the line of one gauge reading now, with the injected faults."""
         cfg = self.config
-        value = self.readings_mm[self.posture(time.monotonic()), channel - 1]
+        value = self.readings_mm[self._shown, channel - 1]
         if rng.random() < cfg.out_of_range:
             self._count("out_of_range")
             value = OUT_OF_RANGE_MM

@@ -6,6 +6,13 @@ request and its answer). An arm sample at time ``t`` is paired once every readin
 it is within ``max_skew``; otherwise the sample is *unpaired* (counted, not written). Nearest, not
 interpolated: a value that jumps between two readings is never blended into one that no device
 reported.
+
+A reading's arrival is known within an interval: a reader busy elsewhere (or starved of the CPU)
+finds several lines waiting at once, which arrived at any time since its previous read. Each
+reading carries that uncertainty ``u`` (its true arrival is within ``t +- u``), and a pair is made
+only if the arrival times differ by ``max_skew`` at most whatever they are within their intervals:
+``|t_arm - t_gauge| + u_arm + u_gauge <= max_skew``. Under load, samples whose timing is unknown
+are counted unpaired instead of being paired with a reading of another posture.
 """
 
 from __future__ import annotations
@@ -43,32 +50,36 @@ class Pairer:
         self.channels = tuple(channels)
         self.max_skew = float(max_skew)
         self.latency = float(latency)
-        self._arm: deque[tuple[float, list[float]]] = deque()
-        self._gauge: dict[int, deque[tuple[float, float]]] = {c: deque() for c in self.channels}
+        self._arm: deque[tuple[float, list[float], float]] = deque()
+        self._gauge: dict[int, deque[tuple[float, float, float]]] = {c: deque()
+                                                                      for c in self.channels}
         self.unpaired = 0
         """Arm samples dropped for want of a reading within ``max_skew`` on some channel."""
         self.missing = dict.fromkeys(self.channels, 0)
         """Channel -> arm samples that lacked its reading."""
 
-    def add_arm(self, t: float, q: list[float]) -> None:
-        """Add an arm sample arrived at ``t`` (s, nondecreasing) with readouts ``q`` (rad)."""
-        self._arm.append((t, q))
+    def add_arm(self, t: float, q: list[float], u: float = 0.0) -> None:
+        """Add an arm sample arrived at ``t`` +- ``u`` (s, t nondecreasing) with readouts ``q`` (rad)."""
+        self._arm.append((t, q, u))
 
-    def add_gauge(self, channel: int, t: float, value: float) -> None:
-        """Add a reading of ``channel`` arrived at ``t`` (s, nondecreasing per channel), in m."""
+    def add_gauge(self, channel: int, t: float, value: float, u: float = 0.0) -> None:
+        """Add a reading of ``channel`` (m) arrived at ``t`` +- ``u`` (s, t nondecreasing per channel)."""
         buf = self._gauge.get(channel)
         if buf is not None:
-            buf.append((t, value))
+            buf.append((t, value, u))
 
-    def _nearest(self, channel: int, t: float) -> float | None:
-        """Return the reading of ``channel`` nearest to ``t`` within max_skew, dropping older ones."""
+    def _nearest(self, channel: int, t: float, u: float) -> float | None:
+        """Return the reading of ``channel`` nearest to ``t`` if surely within max_skew of it.
+
+        ``u`` is the arm sample's time uncertainty; readings older than the nearest are dropped.
+        """
         buf = self._gauge[channel]
         while len(buf) >= 2 and buf[1][0] <= t:
             buf.popleft()  # a later reading is still at or before t: this one is never nearest
         # buf[0] is the last reading at or before t (or the first after), buf[1] the first after.
         candidates = [buf[k] for k in range(min(2, len(buf)))]
         best = min(candidates, key=lambda r: abs(r[0] - t), default=None)
-        if best is None or abs(best[0] - t) > self.max_skew:
+        if best is None or abs(best[0] - t) + u + best[2] > self.max_skew:
             return None
         return best[1]
 
@@ -81,8 +92,8 @@ class Pairer:
         out: list[Pair] = []
         ready = now - self.max_skew - self.latency
         while self._arm and self._arm[0][0] <= ready:
-            t, q = self._arm.popleft()
-            values = [self._nearest(c, t) for c in self.channels]
+            t, q, u = self._arm.popleft()
+            values = [self._nearest(c, t, u) for c in self.channels]
             if any(v is None for v in values):
                 self.unpaired += 1
                 for c, v in zip(self.channels, values):

@@ -3,7 +3,13 @@
 A reader opens its port with pyserial (a device path or any ``serial_for_url`` URL), discards what
 the port buffered before the run, splits the byte stream into lines, stamps each line with the
 host's monotonic clock, parses it with its protocol and puts batches of results on a queue for the
-acquisition loop. Faults are put on the same queue and never stop the reader:
+acquisition loop. A line's stamp is the middle of the interval in which it surely arrived: since
+the reader last saw its input empty (and since the request of a polled device), with the
+half-width of that interval as its uncertainty. A reader that falls behind its device under load
+reads a backlog of lines of unknown age (measured: 4 KB chunks with 4 KB more waiting, lines
+~0.2 s old stamped as new, paired with readings of a later posture); their uncertainty grows until
+the backlog is drained, and the pairing (:mod:`aacmm_pin.acquire.pairing`) leaves them unpaired.
+Faults are put on the same queue and never stop the reader:
 
 * a bad line (garbled, checksum, out of range) is counted and dropped;
 * a silence longer than ``timeout`` is counted once; a polled gauge is asked again;
@@ -35,7 +41,8 @@ Parser = Callable[[bytes], Any]
 
 PortEvent = tuple[str, str, str, Any]
 """What a :class:`PortReader` puts on its queue: (what, port name, kind, payload); the payload is the
-list of (t, parsed value) for ``"data"``, else a str (see :class:`PortReader`)."""
+list of (t, parsed value, u) for ``"data"`` (arrival ``t`` +- ``u`` s), else a str (see
+:class:`PortReader`)."""
 
 
 @dataclass(frozen=True)
@@ -109,7 +116,8 @@ def open_port(url: str, baudrate: int = 115200) -> Any:
 class PortReader(threading.Thread):
     """Read one port in a daemon thread until ``stop`` is set or the port is gone.
 
-    Puts on ``out``: ``("data", name, kind, [(t, value), ...])`` for good lines,
+    Puts on ``out``: ``("data", name, kind, [(t, value, u), ...])`` for good lines (arrived at
+    ``t`` +- ``u``),
     ``("fault", name, kind_of_fault, reason)`` for faults, ``("reconnect", name, "", url)`` and, last,
     ``("gone", name, "", reason)`` if the reader gave up. ``t`` is the host monotonic time, s.
 
@@ -154,7 +162,7 @@ class PortReader(threading.Thread):
 
         cfg = self.config
         buf = bytearray()
-        last_good = t_request = time.monotonic()
+        last_good = t_request = t_asked = t_empty = time.monotonic()
         awaiting = False
         silent = False
         errors = (serial.SerialException, OSError)
@@ -168,8 +176,11 @@ class PortReader(threading.Thread):
                         continue
                     buf.clear()  # nothing is pending now; drop the rest of an unanswered reply
                     self.port.write(cfg.request)
+                    # a late answer to an earlier request may still come: it dates from then
+                    t_asked = t_asked if awaiting else now
                     t_request, awaiting = now, True
                 chunk = self.port.read(self.port.in_waiting or 1)
+                drained = not self.port.in_waiting
             except errors as exc:
                 self._emit("fault", cfg.name, "port_lost", str(exc))
                 if not self._reopen(last_good):
@@ -178,7 +189,7 @@ class PortReader(threading.Thread):
                                                          f"{cfg.give_up:g} s")
                     break
                 buf.clear()
-                awaiting = False
+                awaiting, t_empty = False, time.monotonic()
                 continue
             now = time.monotonic()
             good = []
@@ -189,15 +200,19 @@ class PortReader(threading.Thread):
                 if len(buf) > MAX_LINE:
                     self._emit("fault", cfg.name, "garbled", f"{len(buf)} bytes without a line end")
                     buf.clear()
-                t = (now + t_request) / 2 if awaiting else now
+                # the lines arrived after the input was last seen empty (and after the request)
+                since = max(t_asked, t_empty) if awaiting else t_empty
+                t, u = (now + since) / 2, (now - since) / 2
                 for line in lines:
                     if not line.strip():
                         continue
                     awaiting = False
                     try:
-                        good.append((t, cfg.parse(bytes(line))))
+                        good.append((t, cfg.parse(bytes(line)), u))
                     except LineError as exc:
                         self._emit("fault", cfg.name, exc.kind, exc.reason)
+            if drained:  # what the next read returns arrived after this
+                t_empty = now
             if good:
                 self.out.put(("data", cfg.name, cfg.kind, good))
                 last_good, silent = now, False

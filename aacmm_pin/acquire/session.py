@@ -28,6 +28,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from aacmm_pin.acquire.faults import FAULT_KINDS, AcquisitionError, PortCounts
+from aacmm_pin.acquire.lock import CampaignLock
 from aacmm_pin.acquire.nest import Nest
 from aacmm_pin.acquire.pairing import Pair, Pairer
 from aacmm_pin.acquire.ports import PortConfig, PortEvent, PortReader, arm_port, gauge_port, open_port
@@ -136,6 +137,8 @@ class AcquisitionSummary:
     """What happened to locations.csv."""
     repaired_bytes: int = 0
     """Bytes of an incomplete last line of spat.csv removed before writing."""
+    lock_message: str = ""
+    """A stale lock file of a dead run taken over, or ''."""
 
     @property
     def rate_hz(self) -> float:
@@ -164,6 +167,7 @@ class AcquisitionSummary:
             "displacement_range_um": {axis: ([lo * 1e6, hi * 1e6] if ok else None) for axis, lo, hi, ok
                                       in zip("xyz", self.d_min, self.d_max, span)},
             "locations": self.locations_message, "repaired_bytes": self.repaired_bytes,
+            "lock": self.lock_message,
         }
 
     def status_line(self, rate: float) -> str:
@@ -195,6 +199,8 @@ class AcquisitionSummary:
         if self.repaired_bytes:
             lines.append(f"  removed an incomplete last line ({self.repaired_bytes} bytes) of "
                          "spat.csv left by an interrupted run")
+        if self.lock_message:
+            lines.append(f"  {self.lock_message}")
         lines.append(f"  {self.locations_message}")
         lines.append(f"  summary: {cfg.summary_path}")
         return "\n".join(lines)
@@ -223,6 +229,21 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+def _drain(events: queue.Queue[PortEvent], timeout: float) -> list[PortEvent]:
+    """Return the events waiting on ``events`` (waiting up to ``timeout`` s for the first); [] if none.
+
+    A new list every call: an idle queue gives an empty batch, never the previous one again.
+    """
+    items: list[PortEvent] = []
+    try:
+        items.append(events.get(timeout=timeout))
+        while True:
+            items.append(events.get_nowait())
+    except queue.Empty:
+        pass
+    return items
+
+
 def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
             status: TextIO | None = None) -> AcquisitionSummary:
     """Record one location's SPAT into the campaign folder; see the module docstring.
@@ -238,15 +259,21 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
         The summary (also written as JSON to ``config.summary_path``).
 
     Raises:
-        AcquisitionError: if a port cannot be opened or the campaign files conflict (nothing is
-            written then).
+        AcquisitionError: if another acquire holds the campaign's lock (one writer per
+            campaign, :class:`~aacmm_pin.acquire.lock.CampaignLock`), a port cannot be opened or
+            the campaign files conflict (nothing is written then).
     """
-    cfg = config
-    stop = stop or threading.Event()
+    with CampaignLock(config.campaign) as lock:
+        return _record(config, lock, stop or threading.Event(), status)
+
+
+def _record(cfg: AcquisitionConfig, lock: CampaignLock, stop: threading.Event,
+            status: TextIO | None) -> AcquisitionSummary:
+    """Run :func:`acquire` while holding the campaign's lock."""
     writer = SpatWriter(cfg.campaign, cfg.location, cfg.n_axes, cfg.zero, cfg.fsync_interval)
     summary = AcquisitionSummary(cfg, rows_before=writer.rows_before,
                                  locations_message=writer.locations_message,
-                                 repaired_bytes=writer.repaired_bytes)
+                                 repaired_bytes=writer.repaired_bytes, lock_message=lock.message)
     configs = _port_configs(cfg)
     events: queue.Queue[PortEvent] = queue.Queue()
     halt = threading.Event()
@@ -277,14 +304,16 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
         if what == "data":
             counts.lines += len(event[3])
             if event[2] == "arm":
-                for t, (counter, q) in event[3]:
+                for t, (counter, q), u in event[3]:
                     if counter is not None and last_counter is not None:
-                        summary.missed_samples += (counter - last_counter - 1) % COUNTER_MODULUS
+                        gap = (counter - last_counter - 1) % COUNTER_MODULUS
+                        # a counter that goes back (device restarted) is no gap of ~2**32
+                        summary.missed_samples += gap if gap < COUNTER_MODULUS // 2 else 0
                     last_counter = counter if counter is not None else last_counter
-                    pairer.add_arm(t, q)
+                    pairer.add_arm(t, q, u)
             else:
-                for t, (channel, value) in event[3]:
-                    pairer.add_gauge(channel, t, value)
+                for t, (channel, value), u in event[3]:
+                    pairer.add_gauge(channel, t, value, u)
         elif what == "fault":
             counts.add(event[2])
         elif what == "reconnect":
@@ -311,16 +340,9 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
         reader.start()
     try:
         while reason is None:
-            try:
-                items = [events.get(timeout=0.01)]
-                while True:
-                    items.append(events.get_nowait())
-            except queue.Empty:
-                pass
-            for item in items:
-                if item is not None:
-                    gone = handle(item)
-                    reason = reason or gone
+            for item in _drain(events, 0.01):
+                gone = handle(item)
+                reason = reason or gone
             now = time.monotonic()
             write(pairer.pop(now))
             summary.unpaired = pairer.unpaired

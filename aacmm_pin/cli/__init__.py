@@ -23,7 +23,7 @@ from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter
 from aacmm_pin.errors import AacmmError
 
-__all__ = ["Handler", "build_parser", "main", "version"]
+__all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
 
 
 def version() -> str:
@@ -78,3 +78,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # read-only or full disk, a folder where a file should be, permissions
+        print(f"aacmm-pin {args.command}: error: {os_error_message(exc)}", file=sys.stderr)
+        return 2
+
+
+def os_error_message(exc: OSError) -> str:
+    """Return one line for an operating-system error: the path(s) and what the system said."""
+    paths = [str(p) for p in (exc.filename, exc.filename2) if p is not None]
+    reason = exc.strerror or str(exc)
+    return f"{' -> '.join(paths)}: {reason}" if paths else reason

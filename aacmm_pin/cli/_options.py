@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -71,6 +72,31 @@ def out_option(default: Path, text: str) -> argparse.ArgumentParser:
     return p
 
 
+def force_option() -> argparse.ArgumentParser:
+    """``--force``: replace an existing, non-empty output folder (written whole or not at all)."""
+    p = _parent()
+    p.add_argument("--force", action="store_true",
+                   help="replace the output folder if it exists and holds files (all of them are "
+                        "removed); without it such a folder is refused")
+    return p
+
+
+def positive(kind: type = float, zero: bool = False) -> Callable[[str], Any]:
+    """Return an argparse type: a finite number > 0 (>= 0 with ``zero``) of ``kind``."""
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(value) or value < 0 or (value == 0 and not zero):
+            raise argparse.ArgumentTypeError(
+                f"expected a finite number {'>=' if zero else '>'} 0, got {text!r}")
+        return value
+
+    parse.__name__ = f"{'non-negative' if zero else 'positive'} {kind.__name__}"
+    return parse
+
+
 def seed_option(text: str) -> argparse.ArgumentParser:
     """``--seed N``: a random seed, 0 by default (same seed, same result)."""
     p = _parent()
@@ -105,7 +131,7 @@ def no_rtest_option(text: str) -> argparse.ArgumentParser:
 def max_nfev_option() -> argparse.ArgumentParser:
     """``--max-nfev N``: the evaluation cap of every solve (they stop at their tolerance)."""
     p = _parent()
-    p.add_argument("--max-nfev", type=int, default=200, metavar="N",
+    p.add_argument("--max-nfev", type=positive(int), default=200, metavar="N",
                    help="most residual evaluations per solve (a cap: every solve stops at its "
                         "tolerance; the count used is printed and in report.json)")
     return p

@@ -20,6 +20,7 @@ from aacmm_pin.cli._options import (
     arm_option,
     json_option,
     nest_option,
+    positive,
     seed_option,
     write_json,
 )
@@ -149,17 +150,17 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--location", type=int, required=True, help="R-Test location (nest), >= 1")
     p.add_argument("--zero", type=_triple_mm, default=None, metavar="X,Y,Z",
                    help="nest zero position in the MT-CS, mm, for locations.csv")
-    p.add_argument("--seconds", type=float, default=None,
+    p.add_argument("--seconds", type=positive(), default=None,
                    help="stop after this long (default: at Ctrl-C)")
     p.add_argument("--arm-format", choices=("nmea", "csv"), default="nmea",
                    help="arm line format: nmea ($A,...*HH) or csv")
     p.add_argument("--axes", type=int, default=7, help="readouts per arm line")
     p.add_argument("--baud", type=int, default=115200, help="baud rate of every port")
-    p.add_argument("--decimate", type=int, default=1, help="write every n-th sample")
-    p.add_argument("--max-skew-ms", type=float, default=10.0,
+    p.add_argument("--decimate", type=positive(int), default=1, help="write every n-th sample")
+    p.add_argument("--max-skew-ms", type=positive(), default=10.0,
                    help="largest time between an arm sample and its gauge readings, ms")
-    p.add_argument("--timeout-s", type=float, default=0.5, help="silence counted as a timeout, s")
-    p.add_argument("--give-up-s", type=float, default=5.0,
+    p.add_argument("--timeout-s", type=positive(), default=0.5, help="silence counted as a timeout, s")
+    p.add_argument("--give-up-s", type=positive(), default=5.0,
                    help="a port lost or silent this long ends the run (status 1), s")
     p.add_argument("--gauge-range-mm", type=float, default=1.0,
                    help="readings beyond +- this are out-of-range faults, mm")
@@ -167,10 +168,11 @@ def add_parsers(subparsers: Any) -> None:
                    help=r"request sent to heidenhain gauges, with Python escapes (\x02 is Ctrl-B)")
     p.add_argument("--mitutoyo-request", type=_request_bytes, default=None,
                    help="request sent to mitutoyo ports (default: none, they stream)")
-    p.add_argument("--poll-hz", type=float, default=0.0,
+    p.add_argument("--poll-hz", type=positive(zero=True), default=0.0,
                    help="most requests per second to a polled gauge (0: as fast as it answers)")
-    p.add_argument("--fsync-s", type=float, default=1.0, help="seconds between fsyncs")
-    p.add_argument("--status-s", type=float, default=0.5, help="seconds between status lines")
+    p.add_argument("--fsync-s", type=positive(zero=True), default=1.0,
+                   help="seconds between fsyncs")
+    p.add_argument("--status-s", type=positive(), default=0.5, help="seconds between status lines")
     p.add_argument("--summary", type=Path, default=None,
                    help="JSON summary (default: CAMPAIGN/acquire-location<M>.json)")
     p.add_argument("--quiet", action="store_true", help="no status line or report")
@@ -186,11 +188,12 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--location", type=int, default=1, help="R-Test location to play (1-4)")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS),
                    help=f"comma-separated simulator effects from {', '.join(SIMULATOR_EFFECTS)}")
-    p.add_argument("--postures", type=int, default=40, help="simulated postures per location")
-    p.add_argument("--rate-hz", type=float, default=1000.0, help="arm lines per second")
+    p.add_argument("--postures", type=positive(int), default=40,
+                   help="simulated postures per location")
+    p.add_argument("--rate-hz", type=positive(), default=1000.0, help="arm lines per second")
     p.add_argument("--gauge-format", choices=("heidenhain", "mitutoyo"), default="heidenhain",
                    help="heidenhain (three polled ports) or mitutoyo (one streaming port)")
-    p.add_argument("--dwell-s", type=float, default=0.05, help="seconds per posture")
+    p.add_argument("--dwell-s", type=positive(), default=0.05, help="seconds per posture")
     p.add_argument("--garbage", type=float, default=0.0, help="probability of garbage per line")
     p.add_argument("--checksum-errors", type=float, default=0.0,
                    help="probability of a checksum error per arm line")

@@ -14,11 +14,13 @@ from typing import TYPE_CHECKING, Any
 from aacmm_pin.cli._options import (
     add_command,
     arm_option,
+    force_option,
     json_option,
     max_nfev_option,
     model_option,
     no_rtest_option,
     out_option,
+    positive,
     seed_option,
 )
 from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
@@ -30,14 +32,16 @@ if TYPE_CHECKING:
 
 def _simulate(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
+    from aacmm_pin.output_folder import check_output
     from aacmm_pin.simulate import SimulationConfig, simulate_campaign, write_simulation
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     config = SimulationConfig(seed=args.seed, effects=effects,
                               samples_per_location=args.samples_per_location,
                               samples_per_socket=args.samples_per_socket)
+    check_output(args.out, args.force)  # before the work, not after it
     sim = simulate_campaign(load_arm(args.arm), config)
-    write_simulation(sim, args.out)
+    write_simulation(sim, args.out, force=args.force)
     spat = sim.campaign.spat
     n_spat = 0 if spat is None else len(spat.location)
     print(f"wrote {args.out}: {n_spat} SPAT samples at {len(sim.campaign.locations)} locations, "
@@ -76,14 +80,16 @@ def _identify(args: argparse.Namespace) -> int:
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.export import write_calibration
     from aacmm_pin.identification import identify
+    from aacmm_pin.output_folder import check_output
 
+    check_output(args.out, args.force)
     arm = load_arm(args.arm)
     cal = identify(read_campaign(args.campaign, arm=arm), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
                    max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar,
                    nests=args.nests)
-    write_calibration(cal, arm, args.out)
+    write_calibration(cal, arm, args.out, force=args.force)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
 
@@ -111,14 +117,16 @@ def _discover(args: argparse.Namespace) -> int:
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.discovery import discover
     from aacmm_pin.discovery_figures import write_discovery
+    from aacmm_pin.output_folder import check_output
 
+    check_output(args.out, args.force)
     arm = load_arm(args.arm)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
                                                  if e.strip()]
     result = discover(read_campaign(args.campaign, arm=arm), arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
                       max_nfev=args.max_nfev, progress=sys.stderr.isatty())
-    write_discovery(result, arm, args.out)
+    write_discovery(result, arm, args.out, force=args.force)
     held = result.heldout_rms
     print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
           f"{result.fit_rms[0] * 1e6:.2f} um")
@@ -146,11 +154,12 @@ def _validate(args: argparse.Namespace) -> int:
 
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.parameters import read_parameters
+    from aacmm_pin.parameters import check_against_arm, read_parameters
     from aacmm_pin.validation import validate, validate_points
 
     params = read_parameters(args.caldir)
     arm = load_arm(params.arm)
+    check_against_arm(params, arm)  # exactly as predict does
     campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
     if campaign.lengthbar is not None or campaign.points is None:
@@ -173,11 +182,13 @@ def _uncertainty(args: argparse.Namespace) -> int:
 
     from aacmm_pin.arm import load_arm
     from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.export import write_calibration, write_maps_csv
+    from aacmm_pin.export import write_calibration_files, write_maps_csv
     from aacmm_pin.identification import identify
+    from aacmm_pin.output_folder import check_output, output_folder
     from aacmm_pin.plots import plot_encoder_maps
     from aacmm_pin.uncertainty import monte_carlo, uncertainty_report
 
+    check_output(args.out, args.force)
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
@@ -185,16 +196,19 @@ def _uncertainty(args: argparse.Namespace) -> int:
     mc = monte_carlo(cal, campaign, args.trials, sigma_rtest=args.sigma_rtest_um * 1e-6,
                      sigma_location=args.sigma_location_um * 1e-6, workers=args.workers,
                      seed=args.seed, progress=sys.stderr.isatty())
-    out = write_calibration(cal, arm, args.out)
+    out = Path(args.out)
     axes = sorted(cal.node_identifiable)
     nodes = {a: np.degrees(cal.parameters.map(a).nodes) for a in axes}
     std = {a: mc.node_std(a, nodes[a]) for a in axes}
-    write_maps_csv(cal, out / "encoder_maps.csv", std=std)
-    (out / "uncertainty.json").write_text(json.dumps(uncertainty_report(cal, mc), indent=2) + "\n")
-    if axes:
-        plot_encoder_maps({a: cal.parameters.map(a).values for a in axes},
-                          out / "fig6_encoder_maps.png", identifiable=cal.node_identifiable,
-                          std=std)
+    with output_folder(out, args.force) as tmp:  # the folder whole, or not at all
+        write_calibration_files(cal, arm, tmp)
+        write_maps_csv(cal, tmp / "encoder_maps.csv", std=std)
+        (tmp / "uncertainty.json").write_text(json.dumps(uncertainty_report(cal, mc), indent=2)
+                                              + "\n")
+        if axes:
+            plot_encoder_maps({a: cal.parameters.map(a).values for a in axes},
+                              tmp / "fig6_encoder_maps.png", identifiable=cal.node_identifiable,
+                              std=std)
     ratio = mc.ratio()
     ratio = ratio[np.isfinite(ratio)]
     print(f"{mc.trials} Monte Carlo trials ({mc.converged} converged), sigma R-Test "
@@ -280,13 +294,14 @@ def add_parsers(subparsers: Any) -> None:
 
     p = add_command(subparsers, "simulate",
                     "write a simulated SPAT + length-bar campaign and its truth",
-                    parents=[seed_option("random seed (same seed, same files)"), arm])
+                    parents=[seed_option("random seed (same seed, same files)"), arm,
+                             force_option()])
     p.add_argument("out", type=Path, help="campaign folder to write")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS),
                    help=f"comma-separated effects from {', '.join(SIMULATOR_EFFECTS)}")
-    p.add_argument("--samples-per-location", type=int, default=200,
+    p.add_argument("--samples-per-location", type=positive(int), default=200,
                    help="SPAT samples per R-Test location")
-    p.add_argument("--samples-per-socket", type=int, default=40,
+    p.add_argument("--samples-per-socket", type=positive(int), default=40,
                    help="length-bar postures per socket")
     p.set_defaults(handler=_simulate)
 
@@ -306,13 +321,13 @@ def add_parsers(subparsers: Any) -> None:
                              no_rtest_option("conventional SPAT: each location's mean "
                                              "displacement for every sample"),
                              arm, out_option(Path("calibration"), "calibration folder"),
-                             max_nfev_option()])
+                             max_nfev_option(), force_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--loss", default="linear",
                    help="scipy loss: linear, soft_l1, huber, cauchy, arctan")
-    p.add_argument("--sigma-um", type=float, default=None,
+    p.add_argument("--sigma-um", type=positive(), default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
-    p.add_argument("--step-deg", type=float, default=5.0, help="map node step, deg")
+    p.add_argument("--step-deg", type=positive(), default=5.0, help="map node step, deg")
     p.add_argument("--nests", choices=("auto", "estimate", "fixed"), default="auto",
                    help="R-Test nest offsets: estimated with their 3 um prior, fixed at the "
                         "measured positions, or auto: estimated only when the model's residual "
@@ -329,13 +344,14 @@ def add_parsers(subparsers: Any) -> None:
                                              "(location means)"),
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
                                                                 "figures, final CALDIR"),
-                             max_nfev_option()])
+                             max_nfev_option(), force_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
                    help="comma-separated library effects to try (default: all)")
-    p.add_argument("--max-steps", type=int, default=6, help="most effects to add")
+    p.add_argument("--max-steps", type=positive(int, zero=True), default=6,
+                   help="most effects to add")
     p.set_defaults(handler=_discover)
 
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
@@ -348,12 +364,16 @@ def add_parsers(subparsers: Any) -> None:
                     parents=[model_option(),
                              no_rtest_option("conventional SPAT (location means)"), arm,
                              seed_option("seed of the first trial (trial i uses seed + i)"),
-                             out_option(Path("uncertainty"), "output folder"), max_nfev_option()])
+                             out_option(Path("uncertainty"), "output folder"), max_nfev_option(),
+                             force_option()])
     p.add_argument("campaign", type=Path, help="campaign folder")
-    p.add_argument("--trials", type=int, default=100, help="Monte Carlo trials")
-    p.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
-    p.add_argument("--sigma-rtest-um", type=float, default=2.0, help="R-Test reading sigma, um")
-    p.add_argument("--sigma-location-um", type=float, default=3.0, help="R-Test location sigma, um")
+    p.add_argument("--trials", type=positive(int), default=100, help="Monte Carlo trials")
+    p.add_argument("--workers", type=positive(int), default=None,
+                   help="local processes (default: all cores)")
+    p.add_argument("--sigma-rtest-um", type=positive(zero=True), default=2.0,
+                   help="R-Test reading sigma, um")
+    p.add_argument("--sigma-location-um", type=positive(zero=True), default=3.0,
+                   help="R-Test location sigma, um")
     p.set_defaults(handler=_uncertainty)
 
     p = add_command(subparsers, "plan", "where to measure next: rank candidate SPATs",
@@ -362,13 +382,13 @@ def add_parsers(subparsers: Any) -> None:
                              arm, seed_option("seed of the candidate postures' IK starts"),
                              json_option("the plan"), max_nfev_option()])
     p.add_argument("campaign", type=Path, help="campaign folder")
-    p.add_argument("--grid", type=int, default=3, help="candidate nests per side")
-    p.add_argument("--spacing-mm", type=float, default=260.0,
+    p.add_argument("--grid", type=positive(int), default=3, help="candidate nests per side")
+    p.add_argument("--spacing-mm", type=positive(zero=True), default=260.0,
                    help="half width of the candidate grid around the nests' centre, mm")
     p.add_argument("--heights-mm", default="0,250",
                    help="comma-separated candidate heights above the nests, mm")
-    p.add_argument("--postures", type=int, default=40, help="postures per candidate SPAT")
-    p.add_argument("--top", type=int, default=10, help="candidates to print")
+    p.add_argument("--postures", type=positive(int), default=40, help="postures per candidate SPAT")
+    p.add_argument("--top", type=positive(int), default=10, help="candidates to print")
     p.set_defaults(handler=_plan)
 
     p = add_command(subparsers, "demo", "the main job: simulate, identify the paper's 3 models, "
