@@ -194,7 +194,7 @@ def test_reads_shared_sample_campaign() -> None:
     ("bar.csv", 2, "length_mm", "inf", "not a finite"),
     ("bar.csv", 2, "from", "", "empty cell"),
     # plausibility: magnitudes no instrument gives
-    ("spat.csv", 3, "dx_mm", "1.5", "measuring range"),
+    ("spat.csv", 3, "dx_mm", "2.5", "measuring range"),
     ("spat.csv", 4, "dz_mm", "-1e300", "measuring range"),
     ("locations.csv", 2, "x_mm", "1e300", "beyond +-100 m"),
     ("bar.csv", 2, "length_mm", "1e-9", "not a plausible bar length"),

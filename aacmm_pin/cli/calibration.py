@@ -28,6 +28,18 @@ if TYPE_CHECKING:
     from aacmm_pin.identification import Calibration
 
 
+def _positive_um(text: str) -> float:
+    """Parse a positive, finite noise in um (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not (value > 0 and value < 1e6):
+        raise argparse.ArgumentTypeError(f"{text} um is not a positive standard uncertainty "
+                                         "below 1 m")
+    return value
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.simulate import SimulationConfig, simulate_campaign, write_simulation
@@ -74,7 +86,8 @@ def _identify(args: argparse.Namespace) -> int:
     cal = identify(read_campaign(args.campaign, arm=arm), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar)
+                   max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar,
+                   robust=args.robust)
     write_calibration(cal, arm, args.out)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
@@ -82,6 +95,8 @@ def _identify(args: argparse.Namespace) -> int:
 
 def _print_calibration(cal: Calibration, out: Path) -> None:
     """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
+    from aacmm_pin.robust import OUTLIER_K
+
     state = "converged" if cal.success else "DID NOT CONVERGE"
     by_loc = ", ".join(f"{cal.group_label(m)}: {v * 1e6:.2f}"
                        for m, v in cal.fit_rms_by_location().items())
@@ -94,6 +109,16 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
           f"{cal.runtime_s:.1f} s -> {out}")
     for line in cal.unidentifiable:
         print(f"  not identifiable: {line}")
+    for kind, flagged in (("outlier (rejected)", cal.outliers), ("WARNING: suspect", cal.suspects)):
+        for o in flagged:
+            at = f"line {o.line}" if o.line is not None else f"row {o.row + 1}"
+            print(f"  {kind}: {o.file} {at}: residual {o.residual * 1e6:.4g} um "
+                  f"({o.sigmas:.3g} sigma)")
+    if cal.suspects:
+        print(f"  WARNING: {len(cal.suspects)} samples beyond {OUTLIER_K:g} robust sigmas: outliers "
+              "or a model that misses an effect; --robust rejects outliers")
+    if not cal.success:
+        print(f"  {cal.message}")
 
 
 def _discover(args: argparse.Namespace) -> int:
@@ -295,8 +320,12 @@ def add_parsers(subparsers: Any) -> None:
                              max_nfev_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--loss", default="linear",
-                   help="scipy loss: linear, soft_l1, huber, cauchy, arctan")
-    p.add_argument("--sigma-um", type=float, default=None,
+                   help="scipy loss of every solve: linear, soft_l1, huber, cauchy, arctan (for "
+                        "outliers use --robust)")
+    p.add_argument("--robust", action="store_true",
+                   help="reject outlier samples (Huber then hard rejection beyond 5 robust sigma "
+                        "of the whitened residual norm; listed in report.json 'outliers')")
+    p.add_argument("--sigma-um", type=_positive_um, default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=float, default=5.0, help="map node step, deg")
     p.add_argument("--use-bar", action="store_true",
@@ -334,8 +363,8 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("campaign", type=Path, help="campaign folder")
     p.add_argument("--trials", type=int, default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
-    p.add_argument("--sigma-rtest-um", type=float, default=2.0, help="R-Test reading sigma, um")
-    p.add_argument("--sigma-location-um", type=float, default=3.0, help="R-Test location sigma, um")
+    p.add_argument("--sigma-rtest-um", type=_positive_um, default=2.0, help="R-Test reading sigma, um")
+    p.add_argument("--sigma-location-um", type=_positive_um, default=3.0, help="R-Test location sigma, um")
     p.set_defaults(handler=_uncertainty)
 
     p = add_command(subparsers, "plan", "where to measure next: rank candidate SPATs",
