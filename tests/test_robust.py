@@ -67,7 +67,8 @@ def check_outlier_case(arm: ap.Arm, campaign: Campaign, clean_bar: float, kind: 
     assert bar <= 1.2 * clean_bar, (bar, clean_bar)
 
 
-@pytest.mark.parametrize("kind", ["angles", "rtest", "720"])
+@pytest.mark.parametrize("kind", ["angles", "rtest",
+                                  pytest.param("720", marks=pytest.mark.slow)])
 def test_robust_fit_rejects_exactly_the_corrupted_samples(arm: ap.Arm, clean: tuple[Campaign, float],
                                                           kind: str) -> None:
     """1 % angles 5 deg off / R-Test readings 1 mm off / one 720 deg readout: rejected exactly,
