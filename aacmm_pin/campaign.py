@@ -29,6 +29,14 @@ from typing import TYPE_CHECKING, Any, TypeGuard
 import numpy as np
 
 from aacmm_pin.errors import CampaignFormatError, Problem
+from aacmm_pin.units import (
+    BAR_LENGTH_MAX,
+    BAR_LENGTH_MIN,
+    MAX_COORDINATE,
+    RADIAN_MIN_ROWS,
+    RTEST_RANGE,
+    TEMPERATURE_RANGE_C,
+)
 
 if TYPE_CHECKING:  # the arm is only passed through (the campaign layer does not load arms)
     from aacmm_pin.arm import Arm
@@ -52,7 +60,10 @@ _FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
 }
 # Column -> kind of cell; q columns are "angle", any other column "number".
 _KINDS = {"location": "id", "placement": "id", "socket": "text", "from": "text", "to": "text",
-          "length_mm": "length", "group": "id", "sigma_um": "sigma", "tool": "text"}
+          "length_mm": "length", "group": "id", "sigma_um": "sigma", "tool": "text",
+          "dx_mm": "displacement", "dy_mm": "displacement", "dz_mm": "displacement",
+          "x_mm": "coordinate", "y_mm": "coordinate", "z_mm": "coordinate",
+          "temp_c": "temperature"}
 # Log field -> (dtype, shape after the row axis); None: any length.
 _ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
     "location": (np.int64, ()), "placement": (np.int64, ()), "socket": (str, ()),
@@ -265,7 +276,20 @@ def _parse(text: str, kind: str) -> tuple[Any, str | None]:
               (kind == "angle" and abs(value) > MAX_ANGLE_DEG,
                f"deg is outside +-{MAX_ANGLE_DEG:g} deg"),
               (kind == "length" and value <= 0, "mm is not a positive bar length"),
-              (kind == "sigma" and value <= 0, "um is not a positive standard uncertainty"))
+              (kind == "length" and not BAR_LENGTH_MIN * 1e3 <= value <= BAR_LENGTH_MAX * 1e3,
+               f"mm is not a plausible bar length ({BAR_LENGTH_MIN * 1e3:g} mm to "
+               f"{BAR_LENGTH_MAX:g} m)"),
+              (kind == "displacement" and abs(value) > RTEST_RANGE * 1e3,
+               f"mm is beyond an R-Test's measuring range (+-{RTEST_RANGE * 1e3:g} mm): a unit "
+               "or sensor error"),
+              (kind == "coordinate" and abs(value) > MAX_COORDINATE * 1e3,
+               f"mm is beyond +-{MAX_COORDINATE:g} m: not a position an arm or tracker measures"),
+              (kind == "temperature" and not TEMPERATURE_RANGE_C[0] <= value
+               <= TEMPERATURE_RANGE_C[1], f"deg C is outside {TEMPERATURE_RANGE_C[0]:g} to "
+                                          f"{TEMPERATURE_RANGE_C[1]:g} deg C"),
+              (kind == "sigma" and value <= 0, "um is not a positive standard uncertainty"),
+              (kind == "sigma" and value > MAX_COORDINATE * 1e6, "um is not a plausible "
+                                                                  "standard uncertainty"))
     reason = next((f"{text} {why}" for bad, why in checks if bad), None)
     return (None if reason else value), reason
 
@@ -382,6 +406,29 @@ def _log_fields(table: _Table) -> dict[str, Any]:
             "lines": np.array(table.lines, dtype=np.int64)}
 
 
+def _check_radians(table: _Table, out: list[Problem]) -> None:
+    """Report readouts that look like radians: every column within +-2 pi over many rows.
+
+    With ``units.RADIAN_MIN_ROWS`` rows or more, every readout column within +-2 pi and some
+    column moving by 1 or more: in degrees that is an arm that turned less than 6.3 deg on every
+    axis through a whole measurement (a SPAT, bar or tracker campaign moves axes by tens of
+    degrees), in radians an ordinary one.
+    """
+    if len(table.lines) < RADIAN_MIN_ROWS or not table.q_columns:
+        return
+    cols = [np.array([math.nan if v is None else v for v in table.cols[name]], dtype=float)
+            for name in table.q_columns]
+    if any(np.isnan(c).any() for c in cols):
+        return  # bad cells, reported already
+    ptp = [float(np.ptp(c)) for c in cols]
+    if max(float(np.max(np.abs(c))) for c in cols) <= 2 * math.pi and max(ptp) >= 1.0:
+        name = table.q_columns[int(np.argmax(ptp))]
+        out.append(Problem(table.path, table.lines[0], name,
+                           f"every readout column lies within +-6.29 over {len(table.lines)} "
+                           f"rows ({name} spans {max(ptp):.3g}): these look like radians; "
+                           "write degrees"))
+
+
 def _usable(table: _Table | None, *columns: str) -> TypeGuard[_Table]:
     """Tell whether a table has data rows and these columns (else its problems are reported)."""
     return table is not None and bool(table.lines) and set(columns) <= table.cols.keys()
@@ -494,6 +541,9 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
         _check_bar(log, bar, problems)
     if points is not None and arm is not None and points.lines:
         _check_tools(points, arm, problems)
+    for table in (spat, log, points):
+        if table is not None:
+            _check_radians(table, problems)
     first = next((t for t in (spat, log, points) if t and t.n_axes), None)
     for other in (log, points):
         if first and other and other is not first and other.n_axes and other.n_axes != first.n_axes:

@@ -15,6 +15,7 @@ data cannot determine.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
@@ -24,6 +25,7 @@ from scipy.optimize import OptimizeResult
 from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
+from aacmm_pin import robust as rob
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.campaign import Campaign, PointLog, SpatLog
@@ -31,6 +33,7 @@ from aacmm_pin.effects import Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.robust import Outlier
 from aacmm_pin.samples import Samples
 from aacmm_pin.solver import Factor, Nuisance, Problem, SolverSettings
 from aacmm_pin.units import (
@@ -42,7 +45,7 @@ from aacmm_pin.units import (
     SOCKET_PRIOR,
     STEP_DEG,
 )
-from aacmm_pin.unknowns import FrameKey, NestKey, NodeKey, UnknownKey, Unknowns
+from aacmm_pin.unknowns import BlockJacobian, FrameKey, NestKey, NodeKey, UnknownKey, Unknowns
 
 MODELS = ("dh", "proposed")
 NESTS = ("auto", "estimate", "fixed")
@@ -117,6 +120,15 @@ class Calibration:
     """The measurement kinds fitted: ``"spat"``, ``"points"``, ``"bar"`` (the length bar)."""
     nests: str = ""
     """How the R-Test nests' offsets were treated (estimated or fixed) and why; empty without."""
+    robust: bool = False
+    """Whether outliers were rejected (``identify(..., robust=True)``, :mod:`aacmm_pin.robust`)."""
+    outliers: tuple[Outlier, ...] = ()
+    """Samples the robust fit rejected (weight 0), largest first; empty without ``robust``."""
+    suspects: tuple[Outlier, ...] = ()
+    """Without ``robust``: samples beyond ``robust.OUTLIER_K`` robust sigmas, kept in the fit
+    (named in ``message`` too)."""
+    inlier: np.ndarray | None = field(default=None, repr=False)
+    """Samples kept in the fit, shape (N,), bool; None: all."""
 
     def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
         """Return ``other`` (e.g. the truth) moved into this calibration's gauge and held values.
@@ -153,13 +165,15 @@ class Calibration:
 
     @property
     def fit_rms(self) -> float:
-        """RMS of the residual coordinates, m."""
-        return float(np.sqrt(np.mean(self.fun ** 2)))
+        """RMS of the residual coordinates of the samples kept (all but :attr:`outliers`), m."""
+        kept = self.fun if self.inlier is None else self.fun[self.inlier]
+        return float(np.sqrt(np.mean(kept ** 2)))
 
     def fit_rms_by_location(self) -> dict[int, float]:
-        """RMS of the residual coordinates per R-Test location, m."""
-        return {int(m): float(np.sqrt(np.mean(self.fun[self.location == m] ** 2)))
-                for m in np.unique(self.location)}
+        """RMS of the residual coordinates per R-Test location (samples kept), m."""
+        keep = np.ones(len(self.fun), bool) if self.inlier is None else self.inlier
+        return {int(m): float(np.sqrt(np.mean(self.fun[(self.location == m) & keep] ** 2)))
+                for m in np.unique(self.location[keep])}
 
     def group_label(self, group: int) -> str:
         """Return the name of a group id of :attr:`location`.
@@ -185,6 +199,9 @@ class Calibration:
             "status": self.status, "message": self.message, "nfev": self.nfev,
             "unidentifiable": list(self.unidentifiable),
             "std": {n: float(s) for n, s in self.std.items()},
+            "robust": self.robust,
+            "outliers": [o.to_dict() for o in self.outliers],
+            "suspects": [o.to_dict() for o in self.suspects],
         }
 
 
@@ -491,7 +508,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              f_scale: float | None = None, sigma: float | None = None,
              sigma_location: float = SIGMA_LOCATION, max_nfev: int = 200, jac: str = "analytic",
              progress: bool = False, extensions: tuple[Term, ...] = (),
-             use_bar: bool = False, nests: str = "auto") -> Calibration:
+             use_bar: bool = False, robust: bool = False, nests: str = "auto") -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
     Args:
@@ -505,8 +522,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             the location centres).
         step_deg: map node step, deg.
         map_axes: axes whose maps are estimated (default: all, for ``proposed``).
-        loss: scipy loss, e.g. ``"linear"``, ``"soft_l1"``, ``"huber"`` (robust to outliers).
-        f_scale: residual scale of a robust loss, m (default 3 x sigma).
+        loss: scipy loss of every solve, e.g. ``"linear"`` (default). For outliers use ``robust``:
+            scipy's ``"soft_l1"`` / ``"huber"`` weigh coordinates, not samples, with a fixed
+            scale, and do not reach their tolerance on these problems.
+        f_scale: residual scale of a scipy robust loss, m (default 3 x sigma).
         sigma: R-Test noise per coordinate, m; None estimates it from the residuals.
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
             (paper Section 5: 3 um); each nest's offset is estimated with this prior.
@@ -527,25 +546,37 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             socket's position is estimated from its readouts and the calibrated distances
             between a placement's sockets are residuals (stated noise ``units.SIGMA_SOCKET`` per
             readout coordinate, ``units.SIGMA_BAR`` per length).
+        robust: reject outliers (:mod:`aacmm_pin.robust`): iteratively reweighted least squares,
+            Huber then hard rejection of every sample (its three coordinates together) whose
+            whitened residual norm exceeds ``robust.OUTLIER_K`` robust sigmas; they are listed in
+            ``outliers`` and left out of the final fit, its noise and its covariance. Without
+            it, such samples are listed in ``suspects`` and named in ``message`` (``success``
+            stays the solver's: the DH model on an arm with encoder errors has such residuals on
+            clean data, and they are not a failure to converge).
 
     Returns:
-        The calibration; ``success`` is False (with a message) when the solver did not converge.
+        The calibration; ``success`` is False (with a message) when the solver did not converge
+        or the robust fit's outlier set did not settle.
 
     Raises:
         IdentificationError: for campaigns that cannot be identified.
-        ValueError: for an unknown ``model``.
+        ValueError: for an unknown ``model``, or a ``sigma`` / ``sigma_location`` not > 0.
     """
     if jac not in ("analytic", "2-point", "3-point", "cs"):
         raise ValueError(f"jac: choose 'analytic', '2-point' or '3-point', got {jac!r}")
     if model not in MODELS:
         raise ValueError(f"model: choose from {', '.join(MODELS)}, got {model!r}")
+    for name, value in (("sigma", sigma), ("sigma_location", sigma_location)):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: a positive noise in m expected, got {value!r}")
     if nests not in NESTS:
         raise ValueError(f"nests: choose from {', '.join(NESTS)}, got {nests!r}")
     arm = arm or load_arm()
 
     def fit(fixed: bool) -> Calibration:
         return _identify(campaign, arm, model, use_rtest, start, step_deg, map_axes, loss, f_scale,
-                         sigma, sigma_location, max_nfev, jac, progress, extensions, use_bar, fixed)
+                         sigma, sigma_location, max_nfev, jac, progress, extensions, use_bar, robust,
+                         fixed)
 
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
         cal = fit(nests == "fixed")
@@ -577,6 +608,8 @@ def _noise_consistency(cal: Calibration, stated: float) -> tuple[float, float]:
     res = cal.fun.ravel() / stated
     if cal.problem.row_weight is not None:  # weight = (the solve's sigma) / (the row's noise)
         res = res * cal.problem.row_weight * stated / cal.problem.sigma_class
+    if cal.inlier is not None:  # rejected outliers are not the model's residual
+        res = res[np.repeat(cal.inlier, 3)]
     dof = max(res.size - cal.n_determined, 1)
     stat = float(np.sum(res ** 2))
     return float(chi2.sf(stat, dof)), float(np.sqrt(stat / res.size))
@@ -585,7 +618,8 @@ def _noise_consistency(cal: Calibration, stated: float) -> tuple[float, float]:
 def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: Parameters | None,
               step_deg: float, map_axes: tuple[int, ...] | None, loss: str, f_scale: float | None,
               sigma: float | None, sigma_location: float, max_nfev: int, jac: str, progress: bool,
-              extensions: tuple[Term, ...], use_bar: bool, fixed_nests: bool) -> Calibration:
+              extensions: tuple[Term, ...], use_bar: bool, robust: bool,
+              fixed_nests: bool) -> Calibration:
     tic = time.perf_counter()
     meas = measurements(campaign, arm, use_rtest, use_bar)
     if fixed_nests:
@@ -596,14 +630,8 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
                                     meas.measured[main], group[main],
                                     None if samples.tool is None else samples.tool[main])
     axes = tuple(range(1, arm.n_axes + 1)) if map_axes is None else tuple(map_axes)
-    unknowns = Unknowns.full(arm, start, axes if model == "proposed" else (),
-                             tuple(t for t in extensions if t.kind is not Kind.MAP), samples)
-    unvisited = ident.unvisited_nodes(unknowns, q)
-    unknowns = unknowns.with_fixed(unvisited)
-    x_arm = unknowns.vector(start)
-    _, jac_now = unknowns.jacobian(x_arm, q)
-    gauges = ident.gauge_axes(unknowns, jac_now)
-    gauge = ident.gauge_rows(unknowns, gauges)
+    full_u = Unknowns.full(arm, start, axes if model == "proposed" else (),
+                           tuple(t for t in extensions if t.kind is not Kind.MAP), samples)
     has_spat = campaign.spat is not None or campaign.points is None
     sigma_class = sigma or (SIGMA_RTEST if has_spat else SIGMA_POINT if stated is None
                             else float(np.median(stated)))
@@ -611,35 +639,40 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
         stated = np.where(np.isnan(stated), sigma_class, stated)
     nuisance, measured, nuisance_keys = _nuisance(arm, start, meas, sigma_class, sigma_location)
     n = len(q)
-    scale = f_scale or 3 * sigma_class
-    x_loc = np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)
-    nfev = 0
-    settings = SolverSettings(loss=loss, f_scale=scale, max_nfev=max_nfev)
+    base_w = np.ones(n) if stated is None else sigma_class / stated
+    settings = SolverSettings(loss=loss, f_scale=f_scale or 3 * sigma_class, max_nfev=max_nfev)
     with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
               disable=not progress, leave=False) as bar:
-        held = -1
-        for _round in range(3):  # observability at the start, then at the solution
-            obs = ident.observability(unknowns, jac_now, gauge, sigma_class)
-            if obs.hold.shape[0] == held:
-                break
-            held = obs.hold.shape[0]
-            used = obs  # the observability the constraints (and the results below) come from
-            constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
-            x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
-            x_now = np.concatenate([x_arm, x_loc])
-            problem = Problem(unknowns, q, measured, nuisance, constraints, obs.scale, x_start,
-                              x_now, sigma_class, None if stated is None else sigma_class / stated)
-            z0 = problem.z(x_now)
-            res = problem.solve(z0, settings, jac, on_evaluation=bar.update)
-            nfev += res.nfev
-            x_full = problem.x(res.x)
-            x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
-            _, jac_now = unknowns.jacobian(x_arm, q)
+        def fit(keep: np.ndarray | None) -> _Fit:
+            return _fit_rounds(full_u, start, q, measured, nuisance, sigma_class,
+                               None if stated is None and keep is None else
+                               base_w * (1.0 if keep is None else keep), keep, settings, jac,
+                               bar.update)
 
-    obs = used
-    data_res = res.fun[:3 * n]  # weighted: the noise in units of sigma_class
-    residual = data_res if problem.row_weight is None else data_res / problem.row_weight
+        def reweight(f: _Fit, w: np.ndarray) -> _Fit:
+            prob = Problem(f.unknowns, q, measured, nuisance, f.constraints, f.obs.scale,
+                           f.problem.x_ref, f.x, sigma_class, base_w * np.sqrt(w))
+            out = prob.solve(prob.z(f.x), settings, jac, on_evaluation=bar.update)
+            return f._replace(problem=prob, res=out, x=prob.x(out.x), nfev=int(out.nfev))
+
+        now = fit(None)
+        inlier: np.ndarray | None = None
+        settled = True
+        if robust:
+            inlier, settled, now = _robust(now, fit, reweight, base_w)
+    unknowns, unvisited, gauges, obs, constraints = (now.unknowns, now.unvisited, now.gauges,
+                                                     now.obs, now.constraints)
+    problem, res, x_full, nfev = now.problem, now.res, now.x, now.nfev
+    x_arm = x_full[:problem.n_arm]
     n_det = problem.n_arm - obs.hold.shape[0] - len(gauges) + problem.n_frame
+    kept = np.ones(n, bool) if inlier is None else inlier
+    dof_fraction = max(3 * int(kept.sum()) + problem.n_lengths - n_det, 1) / (3 * int(kept.sum()))
+    residual = problem.data_residuals(x_full)
+    norms = rob.whitened_norms(residual, base_w)
+    scale = rob.robust_scale(norms, dof_fraction)  # as the IRLS judged: median over all samples
+    flagged = rob.describe(residual, norms, scale, ~kept if robust else rob.flag(norms, scale),
+                           rob.sample_sources(campaign, use_bar))
+    data_res = res.fun[:3 * n][np.repeat(kept, 3)]  # weighted: the noise in units of sigma_class
     dof = data_res.size + problem.n_lengths - n_det
     enough = dof >= MIN_DOF_FRACTION * data_res.size
     # too few residuals: the residual says nothing about the noise; the stated noise stands
@@ -659,6 +692,20 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
     node_ok = {a: identifiable[final_u.map_slice(a)].copy() for a in final_u.map_axes}
     success = bool(res.success)  # the last round's: earlier ones only set the held directions
     message = res.message if success else f"did not converge: {res.message}"
+    outliers = flagged if robust else ()
+    suspects = () if robust else flagged
+    limit = f"{rob.OUTLIER_K:g} robust sigmas ({rob.OUTLIER_K * scale * 1e6:.3g} um whitened norm)"
+    if robust:
+        message = (f"{message}; robust fit: {len(outliers)} outlier samples beyond {limit} "
+                   f"rejected" + (_where(outliers) if outliers else ""))
+        if not settled:
+            success = False
+            message += (f"; the outlier set still changed after {rob.MAX_REJECT_ITERATIONS} "
+                        "refits (outliers and model errors of similar size?)")
+    elif suspects:  # reported, not failed: a model that misses an effect has them on clean data
+        message = (f"{message}; but {len(suspects)} samples lie beyond {limit}: outliers or a "
+                   f"model that misses an effect{_where(suspects)}; refit with robust=True "
+                   "(aacmm-pin identify --robust) to reject them")
     if not enough:
         more = int(np.ceil((n_det / (1 - MIN_DOF_FRACTION) - data_res.size) / 3))
         success = False
@@ -669,7 +716,7 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
                    f"{sig * 1e6:.2g} um is used); measure at least about {more} more postures")
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
                        x=x_full, covariance=covariance, sigma=sig,
-                       fun=residual.reshape(n, 3), location=group.copy(), success=success,
+                       fun=residual, location=group.copy(), success=success,
                        status=int(res.status), message=str(message),
                        nfev=int(nfev), unidentifiable=lines, node_identifiable=node_ok,
                        runtime_s=time.perf_counter() - tic,
@@ -679,7 +726,126 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
                        problem=problem, settings=settings, nuisance_keys=tuple(nuisance_keys),
                        inputs=tuple(k for k, on in (("spat", has_spat),
                                                     ("points", campaign.points is not None),
-                                                    ("bar", use_bar)) if on))
+                                                    ("bar", use_bar)) if on),
+                       robust=robust, outliers=outliers, suspects=suspects, inlier=inlier)
+
+
+def _where(flagged: tuple[Outlier, ...]) -> str:
+    """Return ``" (largest: spat.csv line 12, 1000 um; ...)"`` for the first few flagged samples."""
+    def one(o: Outlier) -> str:
+        at = f"line {o.line}" if o.line is not None else f"row {o.row + 1}"
+        return f"{o.file} {at}, {o.residual * 1e6:.4g} um"
+    more = f"; {len(flagged) - 3} more" if len(flagged) > 3 else ""
+    return f" (largest: {'; '.join(one(o) for o in flagged[:3])}{more})"
+
+
+class _Fit(NamedTuple):
+    """One least-squares identification: its structure, problem and solution."""
+
+    unknowns: Unknowns
+    unvisited: np.ndarray
+    gauges: list[int]
+    obs: ident.Observability
+    constraints: sp.csr_matrix
+    problem: Problem
+    res: OptimizeResult
+    x: np.ndarray
+    nfev: int
+
+
+def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.ndarray,
+                nuisance: Nuisance, sigma_class: float, weight: np.ndarray | None,
+                keep: np.ndarray | None, settings: SolverSettings, jac: str,
+                on_evaluation: Callable[[], None]) -> _Fit:
+    """Identify from the start values with the samples of ``keep`` (None: all).
+
+    What the data can determine (unvisited nodes, gauges, held directions) is decided on the
+    samples kept; the observability is taken at the start, then at the solution (up to 3 rounds).
+    """
+    rows = None if keep is None else np.repeat(keep.astype(float), 3)
+    unvisited = ident.unvisited_nodes(full_u, q if keep is None else q[keep])
+    unknowns = full_u.with_fixed(unvisited)
+    x_arm = unknowns.vector(start)
+
+    def jacobian(x: np.ndarray) -> BlockJacobian:
+        _, jac_x = unknowns.jacobian(x, q)
+        return jac_x if rows is None else jac_x.scaled(rows)
+
+    jac_now = jacobian(x_arm)
+    gauges = ident.gauge_axes(unknowns, jac_now)
+    gauge = ident.gauge_rows(unknowns, gauges)
+    x_loc = np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)
+    nfev, held = 0, -1
+    for _round in range(3):  # observability at the start, then at the solution
+        obs = ident.observability(unknowns, jac_now, gauge, sigma_class)
+        if obs.hold.shape[0] == held:
+            break
+        held = obs.hold.shape[0]
+        used = obs  # the observability the constraints (and the results below) come from
+        constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
+        x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
+        x_now = np.concatenate([x_arm, x_loc])
+        problem = Problem(unknowns, q, measured, nuisance, constraints, obs.scale, x_start,
+                          x_now, sigma_class, weight)
+        res = problem.solve(problem.z(x_now), settings, jac, on_evaluation=on_evaluation)
+        nfev += res.nfev
+        x_full = problem.x(res.x)
+        x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
+        jac_now = jacobian(x_arm)
+    return _Fit(unknowns, unvisited, gauges, used, constraints, problem, res, x_full, nfev)
+
+
+def _robust(first: _Fit, fit: Callable[[np.ndarray | None], _Fit],
+            reweight: Callable[[_Fit, np.ndarray], _Fit], base_w: np.ndarray
+            ) -> tuple[np.ndarray, bool, _Fit]:
+    """Reject outliers from a least-squares fit (see :mod:`aacmm_pin.robust`).
+
+    Huber reweighting on the least-squares structure until the weights settle (a convex start
+    that gross outliers cannot capture), then hard rejection: refit from the start values with
+    the samples within ``OUTLIER_K`` robust sigmas, the structure (unvisited nodes, gauges, held
+    directions) decided on them, until the rejected set no longer changes. ``fit(keep)``
+    identifies from the start values with the samples of ``keep``; ``reweight(fit, w)`` solves
+    the same structure again from its solution with sample weights ``w``. Returns the mask of
+    samples kept, whether the set settled and the final fit (its ``nfev`` counts every solve).
+    """
+    now, nfev = first, first.nfev
+    n = len(base_w)
+
+    def norms_of(f: _Fit) -> np.ndarray:
+        return rob.whitened_norms(f.problem.data_residuals(f.x), base_w)
+
+    def fraction(f: _Fit, kept: int) -> float:
+        n_det = int(f.problem.n_arm - f.obs.hold.shape[0] - len(f.gauges) + f.problem.n_frame)
+        return float(max(3 * kept + f.problem.n_lengths - n_det, 1) / (3 * kept))
+
+    norms = norms_of(now)
+    weight = np.ones(n)
+    for _ in range(rob.MAX_HUBER_ITERATIONS):
+        new = rob.huber_weights(norms, rob.robust_scale(norms, fraction(now, n)))
+        if np.max(np.abs(new - weight)) < rob.WEIGHT_TOL:
+            break
+        weight = new
+        now = reweight(now, weight)
+        nfev += now.nfev
+        norms = norms_of(now)
+    mask, refitted = np.zeros(n, bool), False  # refitted: ``now`` is the fit without ``mask``
+    _, first_jac = first.unknowns.jacobian(first.x[:first.problem.n_arm], first.problem.q)
+    node_size = float(first.unknowns.arm.sizes.map_node)
+    for _ in range(rob.MAX_REJECT_ITERATIONS):
+        scale = rob.robust_scale(norms, fraction(now, n - int(mask.sum())))
+        unseen = rob.unseen_variance(first_jac.nodes, ~mask, node_size) * base_w ** 2
+        out = rob.flag_unseen(norms, scale, unseen)
+        if refitted and np.array_equal(out, mask):
+            return ~mask, True, now._replace(nfev=nfev)
+        if not out.any():  # nothing to reject: the least-squares fit stands, if it agrees
+            norms = norms_of(first)
+            if not rob.flag(norms, rob.robust_scale(norms, fraction(first, n))).any():
+                return ~out, True, first._replace(nfev=nfev)
+        mask, refitted = out, True
+        now = fit(~mask)
+        nfev += now.nfev
+        norms = norms_of(now)
+    return ~mask, False, now._replace(nfev=nfev)
 
 
 def _sigma(data_residuals: np.ndarray, n_params: int, given: float | None) -> float:

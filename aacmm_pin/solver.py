@@ -182,6 +182,7 @@ class Problem:
             cols = (3 * nuisance.nest[has][:, None] + np.arange(3)).ravel()
             # d(residual)/d(nest offset): -1 on the rows of that nest and coordinate
             self.nest = sp.csr_matrix((-np.ones(rows.size), (rows, cols)), shape=(3 * n, self.n_loc))
+        self._nest_raw = self.nest
         self.row_weight = None if weight is None else np.repeat(np.asarray(weight, float), 3)
         if self.row_weight is not None:
             self.nest = sp.csr_matrix(sp.diags(self.row_weight) @ self.nest)
@@ -337,6 +338,17 @@ class Problem:
         x_loc = x[self.n_arm:self.n_arm + self.n_loc]
         data = data + self.nest @ x_loc
         return np.concatenate([data, self.prior * x_loc, self.length_residuals(x)])
+
+    def data_residuals(self, x: np.ndarray) -> np.ndarray:
+        """Return the unweighted data residuals (model - measured, nest offsets applied), (N, 3), m.
+
+        Unlike the data rows of :meth:`fun` they are defined for samples of weight 0 too.
+        """
+        pred = self.unknowns.positions(x[:self.n_arm], self.q).reshape(-1)
+        data = pred - self.main_measured(x).reshape(-1)
+        data = data + self._nest_raw @ x[self.n_arm:self.n_arm + self.n_loc]
+        out: np.ndarray = data.reshape(-1, 3)
+        return out
 
     def _prior_rows(self, p_nuis: np.ndarray) -> np.ndarray:
         out: np.ndarray = self.prior[:, None] * p_nuis[:self.n_loc]

@@ -193,6 +193,13 @@ def test_reads_shared_sample_campaign() -> None:
     ("bar.csv", 2, "length_mm", "-361.775", "not a positive"),
     ("bar.csv", 2, "length_mm", "inf", "not a finite"),
     ("bar.csv", 2, "from", "", "empty cell"),
+    # plausibility: magnitudes no instrument gives
+    ("spat.csv", 3, "dx_mm", "2.5", "measuring range"),
+    ("spat.csv", 4, "dz_mm", "-1e300", "measuring range"),
+    ("locations.csv", 2, "x_mm", "1e300", "beyond +-100 m"),
+    ("bar.csv", 2, "length_mm", "1e-9", "not a plausible bar length"),
+    ("bar.csv", 2, "length_mm", "0.5", "not a plausible bar length"),
+    ("bar.csv", 2, "length_mm", "20000", "not a plausible bar length"),
 ])
 def test_bad_cell_is_reported_at_its_line_and_column(tmp_path: Path, name: str, line: int,
                                                      column: str, value: str, words: str) -> None:
@@ -474,3 +481,40 @@ def test_write_refuses_a_folder_with_files_of_absent_parts(tmp_path: Path) -> No
         write_campaign(spat_only, tmp_path / "old")
     write_campaign(spat_only, tmp_path / "new")
     assert sorted(p.name for p in (tmp_path / "new").iterdir()) == ["locations.csv", "spat.csv"]
+
+
+def _spat_text(q_deg: np.ndarray) -> str:
+    rows = [f"{1 + k % 2}," + ",".join(f"{v:.6f}" for v in q) + ",0,0,0"
+            for k, q in enumerate(q_deg)]
+    return "location,q1_deg,q2_deg,q3_deg,dx_mm,dy_mm,dz_mm\n" + "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_readouts_in_radians_are_reported_with_file_line_and_column(tmp_path: Path,
+                                                                    seed: int) -> None:
+    """A SPAT whose readouts were written in rad is refused; the same postures in deg are read."""
+    q = np.random.default_rng(seed).uniform(-np.pi, np.pi, (40, 3)) * [1.0, 0.5, 0.8]
+    problems = problems_of(make(tmp_path / "rad", spat_csv=_spat_text(q)))
+    column = f"q{int(np.argmax(np.ptp(q, axis=0))) + 1}_deg"
+    assert found(problems, "spat.csv", 2, column, "look like radians"), problems
+    campaign = read_campaign(make(tmp_path / "deg", spat_csv=_spat_text(np.degrees(q))))
+    assert campaign.spat is not None and np.allclose(campaign.spat.q, q, atol=1e-6)
+
+
+def test_small_motions_and_short_files_are_not_taken_for_radians(tmp_path: Path) -> None:
+    """An arm that does not move (all readouts equal) or a short file is not flagged as radians."""
+    still = np.tile([1.0, 2.0, 3.0], (40, 1))
+    assert read_campaign(make(tmp_path / "still", spat_csv=_spat_text(still))).spat is not None
+    short = np.random.default_rng(0).uniform(-3, 3, (10, 3))
+    assert read_campaign(make(tmp_path / "short", spat_csv=_spat_text(short))).spat is not None
+
+
+def test_points_and_temperatures_beyond_plausible_magnitudes(tmp_path: Path) -> None:
+    """Tracker coordinates of 1e300 mm, a sigma_um of 1e300 and temp_c of 1e300 are each reported."""
+    points = ("q1_deg,q2_deg,q3_deg,x_mm,y_mm,z_mm,sigma_um,temp_c\n"
+              "1,2,3,1e300,0,0,20,20\n4,5,6,0,0,0,1e300,20\n7,8,9,0,0,0,20,1e300\n"
+              "10,11,12,0,0,1,20,20\n")
+    problems = problems_of(make(tmp_path, points_csv=points))
+    assert found(problems, "points.csv", 2, "x_mm", "beyond")
+    assert found(problems, "points.csv", 3, "sigma_um", "plausible")
+    assert found(problems, "points.csv", 4, "temp_c", "outside")

@@ -88,7 +88,7 @@ def _identify(args: argparse.Namespace) -> int:
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
                    max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar,
-                   nests=args.nests)
+                   nests=args.nests, robust=args.robust)
     write_calibration(cal, arm, args.out, force=args.force)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
@@ -96,6 +96,8 @@ def _identify(args: argparse.Namespace) -> int:
 
 def _print_calibration(cal: Calibration, out: Path) -> None:
     """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
+    from aacmm_pin.robust import OUTLIER_K
+
     state = "converged" if cal.success else "DID NOT CONVERGE"
     by_loc = ", ".join(f"{cal.group_label(m)}: {v * 1e6:.2f}"
                        for m, v in cal.fit_rms_by_location().items())
@@ -110,6 +112,16 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
         print(f"  R-Test nests {cal.nests}")
     for line in cal.unidentifiable:
         print(f"  not identifiable: {line}")
+    for kind, flagged in (("outlier (rejected)", cal.outliers), ("WARNING: suspect", cal.suspects)):
+        for o in flagged:
+            at = f"line {o.line}" if o.line is not None else f"row {o.row + 1}"
+            print(f"  {kind}: {o.file} {at}: residual {o.residual * 1e6:.4g} um "
+                  f"({o.sigmas:.3g} sigma)")
+    if cal.suspects:
+        print(f"  WARNING: {len(cal.suspects)} samples beyond {OUTLIER_K:g} robust sigmas: outliers "
+              "or a model that misses an effect; --robust rejects outliers")
+    if not cal.success:
+        print(f"  {cal.message}")
 
 
 def _discover(args: argparse.Namespace) -> int:
@@ -324,7 +336,11 @@ def add_parsers(subparsers: Any) -> None:
                              max_nfev_option(), force_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--loss", default="linear",
-                   help="scipy loss: linear, soft_l1, huber, cauchy, arctan")
+                   help="scipy loss of every solve: linear, soft_l1, huber, cauchy, arctan (for "
+                        "outliers use --robust)")
+    p.add_argument("--robust", action="store_true",
+                   help="reject outlier samples (Huber then hard rejection beyond 5 robust sigma "
+                        "of the whitened residual norm; listed in report.json 'outliers')")
     p.add_argument("--sigma-um", type=positive(), default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=positive(), default=5.0, help="map node step, deg")
