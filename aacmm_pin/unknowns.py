@@ -239,12 +239,25 @@ class Unknowns:
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
         blocks = [params.map(a).node_columns(q[:, a - 1], jac.angles[:, :, a - 1],
                                              self.free[self.map_slice(a)]) for a in self.map_axes]
-        nodes = (sp.csc_matrix(sp.hstack(blocks, format="csc")) if blocks
-                 else sp.csc_matrix((3 * n, 0)))
+        nodes = _hstack_csc(blocks, 3 * n)
         position = jac.position + self.measurement_shift(params, q) if self.terms else jac.position
         out = (position, BlockJacobian(dense, nodes))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
         return out
+
+
+def _hstack_csc(blocks: list[sp.csc_matrix], n_rows: int) -> sp.csc_matrix:
+    """Return the CSC blocks side by side (their arrays concatenated, no conversion)."""
+    if not blocks:
+        return sp.csc_matrix((n_rows, 0))
+    ends = np.cumsum([0] + [b.nnz for b in blocks])
+    indptr = np.concatenate([[0], *(b.indptr[1:] + e for b, e in zip(blocks, ends))])
+    index = np.int32 if ends[-1] < 2 ** 31 else np.int64
+    out = sp.csc_matrix((np.concatenate([b.data for b in blocks]),
+                         np.concatenate([b.indices for b in blocks]).astype(index),
+                         indptr.astype(index)), shape=(n_rows, sum(b.shape[1] for b in blocks)))
+    out.has_sorted_indices = all(b.has_sorted_indices for b in blocks)
+    return out
 
 
 @dataclass(frozen=True)
