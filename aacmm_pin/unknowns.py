@@ -230,12 +230,20 @@ class Unknowns:
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
             return cache[2]
+        object.__setattr__(self, "_cache", None)  # the old result's memory is free for the new
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
-        dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool,
-                                self.term_columns(params, q, jac)], axis=2)
-        dense = dense.reshape(3 * n, -1)[:, self.free[:self.n_dense]]
+        free = self.free[:self.n_dense]
+        dense: np.ndarray = np.empty((n, 3, int(free.sum())))  # the free columns, written once
+        at = col = 0
+        for part in (jac.rotation, jac.translation, jac.dh, jac.tool,
+                     self.term_columns(params, q, jac)):
+            sel = free[at:at + part.shape[2]]
+            k = int(sel.sum())
+            dense[:, :, col:col + k] = part if k == sel.size else part[:, :, sel]
+            at, col = at + sel.size, col + k
+        dense = dense.reshape(3 * n, -1)
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
         blocks = [params.map(a).node_columns(q[:, a - 1], jac.angles[:, :, a - 1],
                                              self.free[self.map_slice(a)]) for a in self.map_axes]
@@ -272,6 +280,8 @@ class BlockJacobian:
     """d(positions)/d(non-map entries), shape (3N, n_dense)."""
     nodes: sp.csc_matrix
     """d(positions)/d(map nodes), shape (3N, n_nodes)."""
+    _normal: list[np.ndarray] = field(default_factory=list, init=False, repr=False, compare=False)
+    """J^T J once computed (:meth:`normal`)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -283,7 +293,13 @@ class BlockJacobian:
         return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
 
     def normal(self) -> np.ndarray:
-        """Return J^T J, shape (n_free, n_free), from block products (no dense 3N x n matrix)."""
+        """Return J^T J, shape (n_free, n_free), from block products (no dense 3N x n matrix).
+
+        Computed once per Jacobian (the identifiability analysis and the solver both ask for it).
+        """
+        if self._normal:
+            cached: np.ndarray = self._normal[0].copy()
+            return cached
         nd = self.dense.shape[1]
         out = np.empty((self.shape[1], self.shape[1]))
         out[:nd, :nd] = self.dense.T @ self.dense
@@ -291,7 +307,9 @@ class BlockJacobian:
         out[nd:, :nd] = cross
         out[:nd, nd:] = cross.T
         out[nd:, nd:] = (self.nodes.T @ self.nodes).toarray()
-        return out
+        self._normal.append(out)
+        fresh: np.ndarray = out.copy()
+        return fresh
 
     def scaled(self, row_weight: np.ndarray) -> BlockJacobian:
         """Return diag(row_weight) @ J (row_weight shape (3N,))."""
