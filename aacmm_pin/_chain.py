@@ -161,7 +161,8 @@ class BatchedChain:
                 out[lo + rows] = self._point(pose, fid, rows)
         return out
 
-    def jacobians(self, q: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def jacobians(self, q: np.ndarray, frames: np.ndarray, columns: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """Return frame origins (N, 3) and the linear rows of their Jacobians (N, 3, nv).
 
         The Jacobian is Pinocchio's frame Jacobian in ``LOCAL_WORLD_ALIGNED`` (rows 0-2): columns of
@@ -172,10 +173,12 @@ class BatchedChain:
         Args:
             q: configurations, shape (N, nq).
             frames: Pinocchio frame id per sample, shape (N,).
+            columns: the velocity indices to return, in this order (default: all, shape (nv,)).
         """
         n = q.shape[0]
         pos = np.empty((n, 3))
-        jac = np.empty((n, 3, self.nv))
+        columns = np.arange(self.nv) if columns is None else np.asarray(columns)
+        jac = np.empty((n, 3, columns.size))
         for lo in range(0, n, CHUNK):
             pose = self._forward(q[lo:lo + CHUNK])
             size = min(CHUNK, n - lo)
@@ -192,7 +195,7 @@ class BatchedChain:
                         block[self.idx_v[joints]] = cols
                     else:
                         block[np.ix_(self.idx_v[joints], np.arange(3), rows)] = cols
-            jac[lo:lo + size] = block.transpose(2, 1, 0)
+            jac[lo:lo + size] = block[columns].transpose(2, 1, 0)
         return pos, jac
 
     def _columns(self, pose: _Pose, anchor: int, joints: np.ndarray, point: np.ndarray,

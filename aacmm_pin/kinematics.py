@@ -198,25 +198,28 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = identification_configuration(arm, params, q_read, frame, offsets)
-    pos, jac = ident.chain.jacobians(q, fids)
+    # one array, its column blocks in field order: rotation, translation, angles, dh, tool (views)
+    order = [ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.axis_idx, ident.error_idx,
+             ident.tool_idx]
+    ends = np.cumsum([0] + [len(o) for o in order])
+    pos, jac = ident.chain.jacobians(q, fids, np.concatenate(order))
     if params.extensions:  # every length scaled about the r-CS origin: all but the translation
         origin = params.translation if frame == "mt" else np.zeros(3)
         pos = _scaled(pos, scale, origin)
-        jac = jac * scale[:, None, None]
-        jac[:, :, ident.base_idx[:3]] /= scale[:, None, None]
-    angles = jac[:, :, ident.axis_idx]
+        jac *= scale[:, None, None]
+        jac[:, :, ends[1]:ends[2]] /= scale[:, None, None]
+    rotation, translation, angles, dh, tools = (jac[:, :, a:b] for a, b in zip(ends, ends[1:]))
     slope = np.ones_like(q_read)
     for axis in params.encoder_maps:
         slope[:, axis - 1] += params.encoder_maps[axis].slope(q_read[:, axis - 1])
-    alpha, beta, gamma = ident.base_idx[[4, 3, 5]]
     return StylusJacobians(
         position=pos,
         readouts=angles * slope[:, None, :],
         angles=angles,
-        dh=jac[:, :, ident.error_idx],
-        tool=jac[:, :, ident.tool_idx],
-        rotation=jac[:, :, [alpha, beta, gamma]],
-        translation=jac[:, :, ident.base_idx[:3]],
+        dh=dh,
+        tool=tools,
+        rotation=rotation,
+        translation=translation,
         q_readout=q_read,
     )
 
