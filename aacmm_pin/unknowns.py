@@ -11,6 +11,7 @@ held fixed at its start value. Extension terms come from the effect library
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 from typing import NamedTuple, TypeAlias
 
@@ -230,7 +231,7 @@ class Unknowns:
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
             return cache[2]
-        object.__setattr__(self, "_cache", None)  # the old result's memory is free for the new
+        _release_cached_jacobians()  # their memory is free for the new one
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
@@ -244,14 +245,31 @@ class Unknowns:
             dense[:, :, col:col + k] = part if k == sel.size else part[:, :, sel]
             at, col = at + sel.size, col + k
         dense = dense.reshape(3 * n, -1)
+        angles, position = jac.angles.copy(), jac.position
+        del jac, part  # the whole stylus Jacobian, before the node columns are built
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
-        blocks = [params.map(a).node_columns(q[:, a - 1], jac.angles[:, :, a - 1],
+        blocks = [params.map(a).node_columns(q[:, a - 1], angles[:, :, a - 1],
                                              self.free[self.map_slice(a)]) for a in self.map_axes]
         nodes = _hstack_csc(blocks, 3 * n)
-        position = jac.position + self.measurement_shift(params, q) if self.terms else jac.position
+        del blocks
+        if self.terms:
+            position = position + self.measurement_shift(params, q)
         out = (position, BlockJacobian(dense, nodes))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
+        _CACHED.append(weakref.ref(self))
         return out
+
+
+_CACHED: list[weakref.ref[Unknowns]] = []
+"""The layouts holding a cached Jacobian (a campaign's Jacobian can weigh hundreds of MB)."""
+
+
+def _release_cached_jacobians() -> None:
+    """Drop every layout's cached Jacobian (only one is kept in a process: the newest)."""
+    while _CACHED:
+        holder = _CACHED.pop()()
+        if holder is not None:
+            object.__setattr__(holder, "_cache", None)
 
 
 def _hstack_csc(blocks: list[sp.csc_matrix], n_rows: int) -> sp.csc_matrix:
