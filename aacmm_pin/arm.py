@@ -52,6 +52,7 @@ import numpy as np
 import pinocchio as pin
 import yourdfpy
 
+from aacmm_pin._chain import BatchedChain
 from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.sizes import Sizes, sizes_of_urdf, sizes_path
 
@@ -456,6 +457,8 @@ class IdentificationModel:
         self.tool_idx: np.ndarray = np.array([idx[n] for n in arm.tool_unknowns])
         """Configuration indices of the tool vectors (x, y, z per tool, tool order)."""
         assert self.model.nq == self.model.nv == len(idx)
+        self.chain: BatchedChain = BatchedChain(self.model)
+        """The model's kinematics vectorised over samples (positions and frame Jacobians)."""
 
     @property
     def data(self) -> pin.Data:

@@ -139,16 +139,24 @@ class EncoderMap:
         """
         readout = np.asarray(readout, dtype=float).reshape(-1)
         keep_nodes = np.ones(self.n_nodes, dtype=bool) if nodes is None else np.asarray(nodes, bool)
+        n_cols = int(keep_nodes.sum())
         column = np.cumsum(keep_nodes) - 1
         lower, upper, frac = self.neighbours(readout)
-        rows, cols, vals = [], [], []
-        for node, weight in ((lower, 1.0 - frac), (upper, frac)):
-            keep = keep_nodes[node] & (weight != 0.0)
-            rows.append((3 * np.flatnonzero(keep)[:, None] + np.arange(3)).reshape(-1))
-            cols.append(np.repeat(column[node[keep]], 3))
-            vals.append((d_angle[keep] * weight[keep, None]).reshape(-1))
-        return sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(3 * readout.size, int(keep_nodes.sum())))
+        node = np.column_stack([lower, upper])                          # (N, 2)
+        weight = np.column_stack([1.0 - frac, frac])
+        keep = np.repeat((keep_nodes[node] & (weight != 0.0)).reshape(-1), 3)
+        # entries in row order (sample, lower/upper, coordinate): a stable sort by column keeps
+        # each column's rows ascending, so the CSC arrays are built directly (no COO pass)
+        cols = np.repeat(column[node].reshape(-1), 3)[keep]
+        rows = np.broadcast_to(3 * np.arange(readout.size)[:, None, None] + np.arange(3),
+                               (readout.size, 2, 3)).reshape(-1)[keep]
+        vals = (weight[:, :, None] * np.asarray(d_angle, dtype=float)[:, None, :]).reshape(-1)[keep]
+        order = np.argsort(cols.astype(np.int16 if n_cols < 2 ** 15 else np.int64), kind="stable")
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=n_cols))])
+        out = sp.csc_matrix((vals[order], rows[order].astype(np.int32), indptr.astype(np.int32)),
+                            shape=(3 * readout.size, n_cols))
+        out.has_sorted_indices = True
+        return out
 
     def correct(self, readout: np.ndarray) -> np.ndarray:
         """Return the angle the model uses, readout + error(readout), same shape, in rad."""

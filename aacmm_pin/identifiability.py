@@ -79,6 +79,10 @@ def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
     """
     full_cols = np.flatnonzero(unknowns.free)
     dense = jac.dense
+    # one SVD for every axis: the least-squares fit of a column is its projection on the dense
+    # block's numerical range (the singular vectors that numpy's lstsq keeps, rcond=None)
+    u, sv, _ = np.linalg.svd(dense, full_matrices=False)
+    rng = u[:, sv > (sv.max(initial=0.0) * np.finfo(float).eps * max(dense.shape))]
     out = []
     for axis in unknowns.map_axes:
         sl = unknowns.map_slice(axis)
@@ -87,8 +91,7 @@ def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
             continue
         constant = jac.columns_sum(cols)
         norm = np.linalg.norm(constant)
-        beta = np.linalg.lstsq(dense, constant, rcond=None)[0] if norm > 0 else 0.0
-        if norm == 0.0 or np.linalg.norm(constant - dense @ beta) / norm < GAUGE_TOL:
+        if norm == 0.0 or np.linalg.norm(constant - rng @ (rng.T @ constant)) / norm < GAUGE_TOL:
             out.append(axis)
     return out
 

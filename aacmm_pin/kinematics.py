@@ -1,8 +1,11 @@
 r"""Batch kinematics: stylus centres and their Jacobians for N readouts at once.
 
-Positions come from Pinocchio's forward kinematics; Jacobians from Pinocchio's frame Jacobian of the
-identification model (:class:`aacmm_pin.arm.IdentificationModel`), in which every parameter is a
-joint, so every column is analytic. Map nodes enter through the chain rule:
+Positions and Jacobians are those of Pinocchio's models: forward kinematics and the frame Jacobian
+(``LOCAL_WORLD_ALIGNED``) of the identification model (:class:`aacmm_pin.arm.IdentificationModel`),
+in which every parameter is a joint, so every column is analytic. They are evaluated for all samples
+at once (:class:`aacmm_pin._chain.BatchedChain`: the joint placements and axes come from the
+Pinocchio model, the products along the chain are vectorised over samples with numpy; the tests
+check them against Pinocchio's per-sample functions). Map nodes enter through the chain rule:
 :math:`\partial p / \partial \Delta\theta_{n,map}(k) = \partial p / \partial \theta_n \cdot w_k(\theta^*_n)`
 with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
 """
@@ -13,17 +16,15 @@ from collections.abc import Callable
 from typing import NamedTuple, TypeAlias
 
 import numpy as np
-import pinocchio as pin
 import scipy.sparse as sp
 
+from aacmm_pin._chain import BatchedChain
 from aacmm_pin.arm import Arm
 from aacmm_pin.effects import apply_terms
 from aacmm_pin.encoder_map import correct_readouts
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
-
-_WORLD = pin.LOCAL_WORLD_ALIGNED
 
 
 class StylusJacobians(NamedTuple):
@@ -169,16 +170,11 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         tool: which tool each sample measures (see :data:`ToolIndex`).
     """
     ident = arm.identification
-    model, data = ident.model, ident.data
     q_read = _readouts_2d(readouts, arm)
     fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = identification_configuration(arm, params, q_read, frame, offsets)
-    out = np.empty((q.shape[0], 3))
-    forward, update = pin.forwardKinematics, pin.updateFramePlacement  # bound once: hot loop
-    for i, qi in enumerate(q):
-        forward(model, data, qi)
-        out[i] = update(model, data, int(fids[i])).translation
+    out = ident.chain.positions(q, fids)
     if params.extensions:
         out = _scaled(out, scale, params.translation if frame == "mt" else np.zeros(3))
     return out
@@ -198,38 +194,32 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
             that of its own tool's frame.
     """
     ident = arm.identification
-    model, data = ident.model, ident.data
     q_read = _readouts_2d(readouts, arm)
     fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = identification_configuration(arm, params, q_read, frame, offsets)
-    n = q.shape[0]
-    pos = np.empty((n, 3))
-    jac = np.empty((n, 6, model.nv))
-    frame_jacobian, placements = pin.computeFrameJacobian, data.oMf  # bound once: hot loop
-    for i, qi in enumerate(q):
-        fid = int(fids[i])
-        jac[i] = frame_jacobian(model, data, qi, fid, _WORLD)
-        pos[i] = placements[fid].translation
-    jac = jac[:, :3]
+    # one array, its column blocks in field order: rotation, translation, angles, dh, tool (views)
+    order = [ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.axis_idx, ident.error_idx,
+             ident.tool_idx]
+    ends = np.cumsum([0] + [len(o) for o in order])
+    pos, jac = ident.chain.jacobians(q, fids, np.concatenate(order))
     if params.extensions:  # every length scaled about the r-CS origin: all but the translation
         origin = params.translation if frame == "mt" else np.zeros(3)
         pos = _scaled(pos, scale, origin)
-        jac = jac * scale[:, None, None]
-        jac[:, :, ident.base_idx[:3]] /= scale[:, None, None]
-    angles = jac[:, :, ident.axis_idx]
+        jac *= scale[:, None, None]
+        jac[:, :, ends[1]:ends[2]] /= scale[:, None, None]
+    rotation, translation, angles, dh, tools = (jac[:, :, a:b] for a, b in zip(ends, ends[1:]))
     slope = np.ones_like(q_read)
     for axis in params.encoder_maps:
         slope[:, axis - 1] += params.encoder_maps[axis].slope(q_read[:, axis - 1])
-    alpha, beta, gamma = ident.base_idx[[4, 3, 5]]
     return StylusJacobians(
         position=pos,
         readouts=angles * slope[:, None, :],
         angles=angles,
-        dh=jac[:, :, ident.error_idx],
-        tool=jac[:, :, ident.tool_idx],
-        rotation=jac[:, :, [alpha, beta, gamma]],
-        translation=jac[:, :, ident.base_idx[:3]],
+        dh=dh,
+        tool=tools,
+        rotation=rotation,
+        translation=translation,
         q_readout=q_read,
     )
 
@@ -250,17 +240,12 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
         tool: which tool each sample measures (see :data:`ToolIndex`).
     """
     model = arm.runtime_model(params.dh, tools=params.tool_vectors(arm))
-    data = model.createData()
     q_read = _readouts_2d(readouts, arm)
     fids = np.array([model.getFrameId(link) for link in arm.tool_links])[
         tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     offsets, scale = extension_effects(arm, params, q_read, samples)
     q = correct_readouts(q_read, params.encoder_maps) + offsets
-    out = np.empty((q.shape[0], 3))
-    for i, qi in enumerate(q):
-        pin.forwardKinematics(model, data, qi)
-        out[i] = pin.updateFramePlacement(model, data, int(fids[i])).translation
-    positions: np.ndarray = out * scale[:, None]
+    positions: np.ndarray = BatchedChain(model).positions(q, fids) * scale[:, None]
     return positions
 
 

@@ -11,6 +11,7 @@ held fixed at its start value. Extension terms come from the effect library
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 from typing import NamedTuple, TypeAlias
 
@@ -230,21 +231,59 @@ class Unknowns:
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
             return cache[2]
+        _release_cached_jacobians()  # their memory is free for the new one
         params = self.parameters(x)
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
-        dense = np.concatenate([jac.rotation, jac.translation, jac.dh, jac.tool,
-                                self.term_columns(params, q, jac)], axis=2)
-        dense = dense.reshape(3 * n, -1)[:, self.free[:self.n_dense]]
+        free = self.free[:self.n_dense]
+        dense: np.ndarray = np.empty((n, 3, int(free.sum())))  # the free columns, written once
+        at = col = 0
+        for part in (jac.rotation, jac.translation, jac.dh, jac.tool,
+                     self.term_columns(params, q, jac)):
+            sel = free[at:at + part.shape[2]]
+            k = int(sel.sum())
+            dense[:, :, col:col + k] = part if k == sel.size else part[:, :, sel]
+            at, col = at + sel.size, col + k
+        dense = dense.reshape(3 * n, -1)
+        angles, position = jac.angles.copy(), jac.position
+        del jac, part  # the whole stylus Jacobian, before the node columns are built
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
-        blocks = [params.map(a).node_columns(q[:, a - 1], jac.angles[:, :, a - 1],
+        blocks = [params.map(a).node_columns(q[:, a - 1], angles[:, :, a - 1],
                                              self.free[self.map_slice(a)]) for a in self.map_axes]
-        nodes = (sp.csc_matrix(sp.hstack(blocks, format="csc")) if blocks
-                 else sp.csc_matrix((3 * n, 0)))
-        position = jac.position + self.measurement_shift(params, q) if self.terms else jac.position
+        nodes = _hstack_csc(blocks, 3 * n)
+        del blocks
+        if self.terms:
+            position = position + self.measurement_shift(params, q)
         out = (position, BlockJacobian(dense, nodes))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
+        _CACHED.append(weakref.ref(self))
         return out
+
+
+_CACHED: list[weakref.ref[Unknowns]] = []
+"""The layouts holding a cached Jacobian (a campaign's Jacobian can weigh hundreds of MB)."""
+
+
+def _release_cached_jacobians() -> None:
+    """Drop every layout's cached Jacobian (only one is kept in a process: the newest)."""
+    while _CACHED:
+        holder = _CACHED.pop()()
+        if holder is not None:
+            object.__setattr__(holder, "_cache", None)
+
+
+def _hstack_csc(blocks: list[sp.csc_matrix], n_rows: int) -> sp.csc_matrix:
+    """Return the CSC blocks side by side (their arrays concatenated, no conversion)."""
+    if not blocks:
+        return sp.csc_matrix((n_rows, 0))
+    ends = np.cumsum([0] + [b.nnz for b in blocks])
+    indptr = np.concatenate([[0], *(b.indptr[1:] + e for b, e in zip(blocks, ends))])
+    index = np.int32 if ends[-1] < 2 ** 31 else np.int64
+    out = sp.csc_matrix((np.concatenate([b.data for b in blocks]),
+                         np.concatenate([b.indices for b in blocks]).astype(index),
+                         indptr.astype(index)), shape=(n_rows, sum(b.shape[1] for b in blocks)))
+    out.has_sorted_indices = all(b.has_sorted_indices for b in blocks)
+    return out
 
 
 @dataclass(frozen=True)
@@ -259,6 +298,8 @@ class BlockJacobian:
     """d(positions)/d(non-map entries), shape (3N, n_dense)."""
     nodes: sp.csc_matrix
     """d(positions)/d(map nodes), shape (3N, n_nodes)."""
+    _normal: list[np.ndarray] = field(default_factory=list, init=False, repr=False, compare=False)
+    """J^T J once computed (:meth:`normal`)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -270,7 +311,13 @@ class BlockJacobian:
         return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
 
     def normal(self) -> np.ndarray:
-        """Return J^T J, shape (n_free, n_free), from block products (no dense 3N x n matrix)."""
+        """Return J^T J, shape (n_free, n_free), from block products (no dense 3N x n matrix).
+
+        Computed once per Jacobian (the identifiability analysis and the solver both ask for it).
+        """
+        if self._normal:
+            cached: np.ndarray = self._normal[0].copy()
+            return cached
         nd = self.dense.shape[1]
         out = np.empty((self.shape[1], self.shape[1]))
         out[:nd, :nd] = self.dense.T @ self.dense
@@ -278,7 +325,9 @@ class BlockJacobian:
         out[nd:, :nd] = cross
         out[:nd, nd:] = cross.T
         out[nd:, nd:] = (self.nodes.T @ self.nodes).toarray()
-        return out
+        self._normal.append(out)
+        fresh: np.ndarray = out.copy()
+        return fresh
 
     def scaled(self, row_weight: np.ndarray) -> BlockJacobian:
         """Return diag(row_weight) @ J (row_weight shape (3N,))."""

@@ -66,3 +66,20 @@ def test_rejects_wrong_node_count_and_nan():
         EncoderMap(np.zeros(71))
     with pytest.raises(ValueError, match="finite"):
         EncoderMap(np.full(72, np.nan))
+
+
+def test_node_columns_are_angle_columns_times_weights(emap):
+    """Node columns equal d(point)/d(angle) x interpolation weight, with held nodes left out."""
+    rng = np.random.default_rng(11)
+    readout = np.concatenate([rng.uniform(-7.0, 7.0, 300), emap.nodes[:5]])  # some on nodes
+    d_angle = rng.normal(size=(readout.size, 3))
+    keep = rng.random(emap.n_nodes) > 0.3
+    weights = emap.weights(readout).toarray()                     # (N, n_nodes)
+    expected = (d_angle[:, :, None] * weights[:, None, :]).reshape(3 * readout.size, -1)[:, keep]
+    cols = emap.node_columns(readout, d_angle, keep)
+    assert cols.format == "csc" and cols.has_canonical_format
+    np.testing.assert_array_equal(cols.toarray(), expected)
+    assert cols.nnz == np.count_nonzero(np.repeat(weights[:, keep], 3, axis=0))
+    np.testing.assert_array_equal(emap.node_columns(readout, d_angle).toarray(),
+                                  (d_angle[:, :, None] * weights[:, None, :]).reshape(
+                                      3 * readout.size, -1))

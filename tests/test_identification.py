@@ -281,3 +281,20 @@ def test_dh_fit_is_no_worse_than_a_plain_dh_fit_with_fixed_nests():
     proposed = identify(sim.campaign, arm, "proposed")
     assert proposed.nests.startswith("estimated")
     assert identify(sim.campaign, arm, "dh", nests="estimate").nests == "estimate (asked)"
+
+
+def test_lsmr_steps_reach_the_exact_solvers_solution(small_cal):
+    """The LSMR trust-region steps of Problem.solve end where dense SVD steps end (< 1e-3 std)."""
+    from scipy.optimize import least_squares
+
+    problem = small_cal.problem
+    z = problem.z(small_cal.x)
+    # z: metres of residual per unit (J P nearly orthonormal); start ~5 noise sigmas off everywhere
+    z0 = z + np.random.default_rng(0).normal(0.0, 5 * small_cal.sigma, z.size)
+    res = problem.solve(z0, small_cal.settings)
+    ref = least_squares(problem.fun, z0, jac=problem.jac, method="trf", tr_solver="exact",
+                        ftol=1e-12, xtol=1e-12, gtol=1e-12)
+    assert res.success and ref.success
+    std = np.sqrt(np.diag(small_cal.covariance))
+    np.testing.assert_array_less(np.abs(problem.x(res.x) - problem.x(ref.x)), 1e-3 * std)
+    assert abs(res.cost - ref.cost) <= 1e-9 * ref.cost

@@ -1,0 +1,177 @@
+"""Batched kinematics against Pinocchio's own per-sample forward kinematics and frame Jacobian."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import aacmm_pin as ap
+from aacmm_pin import kinematics
+from aacmm_pin._chain import CHUNK, BatchedChain
+from aacmm_pin.encoder_map import EncoderMap, correct_readouts
+from aacmm_pin.samples import Samples
+
+ROOT = Path(__file__).resolve().parents[1]
+ARMS = ["aacmm7", "ur5", "wam7", str(ROOT / "urdf" / "torso.urdf")]
+# Every value is a sum of a few dozen products of O(1 m) terms: rounding ~ 40 eps ~ 1e-14 m; a
+# wrong joint, axis or sign is off by O(1 mm) or more.
+TOL = 1e-12
+
+
+@pytest.fixture(scope="module", params=ARMS, ids=["aacmm7", "ur5", "wam7", "torso"])
+def any_arm(request: pytest.FixtureRequest) -> ap.Arm:
+    return ap.load_arm(request.param)
+
+
+def _pinocchio(model: pin.Model, q: np.ndarray, frames: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Pinocchio, one sample at a time: frame origins (N, 3) and linear frame Jacobians (N, 3, nv)."""
+    data = model.createData()
+    pos, jac = np.empty((len(q), 3)), np.empty((len(q), 3, model.nv))
+    for i, (qi, fid) in enumerate(zip(q, frames)):
+        jac[i] = pin.computeFrameJacobian(model, data, qi, int(fid), pin.LOCAL_WORLD_ALIGNED)[:3]
+        pin.forwardKinematics(model, data, qi)
+        pos[i] = pin.updateFramePlacement(model, data, int(fid)).translation
+    return pos, jac
+
+
+def _tools(arm: ap.Arm, rng: np.random.Generator, n: int) -> np.ndarray:
+    return rng.integers(0, arm.n_tools, n)
+
+
+@pytest.mark.parametrize("moving", ["axes", "all"])
+def test_chain_matches_pinocchio(any_arm, moving):
+    """Positions and every Jacobian column equal Pinocchio's to 1e-12 (axes or all joints moving)."""
+    ident = any_arm.identification
+    rng = np.random.default_rng(3)
+    n = 200
+    q = np.tile(rng.uniform(-1.0, 1.0, ident.model.nq), (n, 1))
+    if moving == "all":
+        q = rng.uniform(-4.0, 4.0, (n, ident.model.nq))
+    q[:, ident.axis_idx] = rng.uniform(-4.0, 4.0, (n, any_arm.n_axes))
+    frames = np.asarray(ident.tool_frames)[_tools(any_arm, rng, n)]
+    ref_pos, ref_jac = _pinocchio(ident.model, q, frames)
+    pos, jac = ident.chain.jacobians(q, frames)
+    np.testing.assert_allclose(pos, ref_pos, rtol=0, atol=TOL)
+    np.testing.assert_allclose(jac, ref_jac, rtol=0, atol=TOL)
+    np.testing.assert_allclose(ident.chain.positions(q, frames), ref_pos, rtol=0, atol=TOL)
+    if any_arm.n_tools > 1:  # the other tool's vector and the other arm's axes: zero columns
+        other = jac[frames == ident.tool_frames[0]][:, :, ident.tool_idx[3:]]
+        assert other.shape[0] > 0 and not other.any()
+
+
+def test_chain_across_chunks_and_one_sample(arm):
+    """More samples than a chunk (some joints fixed in one chunk only) and a single sample agree."""
+    ident = arm.identification
+    rng = np.random.default_rng(4)
+    n = CHUNK + 37
+    q = np.tile(rng.uniform(-1.0, 1.0, ident.model.nq), (n, 1))
+    q[:, ident.axis_idx] = rng.uniform(-3.0, 3.0, (n, arm.n_axes))
+    q[CHUNK:, ident.error_idx[0]] += rng.normal(0.0, 1e-3, 37)  # moves in the last chunk only
+    q[:CHUNK, ident.axis_idx[2]] = 0.3                           # fixed in the first chunk
+    frames = np.full(n, ident.stylus_frame)
+    ref_pos, ref_jac = _pinocchio(ident.model, q, frames)
+    pos, jac = ident.chain.jacobians(q, frames)
+    np.testing.assert_allclose(jac, ref_jac, rtol=0, atol=TOL)
+    np.testing.assert_allclose(pos, ref_pos, rtol=0, atol=TOL)
+    one_pos, one_jac = ident.chain.jacobians(q[:1], frames[:1])
+    np.testing.assert_allclose(one_jac, ref_jac[:1], rtol=0, atol=TOL)
+
+
+def test_chain_unaligned_axes():
+    """Joints about and along arbitrary axes (Pinocchio's Unaligned joints) agree with Pinocchio."""
+    model = pin.Model()
+    rng = np.random.default_rng(5)
+    parent = 0
+    for k in range(6):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        joint = (pin.JointModelRevoluteUnaligned(axis) if k % 2 == 0
+                 else pin.JointModelPrismaticUnaligned(axis))
+        placement = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
+        parent = model.addJoint(parent, joint, placement, f"j{k}")
+    fid = model.addFrame(pin.Frame("tip", parent, 0, pin.SE3(np.eye(3), np.array([0.1, 0.2, 0.3])),
+                                   pin.FrameType.OP_FRAME))
+    q = rng.uniform(-3.0, 3.0, (50, model.nq))
+    frames = np.full(50, fid)
+    ref_pos, ref_jac = _pinocchio(model, q, frames)
+    pos, jac = BatchedChain(model).jacobians(q, frames)
+    np.testing.assert_allclose(pos, ref_pos, rtol=0, atol=TOL)
+    np.testing.assert_allclose(jac, ref_jac, rtol=0, atol=TOL)
+
+
+def test_chain_rejects_other_joints():
+    """A joint with more than one degree of freedom is refused, by name."""
+    model = pin.Model()
+    model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    with pytest.raises(ValueError, match="ball"):
+        BatchedChain(model)
+
+
+def _off_nominal(arm: ap.Arm, seed: int) -> tuple[ap.Parameters, Samples]:
+    """Random DH, tools, X0, maps and extensions (compliance, thermal, crosstalk) and samples."""
+    rng = np.random.default_rng(seed)
+    nominal = ap.Parameters.nominal(arm)
+    dh = {f.name: v + rng.normal(0.0, 1e-3) for f, v in zip(arm.error_frames, nominal.dh.values())}
+    tools = {k: v + rng.normal(0.0, 1e-3, 3) for k, v in nominal.tool_vectors(arm).items()}
+    maps = {a: EncoderMap(rng.normal(0.0, 1e-4, 72)) for a in range(1, arm.n_axes + 1)}
+    ext = {"compliance[A2]": np.array([1e-5]), "thermal": np.array([2e-5]),
+           "crosstalk[A3<-A1]": np.array([1e-4, -2e-4])}
+    params = nominal.replace(dh=dh, tools=tools, encoder_maps=maps, extensions=ext,
+                             rotation_abc=rng.normal(0.0, 0.1, 3),
+                             translation=rng.normal(0.0, 0.5, 3))
+    n = 60
+    q = rng.uniform(arm.joint_limits[:, 0], arm.joint_limits[:, 1], (n, arm.n_axes))
+    samples = Samples(arm, q, temp=rng.uniform(15.0, 25.0, n), t=np.arange(n, dtype=float),
+                      tool=_tools(arm, rng, n))
+    return params, samples
+
+
+def _reference_jacobians(arm: ap.Arm, params: ap.Parameters, samples: Samples, frame: str
+                         ) -> kinematics.StylusJacobians:
+    """The public Jacobians computed sample by sample with Pinocchio's computeFrameJacobian."""
+    ident = arm.identification
+    q_read = samples.q
+    offsets, scale = kinematics.extension_effects(arm, params, q_read, samples)
+    q = kinematics.identification_configuration(arm, params, q_read, frame, offsets)
+    pos, jac = _pinocchio(ident.model, q, np.asarray(ident.tool_frames)[samples.tool])
+    origin = params.translation if frame == "mt" else np.zeros(3)
+    pos = origin + scale[:, None] * (pos - origin)
+    jac = jac * scale[:, None, None]
+    jac[:, :, ident.base_idx[:3]] /= scale[:, None, None]
+    angles = jac[:, :, ident.axis_idx]
+    slope = 1.0 + np.column_stack([params.encoder_maps[a].slope(q_read[:, a - 1])
+                                   for a in range(1, arm.n_axes + 1)])
+    return kinematics.StylusJacobians(
+        position=pos, readouts=angles * slope[:, None, :], angles=angles,
+        dh=jac[:, :, ident.error_idx], tool=jac[:, :, ident.tool_idx],
+        rotation=jac[:, :, ident.base_idx[[4, 3, 5]]], translation=jac[:, :, ident.base_idx[:3]],
+        q_readout=q_read)
+
+
+@pytest.mark.parametrize("frame", ["r", "mt"])
+def test_public_kinematics_match_pinocchio_off_nominal(any_arm, frame):
+    """stylus_jacobians and stylus_positions equal Pinocchio per sample to 1e-12, every field."""
+    params, samples = _off_nominal(any_arm, 6)
+    ref = _reference_jacobians(any_arm, params, samples, frame)
+    got = kinematics.stylus_jacobians(any_arm, params, samples.q, frame, samples)
+    for name in ref._fields:
+        np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=TOL,
+                                   err_msg=name)
+    np.testing.assert_allclose(kinematics.stylus_positions(any_arm, params, samples.q, frame,
+                                                           samples), ref.position, rtol=0, atol=TOL)
+
+
+def test_predict_matches_pinocchio_runtime_model(any_arm):
+    """predict equals Pinocchio's forward kinematics of the calibrated runtime model per sample."""
+    params, samples = _off_nominal(any_arm, 7)
+    model = any_arm.runtime_model(params.dh, tools=params.tool_vectors(any_arm))
+    offsets, scale = kinematics.extension_effects(any_arm, params, samples.q, samples)
+    q = correct_readouts(samples.q, params.encoder_maps) + offsets
+    fids = np.array([model.getFrameId(link) for link in any_arm.tool_links])[samples.tool]
+    ref = _pinocchio(model, q, fids)[0] * scale[:, None]
+    np.testing.assert_allclose(kinematics.predict(any_arm, params, samples.q, samples), ref,
+                               rtol=0, atol=TOL)
