@@ -30,7 +30,6 @@ import dataclasses
 import time
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
@@ -41,6 +40,7 @@ from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identification import Calibration, identify, measurements
 from aacmm_pin.linear_scorer import LinearScorer
+from aacmm_pin.progress import Progress
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
@@ -128,7 +128,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     factors = [lin.size_factors]
     n_candidates: list[int] = []
     stopped, missing = "", []
-    ticker = tqdm(total=max_steps, desc="discover", unit="step", disable=not progress, leave=False)
+    ticker = Progress("discover", "step", total=max_steps, enabled=progress)
     def candidates() -> list[Term]:
         out = [t for n in names if not LIBRARY[n].in_start
                for t in LIBRARY[n].candidates(arm, samples)

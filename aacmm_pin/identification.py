@@ -22,7 +22,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import OptimizeResult
-from tqdm.auto import tqdm
 
 from aacmm_pin import identifiability as ident
 from aacmm_pin import robust as rob
@@ -33,6 +32,7 @@ from aacmm_pin.effects import Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import stylus_positions
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.progress import Progress
 from aacmm_pin.robust import Outlier
 from aacmm_pin.samples import Samples
 from aacmm_pin.solver import Factor, Nuisance, Problem, SolverSettings
@@ -534,7 +534,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             ``success`` False).
         jac: ``"analytic"`` (Pinocchio, sparse in the map nodes) or a scipy finite-difference
             scheme (``"2-point"``, ``"3-point"``) on the same problem, for comparison.
-        progress: show a progress bar.
+        progress: show progress (evaluations and residual RMS; log lines when stderr is not a
+            terminal).
         extensions: further terms of the effect library (:mod:`aacmm_pin.effects`) to estimate
             (angle, scale or measurement kind; map terms are ``map_axes``).
         nests: the R-Test nests' offsets: ``"estimate"`` (each with the prior
@@ -641,18 +642,20 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
     n = len(q)
     base_w = np.ones(n) if stated is None else sigma_class / stated
     settings = SolverSettings(loss=loss, f_scale=f_scale or 3 * sigma_class, max_nfev=max_nfev)
-    with tqdm(total=2 * max_nfev, desc=f"identify {model}", unit="eval",
-              disable=not progress, leave=False) as bar:
+    with Progress(f"identify {model}", "evaluation", enabled=progress) as bar:
+        def evaluated(rms: float) -> None:
+            bar.update(rms_um=rms * 1e6)
+
         def fit(keep: np.ndarray | None) -> _Fit:
             return _fit_rounds(full_u, start, q, measured, nuisance, sigma_class,
                                None if stated is None and keep is None else
                                base_w * (1.0 if keep is None else keep), keep, settings, jac,
-                               bar.update)
+                               evaluated)
 
         def reweight(f: _Fit, w: np.ndarray) -> _Fit:
             prob = Problem(f.unknowns, q, measured, nuisance, f.constraints, f.obs.scale,
                            f.problem.x_ref, f.x, sigma_class, base_w * np.sqrt(w))
-            out = prob.solve(prob.z(f.x), settings, jac, on_evaluation=bar.update)
+            out = prob.solve(prob.z(f.x), settings, jac, on_evaluation=evaluated)
             return f._replace(problem=prob, res=out, x=prob.x(out.x), nfev=int(out.nfev))
 
         now = fit(None)
@@ -756,7 +759,7 @@ class _Fit(NamedTuple):
 def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.ndarray,
                 nuisance: Nuisance, sigma_class: float, weight: np.ndarray | None,
                 keep: np.ndarray | None, settings: SolverSettings, jac: str,
-                on_evaluation: Callable[[], None]) -> _Fit:
+                on_evaluation: Callable[[float], None]) -> _Fit:
     """Identify from the start values with the samples of ``keep`` (None: all).
 
     What the data can determine (unvisited nodes, gauges, held directions) is decided on the

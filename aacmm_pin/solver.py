@@ -430,14 +430,15 @@ class Problem:
         return bool(n_z * self.q.shape[0] * 3 < DENSE_LIMIT)
 
     def solve(self, z0: np.ndarray, settings: SolverSettings, jac: str = "analytic",
-              on_evaluation: Callable[[], None] | None = None) -> OptimizeResult:
+              on_evaluation: Callable[[float], None] | None = None) -> OptimizeResult:
         """Minimise from z0 with scipy's trust-region reflective solver (LSMR steps).
 
         Args:
             z0: start, reduced coordinates, shape (n_z,).
             settings: loss, its scale and the evaluation budget.
             jac: ``"analytic"`` or a scipy finite-difference scheme (``"2-point"``, ...).
-            on_evaluation: called after every residual evaluation (progress).
+            on_evaluation: called after every residual evaluation with the residual's RMS (m,
+                in units of the solve's sigma for weighted rows), for progress.
         """
         # The analytic Jacobian goes to LSMR as an operator at every size: in the preconditioned
         # coordinates its columns are nearly orthonormal, so LSMR takes a few products per step
@@ -448,7 +449,7 @@ class Problem:
         def fun(z: np.ndarray) -> np.ndarray:
             out = self.fun(z)
             if on_evaluation is not None:
-                on_evaluation()
+                on_evaluation(float(np.sqrt(np.mean(out ** 2))))
             return out
 
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac

@@ -165,7 +165,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
         workers: local worker processes when no executor is given.
         progress: show a progress bar.
     """
-    from tqdm.auto import tqdm
+    from aacmm_pin.progress import Progress
 
     if trials < 2:
         raise ValueError(f"trials: need at least 2, got {trials}")
@@ -186,7 +186,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
     pool = ProcessPoolExecutor(workers) if own else executor
-    with tqdm(total=trials, desc="Monte Carlo", unit="trial", disable=not progress) as bar:
+    with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
             for batch in batches:
                 results.append(_trial_batch(cal, factor, base, spat.location, cal.use_rtest, sigma_rtest,

@@ -15,6 +15,7 @@ handlers import what they need, so ``aacmm-pin --help`` and ``--version`` answer
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -78,6 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `aacmm-pin ... | head`: the reader left; so do we, quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
+        return 1  # as the Python documentation recommends for a broken pipe
     except OSError as exc:  # read-only or full disk, a folder where a file should be, permissions
         print(f"aacmm-pin {args.command}: error: {os_error_message(exc)}", file=sys.stderr)
         return 2

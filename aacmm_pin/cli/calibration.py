@@ -7,7 +7,6 @@ The modules that import Pinocchio, scipy or matplotlib are imported inside the h
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -87,7 +86,7 @@ def _identify(args: argparse.Namespace) -> int:
     cal = identify(read_campaign(args.campaign, arm=arm), arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   max_nfev=args.max_nfev, progress=sys.stderr.isatty(), use_bar=args.use_bar,
+                   max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
                    nests=args.nests, robust=args.robust)
     write_calibration(cal, arm, args.out, force=args.force)
     _print_calibration(cal, args.out)
@@ -137,7 +136,7 @@ def _discover(args: argparse.Namespace) -> int:
                                                  if e.strip()]
     result = discover(read_campaign(args.campaign, arm=arm), arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
-                      max_nfev=args.max_nfev, progress=sys.stderr.isatty())
+                      max_nfev=args.max_nfev, progress=True)
     write_discovery(result, arm, args.out, force=args.force)
     held = result.heldout_rms
     print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
@@ -204,10 +203,10 @@ def _uncertainty(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
-                   max_nfev=args.max_nfev, progress=sys.stderr.isatty())
+                   max_nfev=args.max_nfev, progress=True)
     mc = monte_carlo(cal, campaign, args.trials, sigma_rtest=args.sigma_rtest_um * 1e-6,
                      sigma_location=args.sigma_location_um * 1e-6, workers=args.workers,
-                     seed=args.seed, progress=sys.stderr.isatty())
+                     seed=args.seed, progress=True)
     out = Path(args.out)
     axes = sorted(cal.node_identifiable)
     nodes = {a: np.degrees(cal.parameters.map(a).nodes) for a in axes}
@@ -249,7 +248,7 @@ def _plan(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, max_nfev=args.max_nfev,
-                   progress=sys.stderr.isatty())
+                   progress=True)
     centre = np.mean(list(campaign.locations.values()), axis=0)
     steps = np.linspace(-args.spacing_mm, args.spacing_mm, args.grid) * 1e-3 if args.grid > 1 \
         else np.zeros(1)
