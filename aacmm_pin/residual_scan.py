@@ -10,12 +10,13 @@ in two ways (:func:`scan_residuals`):
 * **for structure**, variable by variable: time within each location, time overall, temperature,
   each axis angle, the gravity torque on each axis, the R-Test displacement per coordinate, each
   axis' direction of motion, and the location itself (spread). For a continuous variable the
-  whitened residual's three coordinates are fitted by binned means (:data:`BINS` equal-count
-  bins; within each location for the within-location variables, whose constants the nest offsets
-  absorb) on top of a constant per location, and the fit improvement is F-tested against the
-  residual's own variance with its degrees of freedom (so a wrong stated noise does not look like
-  structure); the location's spread is Bartlett's test of equal variances. The p-values are
-  Holm-corrected over the variables; the significant ones are ranked by p-value.
+  whitened residual's three coordinates are fitted smoothly (Legendre polynomials of degree 1 to
+  :data:`DEGREE` of the variable's rank; within each location for time within a location) on top
+  of a constant per location (the nest offsets absorb those), a discrete one by its levels, and
+  the fit improvement is F-tested against the residual's own variance with its degrees of freedom
+  (so a wrong stated noise does not look like structure); the location's spread is Bartlett's
+  test of equal variances. The p-values are Holm-corrected over the variables; the significant
+  ones are ranked by p-value (time is reported once, see :func:`_within_better`).
 
 The residual is *unexplained* when its chi-square exceeds the stated noise's (level
 :data:`ALPHA_NOISE`) or a variable carries structure (family-wise level :data:`ALPHA_STRUCTURE`).
@@ -293,11 +294,10 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
     dof = max(residual_dof(cal), 1.0)
     sigma = np.broadcast_to(np.asarray(noise, dtype=float), (n,))[:, None]
     white = residual / sigma
-    ssr_stated = float(np.sum(white ** 2))
+    ssr_stated = total = float(np.sum(white ** 2))
     noise_rms = float(np.sqrt(np.mean(sigma ** 2)))
     loc_design = _indicators(location)
     ss_loc, rank_loc = _projected_ss(white, loc_design)  # ~0: the nest offsets took the means
-    total = float(np.sum(white ** 2))
     centred = residual.copy()
     for m in np.unique(location):
         centred[location == m] -= centred[location == m].mean(axis=0)
