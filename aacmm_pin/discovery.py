@@ -228,7 +228,9 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
             f"; {len(missing)} candidates are still significant (see missing)" if missing else
             "; nothing else is significant"))
     ticker.close()
-    scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise))
+    tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
+    scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
+                          np.einsum("nij,j->ni", lin.stylus.tool, tools))
     return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
                      calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
                      bar_rms=[None if b is None else b.rms for b in bars],

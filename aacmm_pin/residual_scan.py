@@ -8,8 +8,9 @@ in two ways (:func:`scan_residuals`):
   :math:`3N - \mathrm{tr}\,H` (H: the hat matrix of the linearised fit, nest offsets and held
   directions included);
 * **for structure**, variable by variable: time within each location, time overall, temperature,
-  each axis angle, the gravity torque on each axis, the R-Test displacement per coordinate, each
-  axis' direction of motion, and the location itself (spread). For a continuous variable the
+  each axis angle, the gravity torque on each axis, the R-Test displacement per coordinate, the
+  stylus' inclination and azimuth, each axis' direction of motion, and the location itself
+  (spread). For a continuous variable the
   whitened residual's three coordinates are fitted smoothly (Legendre polynomials of degree 1 to
   :data:`DEGREE` of the variable's rank; within each location for time within a location) on top
   of a constant per location (the nest offsets absorb those), a discrete one by its levels, and
@@ -155,7 +156,8 @@ OVERALL = "time over the campaign"
 TIME = "time"
 
 
-def _variables(samples: Samples) -> list[tuple[str, str, str, np.ndarray, str]]:
+def _variables(samples: Samples, stylus: np.ndarray | None = None
+               ) -> list[tuple[str, str, str, np.ndarray, str]]:
     """Return (variable, where, label, values, kind) of every variable worth a test.
 
     kind: ``"within"`` (fitted within each location), ``"global"`` (over all samples), ``"levels"``
@@ -186,6 +188,15 @@ def _variables(samples: Samples) -> list[tuple[str, str, str, np.ndarray, str]]:
         for c, name in enumerate("xyz"):  # "own": tested on the other coordinates' residual
             out.append((f"the R-Test displacement {name}", name, f"R-Test displacement {name} (um)",
                         samples.displacement[:, c] * 1e6, "own"))
+    if stylus is not None:  # the stylus' inclination from pointing down, and its azimuth
+        unit = stylus / np.maximum(np.linalg.norm(stylus, axis=1, keepdims=True), 1e-12)
+        tilt = np.degrees(np.arccos(np.clip(-unit[:, 2], -1.0, 1.0)))
+        azimuth = np.degrees(np.arctan2(unit[:, 1], unit[:, 0]))
+        if np.ptp(tilt) > 1.0:
+            out.append(("the stylus inclination", "stylus", "stylus inclination from pointing "
+                        "down (deg)", tilt, "global"))
+        if np.ptp(azimuth) > 1.0 and np.median(tilt) > 5.0:
+            out.append(("the stylus azimuth", "stylus", "stylus azimuth (deg)", azimuth, "global"))
     direction = samples.direction
     for a in range(1, samples.q.shape[1] + 1):
         d = direction[:, a - 1]
@@ -276,7 +287,8 @@ def _merge_time(ranked: list[Structure], within_better: bool) -> list[Structure]
     return out
 
 
-def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray) -> Scan:
+def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray,
+                   stylus: np.ndarray | None = None) -> Scan:
     """Judge a calibration's residual against the stated noise and test it for structure.
 
     Args:
@@ -285,6 +297,8 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         noise: the stated noise of its measurements per coordinate, m (e.g. the R-Test's), or
             one per sample, shape (N,) (the residual is whitened row by row; the scan reports
             their RMS).
+        stylus: the stylus vector (last joint to stylus centre) of every sample in the residual's
+            frame, shape (N, 3), m, or None: its inclination and azimuth are variables too.
 
     Returns:
         The scan (see the module doc); :attr:`Scan.unexplained` says whether something is missing.
@@ -303,7 +317,7 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         centred[location == m] -= centred[location == m].mean(axis=0)
     found: list[tuple[Structure, float]] = []
     designs: dict[str, np.ndarray] = {}
-    for variable, where, label, values, kind in _variables(samples):
+    for variable, where, label, values, kind in _variables(samples, stylus):
         coords = [c for c in range(3) if kind != "own" or c != "xyz".index(where)]
         kind = "global" if kind == "own" else kind
         designs[variable] = _design(values, location, kind)

@@ -85,6 +85,9 @@ def test_paper_model_leaves_nothing_unexplained(arm: ap.Arm) -> None:
     assert result.unexplained is None, result.scan.hint()
     assert abs(result.scan.noise_ratio - 1.0) < 4 * np.sqrt(2 / result.scan.dof)  # chi2 spread
     assert result.to_dict()["unexplained"] is None
+    tested = {v.variable for v in result.scan.variables}
+    assert {TIME, "the A6 angle", "the gravity torque on A2", "the stylus inclination",
+            "the R-Test displacement x", "the location (its spread)"} <= tested
 
 
 def test_creeping_fixture_is_reported_with_time(arm: ap.Arm) -> None:
