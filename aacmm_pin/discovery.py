@@ -231,6 +231,12 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
     scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
                           np.einsum("nij,j->ni", lin.stylus.tool, tools))
+    if scan.structure:  # library terms on a variable the residual follows, not named
+        labels = {s.label for s in scan.structure}
+        scan = dataclasses.replace(scan, suspects=tuple(
+            t.key for n in names if not LIBRARY[n].in_start
+            for t in LIBRARY[n].candidates(arm, samples)
+            if not _in_model(t, terms, map_axes, use_rtest) and t.variable(samples)[0] in labels))
     return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
                      calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
                      bar_rms=[None if b is None else b.rms for b in bars],

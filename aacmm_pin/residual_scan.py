@@ -91,6 +91,9 @@ class Scan:
     """Location of each residual row, shape (N,)."""
     location_ratio: dict[int, float] = field(default_factory=dict)
     """Residual RMS per location in units of the stated noise (1: as stated)."""
+    suspects: tuple[str, ...] = ()
+    """Keys of library terms not in the model whose variable the residual follows (set by
+    :func:`aacmm_pin.discover`): they use it, yet were not named."""
 
     @property
     def noise_ratio(self) -> float:
@@ -117,9 +120,13 @@ class Scan:
         if self.structure:
             top = self.structure[0]
             where = f" {top.where}" if top.variable == TIME else ""
-            return (f"something is missing that no effect in the library explains: the residual "
-                    f"follows {top.variable}{where} ({top.explained_rms * 1e6:.1f} um of "
-                    f"{self.fit_rms * 1e6:.1f} um), p = {top.p_value:.2g}")
+            follows = (f"the residual follows {top.variable}{where} ({top.explained_rms * 1e6:.1f} "
+                       f"um of {self.fit_rms * 1e6:.1f} um), p = {top.p_value:.2g}")
+            if self.suspects:
+                return (f"something is missing: {follows}; the library's "
+                        f"{', '.join(self.suspects)} uses a variable it follows but did not pass "
+                        f"discovery's tests (it may explain a part)")
+            return f"something is missing that no effect in the library explains: {follows}"
         if not self.noise_consistent:
             above = sum(v > 1.0 for v in self.location_ratio.values())
             everywhere = ("at every location" if above == len(self.location_ratio)
@@ -137,7 +144,8 @@ class Scan:
             return None
         return {"fit_rms_um": self.fit_rms * 1e6, "noise_um": self.noise * 1e6,
                 "noise_ratio": self.noise_ratio, "dof": self.dof, "p_value": self.p_value,
-                "structure": [s.to_dict() for s in self.structure], "hint": self.hint()}
+                "structure": [s.to_dict() for s in self.structure],
+                "library_terms": list(self.suspects), "hint": self.hint()}
 
 
 def residual_dof(cal: Calibration) -> float:
@@ -174,11 +182,11 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None
     t = samples.t if samples.t is not None else np.arange(samples.n, dtype=float)
     out.append((OVERALL, "all", f"time ({unit})", t, "global"))
     if samples.temp is not None and np.ptp(samples.temp) > 0.05:
-        out.append(("temperature", "all", "temperature (deg C)", samples.temp, "global"))
+        out.append(("temperature", "all", "arm temperature (deg C)", samples.temp, "global"))
     for a in range(1, samples.q.shape[1] + 1):
         q = samples.q[:, a - 1]
         if np.ptp(q) > np.radians(1.0):
-            out.append((f"the A{a} angle", f"A{a}", f"A{a} angle (deg)", np.degrees(q), "global"))
+            out.append((f"the A{a} angle", f"A{a}", f"A{a} readout (deg)", np.degrees(q), "global"))
     gravity = samples.gravity
     for a in range(1, samples.q.shape[1] + 1):
         if np.ptp(gravity[:, a - 1]) > 1e-2:
