@@ -9,6 +9,7 @@ seed of each stays in the default run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable
 
@@ -21,7 +22,7 @@ from aacmm_pin.cli import main
 from aacmm_pin.discovery import discover
 from aacmm_pin.discovery_results import Discovery
 from aacmm_pin.errors import CampaignFormatError
-from aacmm_pin.residual_scan import ALPHA_NOISE, ALPHA_STRUCTURE, TIME
+from aacmm_pin.residual_scan import ALPHA_NOISE, ALPHA_STRUCTURE, TIME, Scan, Structure
 
 N_PER_LOCATION = 100
 DT_S = 2.0
@@ -199,3 +200,17 @@ def test_cli_reports_unexplained_with_stated_noise(arm: ap.Arm, tmp_path, capsys
     assert report["unexplained"]["structure"][0]["variable"] == TIME
     assert set(report["unexplained"]) >= {"fit_rms_um", "noise_um", "p_value", "structure", "hint"}
     assert (out / "discovery_unexplained.png").stat().st_size > 10_000
+
+
+def test_hint_names_library_terms_that_were_not_named() -> None:
+    """A structure on a variable a library term uses: the hint names the term, not "no effect"."""
+    top = Structure("the gravity torque on A4", "A4", 0.4e-6, 1e-5, -11.5, 9, np.zeros(3),
+                    "gravity torque on A4 (N m)")
+    scan = Scan(fit_rms=2.1e-6, noise=2e-6, chi2=1300.0, dof=864.0, p_value=1e-20,
+                variables=[top], residual=np.zeros((3, 3)), location=np.ones(3, dtype=int),
+                location_ratio={1: 1.2})
+    assert "no effect in the library explains" in scan.hint()
+    named = dataclasses.replace(scan, suspects=("compliance[A4]",))
+    report = named.to_dict()
+    assert report is not None and report["library_terms"] == ["compliance[A4]"]
+    assert "compliance[A4]" in report["hint"] and "no effect in the library" not in report["hint"]
