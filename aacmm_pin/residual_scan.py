@@ -11,8 +11,9 @@ in two ways (:func:`scan_residuals`):
   each axis angle, the gravity torque on each axis, the R-Test displacement per coordinate, the
   stylus' inclination and azimuth, each axis' direction of motion, and the location itself
   (spread). For a continuous variable the
-  whitened residual's three coordinates are fitted smoothly (Legendre polynomials of degree 1 to
-  :data:`DEGREE` of the variable's rank; within each location for time within a location) on top
+  whitened residual's three coordinates are fitted smoothly (Legendre polynomials of the
+  variable's rank, of degree 1 and of degrees 1-3, :data:`DEGREES`, the better with a Bonferroni
+  factor; within each location for time within a location) on top
   of a constant per location (the nest offsets absorb those), a discrete one by its levels, and
   the fit improvement is F-tested against the residual's own variance with its degrees of freedom
   (so a wrong stated noise does not look like structure); the location's spread is Bartlett's
@@ -34,8 +35,10 @@ from scipy import stats
 from aacmm_pin.identification import Calibration
 from aacmm_pin.samples import Samples
 
-DEGREE = 3
-"""Degree of the smooth fit of a continuous variable (per location for the within-location ones)."""
+DEGREES = (1, 3)
+"""Degrees of the smooth fits of a continuous variable (per location for the within-location
+ones): a trend (few degrees of freedom, the power for a drift) and a curve; the better p-value,
+times their number (Bonferroni), is the variable's."""
 ALPHA_NOISE = 0.005
 """Level of the chi-square test of the residual against the stated noise."""
 ALPHA_STRUCTURE = 0.005
@@ -214,10 +217,10 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None
     return out
 
 
-def _design(values: np.ndarray, location: np.ndarray, kind: str) -> np.ndarray:
+def _design(values: np.ndarray, location: np.ndarray, kind: str, degree: int = 3) -> np.ndarray:
     """Return the smooth fit's columns of a variable, shape (N, k).
 
-    Continuous variables: Legendre polynomials of degree 1..:data:`DEGREE` of the variable's rank
+    Continuous variables: Legendre polynomials of degree 1..``degree`` of the variable's rank
     mapped onto [-1, 1] (a smooth fit robust to a skewed spread), per location for ``"within"``;
     ``"levels"``: one indicator per level.
     """
@@ -229,7 +232,7 @@ def _design(values: np.ndarray, location: np.ndarray, kind: str) -> np.ndarray:
     for sel in groups:
         rank = np.argsort(np.argsort(values[sel], kind="stable"), kind="stable")
         u = 2.0 * rank / max(int(sel.sum()) - 1, 1) - 1.0
-        for d in range(1, DEGREE + 1):
+        for d in range(1, degree + 1):
             col = np.zeros(values.size)
             col[sel] = np.polynomial.legendre.Legendre.basis(d)(u)
             cols.append(col)
@@ -328,17 +331,23 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
     for variable, where, label, values, kind in _variables(samples, stylus):
         coords = [c for c in range(3) if kind != "own" or c != "xyz".index(where)]
         kind = "global" if kind == "own" else kind
-        designs[variable] = _design(values, location, kind)
-        ss, rank = _projected_ss(white[:, coords], np.hstack([loc_design, designs[variable]]))
         ss_base = _projected_ss(white[:, coords], loc_design)[0]
-        k = len(coords) * (rank - rank_loc)
-        if k <= 0 or dof - k <= 0:
+        fits = []
+        for degree in (DEGREES if kind != "levels" else (0,)):
+            designs[variable] = _design(values, location, kind, degree)  # the last: the curve
+            ss, rank = _projected_ss(white[:, coords], np.hstack([loc_design, designs[variable]]))
+            k = len(coords) * (rank - rank_loc)
+            if k <= 0 or dof - k <= 0:
+                continue
+            explained = max(ss - ss_base, 0.0)
+            rest = max(total - ss_loc - explained, 1e-300)
+            log_p = float(stats.f.logsf((explained / k) / (rest / (dof - k)), k, dof - k))
+            excess = max(explained - k * rest / (dof - k), 0.0)  # less what noise would explain
+            fits.append((log_p, k, excess))
+        if not fits:
             continue
-        explained = max(ss - ss_base, 0.0)
-        rest = max(total - ss_loc - explained, 1e-300)
-        f_stat = (explained / k) / (rest / (dof - k))
-        log_p = float(stats.f.logsf(f_stat, k, dof - k))
-        excess = max(explained - k * rest / (dof - k), 0.0)  # less what noise alone would explain
+        log_p, k, excess = min(fits)
+        log_p = min(log_p + float(np.log(len(fits))), 0.0)
         found.append((Structure(variable, where, float(np.sqrt(excess / (3 * n))) * noise_rms,
                                 1.0, log_p, k, values, label), log_p))
     groups = [centred[location == m].reshape(-1) for m in np.unique(location)]
