@@ -17,7 +17,9 @@ if TYPE_CHECKING:
         Campaign,
         LengthBarLog,
         SpatLog,
+        StatedNoise,
         read_campaign,
+        read_noise,
         read_readouts,
         write_campaign,
         write_points,
@@ -55,6 +57,7 @@ __all__ = [
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",
+    "StatedNoise", "read_noise",
     "StylusJacobians", "correct_readouts", "load_arm", "node_angles", "predict",
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
@@ -64,8 +67,8 @@ __all__ = [
 _PUBLIC: dict[str, tuple[str, ...]] = {
     # module -> the public names it defines (the same as the TYPE_CHECKING imports above)
     "arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
-    "campaign": ("Campaign", "LengthBarLog", "SpatLog", "read_campaign", "read_readouts",
-                 "write_campaign", "write_points"),
+    "campaign": ("Campaign", "LengthBarLog", "SpatLog", "StatedNoise", "read_campaign",
+                 "read_noise", "read_readouts", "write_campaign", "write_points"),
     "discovery": ("discover",),
     "discovery_results": ("Discovery",),
     "discovery_figures": ("write_discovery",),

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import re
 from collections import Counter
@@ -35,7 +36,11 @@ from aacmm_pin.units import (
     MAX_COORDINATE,
     RADIAN_MIN_ROWS,
     RTEST_RANGE,
+    SIGMA_LOCATION,
+    SIGMA_POINT,
+    SIGMA_RTEST,
     TEMPERATURE_RANGE_C,
+    UM,
 )
 
 if TYPE_CHECKING:  # the arm is only passed through (the campaign layer does not load arms)
@@ -70,6 +75,64 @@ _ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
     "q": (float, (None,)), "displacement": (float, (3,)), "t": (float, ()), "temp": (float, ()),
     "lines": (np.int64, ()), "group": (np.int64, ()), "point": (float, (3,)), "sigma": (float, ()),
     "tool": (str, ())}
+
+
+NOISE_FILE = "campaign.json"
+"""Optional file beside the CSVs stating the campaign's noise: ``{"noise_um": {"rtest": 2.0,
+"location": 3.0, "point": 20.0}}`` (any subset of the keys; the others keep the paper's values)."""
+
+
+@dataclass(frozen=True)
+class StatedNoise:
+    """The measurement noise a campaign states per kind of measurement.
+
+    Standard uncertainties per coordinate, m; the paper's values by default (:mod:`aacmm_pin.units`).
+    """
+
+    rtest: float = SIGMA_RTEST
+    """R-Test gauge reading, m."""
+    location: float = SIGMA_LOCATION
+    """R-Test nest (zero) position, m."""
+    point: float = SIGMA_POINT
+    """Absolute tool point of an instrument (laser tracker), m (a ``sigma_um`` column overrides)."""
+
+    def __post_init__(self) -> None:
+        for name in ("rtest", "location", "point"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: a positive noise in m expected, got {value!r}")
+
+    def to_um(self) -> dict[str, float]:
+        """Return the ``campaign.json`` form: kind -> noise, um."""
+        return {"rtest": self.rtest / UM, "location": self.location / UM, "point": self.point / UM}
+
+
+def read_noise(path: str | Path) -> StatedNoise:
+    """Read a ``campaign.json``'s stated noise (see :data:`NOISE_FILE`).
+
+    Raises:
+        CampaignFormatError: if the file is not JSON, or ``noise_um`` is not an object of positive
+            numbers with the keys rtest, location, point (each one optional).
+    """
+    path = Path(path)
+    try:
+        content = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise CampaignFormatError([Problem(path, None, None, f"not readable as JSON: {exc}")]) from exc
+    noise = content.get("noise_um", {}) if isinstance(content, dict) else None
+    if not isinstance(noise, dict):
+        raise CampaignFormatError([Problem(path, None, "noise_um", "an object {\"rtest\": 2.0, "
+                                           "\"location\": 3.0, \"point\": 20.0} (um) expected")])
+    kinds = tuple(f.name for f in StatedNoise.__dataclass_fields__.values())
+    problems = [Problem(path, None, f"noise_um.{key}", f"unknown kind; choose from {', '.join(kinds)}")
+                for key in noise if key not in kinds]
+    problems += [Problem(path, None, f"noise_um.{key}", f"a positive number (um) expected, got "
+                         f"{value!r}") for key, value in noise.items() if key in kinds and not (
+                             isinstance(value, (int, float)) and not isinstance(value, bool)
+                             and math.isfinite(value) and value > 0)]
+    if problems:
+        raise CampaignFormatError(problems)
+    return StatedNoise(**{key: float(value) * UM for key, value in noise.items()})
 
 
 class _Log:
@@ -174,6 +237,8 @@ class Campaign:
     """Folder the campaign was read from, or None."""
     points: PointLog | None = None
     """Absolute tool points (laser tracker, motion capture), or None."""
+    noise: StatedNoise | None = None
+    """The measurement noise the campaign states (``campaign.json``), or None: the paper's."""
 
     def __post_init__(self) -> None:
         axes = {log.q.shape[1] for log in self.logs}
@@ -572,7 +637,8 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
             sigma=(np.array(points.cols["sigma_um"], dtype=float) * 1e-6
                    if "sigma_um" in points.cols else None),
             tool=np.array(points.cols["tool"], dtype=str) if "tool" in points.cols else None,
-            **_log_fields(points)))
+            **_log_fields(points)),
+        noise=read_noise(folder / NOISE_FILE) if (folder / NOISE_FILE).is_file() else None)
 
 
 def read_readouts(path: str | Path, arm: Arm | None = None) -> np.ndarray:
@@ -657,7 +723,8 @@ def _mm(names: tuple[str, ...], xyz: Any) -> dict[str, list[float]]:
 def write_campaign(campaign: Campaign, folder: str | Path) -> None:
     """Write ``campaign`` into ``folder`` (created if needed): the files of the parts present.
 
-    Lengths are written in mm and angles in degrees, with 9 decimals; t_s and temp_c when present.
+    Lengths are written in mm and angles in degrees, with 9 decimals; t_s and temp_c when present;
+    the stated noise, when set, in ``campaign.json``.
 
     Raises:
         FileExistsError: if the folder holds a campaign file for a part that ``campaign`` lacks
@@ -691,6 +758,9 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
         if pts.tool is not None:
             first["tool"] = pts.tool.tolist()
         _write_csv(folder / "points.csv", _file_columns(pts, first, after))
+    if campaign.noise is not None:
+        (folder / NOISE_FILE).write_text(json.dumps({"noise_um": campaign.noise.to_um()},
+                                                    indent=2) + "\n")
 
 
 def write_points(path: str | Path, points: np.ndarray,

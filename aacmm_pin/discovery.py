@@ -18,7 +18,11 @@ The loop (:func:`discover`):
    chi-square units) that is significant, improves the BIC and the held-out score is named;
    further axes of the same effect join it while they stay significant
    given the ones already in (forward selection); the model is refitted with them (nonlinear);
-4. stop when no candidate is significant: "nothing is missing".
+4. stop when no candidate is significant: "nothing is missing";
+5. scan the final model's residual (:func:`aacmm_pin.residual_scan.scan_residuals`): against the
+   campaign's stated noise (:class:`aacmm_pin.campaign.StatedNoise`) and for structure along every
+   per-sample variable (time, temperature, angles, gravity torques, displacement, motion): what
+   no effect of the library explains (:attr:`Discovery.unexplained`).
 
 Held-out RMS after a step is measured on the refitted model, and so are the length-bar errors (when
 the campaign has a bar): their RMS (as :func:`aacmm_pin.validate`), their RMS over the bar readouts
@@ -34,13 +38,14 @@ import numpy as np
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.bar_linear import LinearBar
-from aacmm_pin.campaign import Campaign
+from aacmm_pin.campaign import Campaign, StatedNoise
 from aacmm_pin.discovery_results import Discovery, Score, Step
 from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.identification import Calibration, identify, measurements
+from aacmm_pin.identification import Calibration, Measurements, identify, measurements
 from aacmm_pin.linear_scorer import LinearScorer
 from aacmm_pin.progress import Progress
+from aacmm_pin.residual_scan import scan_residuals
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
@@ -70,7 +75,8 @@ def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: boo
 
 def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
              effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
-             alpha: float = ALPHA, max_nfev: int = 200, progress: bool = False) -> Discovery:
+             alpha: float = ALPHA, max_nfev: int = 200, progress: bool = False,
+             noise: StatedNoise | None = None) -> Discovery:
     """Find the effects the ``start`` model is missing on a campaign, add them and refit.
 
     Args:
@@ -85,9 +91,13 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         alpha: family-wise error rate of a step's significance tests (Bonferroni).
         max_nfev: most residual evaluations of every fit (a cap: each stops at its tolerance).
         progress: show progress bars.
+        noise: the measurement noise stated per kind (default: the campaign's ``campaign.json``,
+            else the paper's values); the nest offsets' prior is its ``location``, and the final
+            residual is judged against it (:attr:`Discovery.unexplained`).
 
     Returns:
-        The steps, the final calibration and why the loop stopped.
+        The steps, the final calibration, why the loop stopped and what the final residual shows
+        that no effect explains.
 
     Raises:
         ValueError: for an unknown start or effect name.
@@ -100,21 +110,41 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(LIBRARY)}")
     with single_threaded_blas():  # many small products: threads only spin
         return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, max_nfev,
-                         progress)
+                         progress, noise or campaign.noise or StatedNoise())
+
+
+def stated_noise(campaign: Campaign, meas: Measurements, noise: StatedNoise) -> np.ndarray:
+    """Return the stated noise of every sample per coordinate, shape (N,), m.
+
+    SPAT samples: the R-Test's; tool points: their ``sigma_um`` column, else the instrument's;
+    length-bar readouts: :data:`aacmm_pin.units.SIGMA_SOCKET`.
+    """
+    if meas.sigma is None:
+        return np.full(len(meas.q), noise.rtest if campaign.spat is not None else noise.point)
+    points = campaign.points
+    stated = np.where(np.isnan(meas.sigma), noise.rtest, meas.sigma)
+    if points is not None and points.sigma is None:  # points without sigma_um: the instrument's
+        rows = meas.group < 0 if campaign.spat is not None else np.ones(len(stated), dtype=bool)
+        stated = np.where(rows, noise.point, stated)
+    out: np.ndarray = stated
+    return out
 
 
 def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
-              max_steps: int, alpha: float, max_nfev: int, progress: bool) -> Discovery:
+              max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise
+              ) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
-    samples = measurements(campaign, arm, use_rtest).samples
+    meas = measurements(campaign, arm, use_rtest)
+    samples = meas.samples
     map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
     terms: list[Term] = []
 
     def fit() -> Calibration:
         cal = identify(campaign, arm, model="proposed" if map_axes else "dh", use_rtest=use_rtest,
                        map_axes=tuple(map_axes) or None, extensions=tuple(terms),
-                       max_nfev=max_nfev, nests="estimate")  # one treatment for every model
+                       max_nfev=max_nfev, nests="estimate",  # one treatment for every model
+                       sigma_location=noise.location)
         if not cal.success:
             raise AacmmError(f"discovery: the fit with {', '.join(t.key for t in terms) or start} "
                              f"did not converge: {cal.message}")
@@ -199,6 +229,15 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
             f"; {len(missing)} candidates are still significant (see missing)" if missing else
             "; nothing else is significant"))
     ticker.close()
+    tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
+    scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
+                          np.einsum("nij,j->ni", lin.stylus.tool, tools))
+    if scan.structure:  # library terms on a variable the residual follows, not named
+        labels = {s.label for s in scan.structure}
+        scan = dataclasses.replace(scan, suspects=tuple(
+            t.key for n in names if not LIBRARY[n].in_start
+            for t in LIBRARY[n].candidates(arm, samples)
+            if not _in_model(t, terms, map_axes, use_rtest) and t.variable(samples)[0] in labels))
     return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
                      calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
                      bar_rms=[None if b is None else b.rms for b in bars],
@@ -206,7 +245,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      bar_normalised=[None if b is None else lin.bar_normalised(b.errors) for b in bars],
                      bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
                      noise=cal.sigma, n_candidates=n_candidates,
-                     runtime_s=time.perf_counter() - tic, size_factors=factors)
+                     runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
+                     stated_noise=noise)
 
 
 def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float

@@ -1,7 +1,7 @@
 """What a discovery run writes: ``discovery.json``, its figures and the final model as a CALDIR.
 
-Figures: residuals against a named effect's variable before and after each step, and the gap per
-step.
+Figures: residuals against a named effect's variable before and after each step, the gap per
+step, and, when the final residual is unexplained, the residual against the variable it follows.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from aacmm_pin.discovery_results import Discovery, Step
 from aacmm_pin.export import write_calibration_files
 from aacmm_pin.output_folder import output_folder
 from aacmm_pin.plots import DPI, MODEL_COLOURS, _new_figure
+from aacmm_pin.residual_scan import Scan
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -105,11 +106,38 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
     fig.savefig(path, dpi=DPI)
 
 
+def unexplained_figure(scan: Scan, path: str | Path) -> None:
+    """Write the final residual (less each location's mean) against the variable it follows most.
+
+    One panel per coordinate: the residual of every sample and its binned means, with the stated
+    noise as a band; the variable is the scan's top structure (else its best-ranked variable).
+    """
+    top = (scan.structure or scan.variables)[0]
+    fig = _new_figure(11.0, 3.4)
+    x = np.asarray(top.values, dtype=float)
+    noise = scan.noise * 1e6
+    for c, ax in enumerate(fig.subplots(1, 3, sharey=True)):
+        y = scan.residual[:, c] * 1e6
+        ax.plot(x, y, ".", ms=2, alpha=0.35, color=MODEL_COLOURS[0])
+        bx, by = _binned(x, y)
+        ax.plot(bx, by, "-o", ms=3, color=MODEL_COLOURS[3], label="bin means")
+        ax.axhspan(-noise, noise, color="0.85", zorder=0, label="stated noise (+- sigma)")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(top.label or top.variable)
+        ax.set_title(f"{'xyz'[c]} residual", fontsize=9)
+        if c == 0:
+            ax.set_ylabel("residual less its location's mean (um)")
+            ax.legend(fontsize=7)
+    fig.suptitle("\n".join(textwrap.wrap(scan.hint(), 130)), fontsize=8)
+    fig.savefig(path, dpi=DPI)
+
+
 def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False) -> Path:
     """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
 
     Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
-    the named effect's variable before and after), and the CALDIR files of
+    the named effect's variable before and after), ``discovery_unexplained.png`` (when the final
+    residual is unexplained: against the variable it follows most), and the CALDIR files of
     :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...). The folder
     is written whole (:func:`~aacmm_pin.output_folder.output_folder`).
 
@@ -122,4 +150,6 @@ def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool
         gap_figure(result, tmp / "discovery_gap.png")
         for k, step in enumerate(result.steps, start=1):
             step_figure(step, k, tmp / f"discovery_step{k}.png")
+        if result.scan is not None and result.scan.unexplained and result.scan.variables:
+            unexplained_figure(result.scan, tmp / "discovery_unexplained.png")
     return Path(folder)

@@ -9,8 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from aacmm_pin.campaign import StatedNoise
 from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.identification import Calibration
+from aacmm_pin.residual_scan import Scan
 
 
 @dataclass(frozen=True)
@@ -160,6 +162,21 @@ class Discovery:
     size_factors: list[dict[str, float]] = field(default_factory=list)
     """Per model (start, then after every step): the groups of the arm's sizes its fit rejected
     and the factor the held-out prior widened them by (:func:`aacmm_pin.linear_scorer.size_factors`)."""
+    scan: Scan | None = None
+    """The final residual against the stated noise and every per-sample variable
+    (:func:`aacmm_pin.residual_scan.scan_residuals`)."""
+    stated_noise: StatedNoise | None = None
+    """The measurement noise the run judged the residual against."""
+
+    @property
+    def unexplained(self) -> dict[str, Any] | None:
+        """Return ``discovery.json``'s ``"unexplained"`` (um).
+
+        None when the final residual is consistent with the stated noise and follows no variable,
+        else its size, the stated noise, the chi-square p-value, the variables it follows and a
+        hint.
+        """
+        return None if self.scan is None else self.scan.to_dict()
 
     @property
     def named(self) -> list[tuple[str, list[int]]]:
@@ -182,6 +199,8 @@ class Discovery:
             "final": {"extensions": sorted(cal.parameters.extensions),
                       "map_axes": list(cal.unknowns.map_axes),
                       "noise_um": self.noise * 1e6},
+            "unexplained": self.unexplained,
+            "stated_noise_um": None if self.stated_noise is None else self.stated_noise.to_um(),
             "candidates_scored": self.n_candidates, "runtime_s": self.runtime_s,
             "library": {name: e.description for name, e in LIBRARY.items()},
         }

@@ -26,12 +26,14 @@ class Samples:
         displacement: R-Test displacement less its location's mean, shape (N, 3), m, or None.
         tool: 0-based index (in ``arm.tool_joints``) of the tool each sample measures, shape (N,),
             or None (the arm's only tool).
+        location: R-Test location (or instrument group) of each sample, shape (N,), or None.
     """
 
     def __init__(self, arm: Arm, q: np.ndarray, temp: np.ndarray | None = None,
                  t: np.ndarray | None = None, displacement: np.ndarray | None = None,
-                 tool: np.ndarray | None = None):
+                 tool: np.ndarray | None = None, location: np.ndarray | None = None):
         self.arm = arm
+        self.location = None if location is None else np.asarray(location, dtype=np.int64)
         self.tool = None if tool is None else np.asarray(tool, dtype=np.int64)
         self.q = np.atleast_2d(np.asarray(q, dtype=float))
         self.temp = None if temp is None else np.asarray(temp, dtype=float)
@@ -58,12 +60,26 @@ class Samples:
         for m in np.unique(spat.location):
             sel = spat.location == m
             dev[sel] -= dev[sel].mean(axis=0)
-        return cls(arm, spat.q, spat.temp, spat.t, dev)
+        return cls(arm, spat.q, spat.temp, spat.t, dev, location=spat.location)
 
     @property
     def n(self) -> int:
         """Number of samples."""
         return int(self.q.shape[0])
+
+    def time_in_location(self) -> np.ndarray:
+        """Return the time since the first sample of each sample's location, shape (N,), s.
+
+        Without ``t``: rows since the location's first row; without locations: since the first
+        sample.
+        """
+        t = self.t if self.t is not None else np.arange(self.n, dtype=float)
+        groups = self.location if self.location is not None else np.zeros(self.n, dtype=np.int64)
+        out = np.empty(self.n)
+        for m in np.unique(groups):
+            sel = groups == m
+            out[sel] = t[sel] - t[sel].min()
+        return out
 
     def matches(self, q: np.ndarray) -> bool:
         """Whether these samples describe readouts ``q`` (same array or same values)."""

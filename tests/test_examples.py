@@ -99,3 +99,20 @@ def test_02_discover_compliance_paper_sized(tmp_path: Path) -> None:
     out = _run("02_discover_compliance.py", cwd=tmp_path)
     _check_02(out, tmp_path / "discovery-example")
     assert "length bar: RMS 1.28 -> 2.36 um" in out
+
+
+def test_04_unexplained_drift_reports_time_then_names_the_users_effect(tmp_path: Path) -> None:
+    """Example 04: the library alone leaves the residual unexplained and following time; the
+    user's fixture_creep effect is then named, shrinks the held-out gap and leaves nothing."""
+    out = _run("04_unexplained_drift.py", "--out", "ex4", cwd=tmp_path)
+    assert "library only: named nothing" in out
+    assert "unexplained: something is missing that no effect in the library explains: the " \
+           "residual follows time" in out
+    gap = re.search(rf"named fixture_creep: held-out RMS ({NUMBER}) -> ({NUMBER}) um", out)
+    assert gap is not None and float(gap.group(2)) < float(gap.group(1))
+    assert out.rstrip().splitlines()[-2].endswith("unexplained: null")
+    first = json.loads((tmp_path / "ex4" / "library" / "discovery.json").read_text())
+    assert first["unexplained"]["structure"][0]["variable"] == "time"
+    assert (tmp_path / "ex4" / "library" / "discovery_unexplained.png").stat().st_size > 10_000
+    second = json.loads((tmp_path / "ex4" / "with_creep" / "discovery.json").read_text())
+    assert second["steps"][0]["effect"] == "fixture_creep" and second["unexplained"] is None

@@ -7,6 +7,7 @@ The modules that import Pinocchio, scipy or matplotlib are imported inside the h
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -125,18 +126,26 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
 
 def _discover(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_campaign
+    from aacmm_pin.campaign import StatedNoise, read_campaign
     from aacmm_pin.discovery import discover
     from aacmm_pin.discovery_figures import write_discovery
     from aacmm_pin.output_folder import check_output
+    from aacmm_pin.units import UM
 
     check_output(args.out, args.force)
     arm = load_arm(args.arm)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
                                                  if e.strip()]
-    result = discover(read_campaign(args.campaign, arm=arm), arm, args.start, effects=effects,
+    campaign = read_campaign(args.campaign, arm=arm)
+    given = {kind: value * UM for kind in ("rtest", "location", "point")
+             if (value := getattr(args, f"sigma_{kind}_um")) is not None}
+    try:  # the command line over campaign.json over the paper's values
+        noise = dataclasses.replace(campaign.noise or StatedNoise(), **given)
+    except ValueError as exc:
+        raise SystemExit(f"discover: --sigma-*-um: {exc}") from exc
+    result = discover(campaign, arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
-                      max_nfev=args.max_nfev, progress=True)
+                      max_nfev=args.max_nfev, progress=True, noise=noise)
     write_discovery(result, arm, args.out, force=args.force)
     held = result.heldout_rms
     print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
@@ -155,6 +164,8 @@ def _discover(args: argparse.Namespace) -> int:
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
+    if result.scan is not None:
+        print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
     print(f"wrote {args.out / 'discovery.json'}, figures and the final model (CALDIR) "
           f"in {args.out} ({result.runtime_s:.1f} s)")
     return 0
@@ -367,6 +378,12 @@ def add_parsers(subparsers: Any) -> None:
                    help="comma-separated library effects to try (default: all)")
     p.add_argument("--max-steps", type=positive(int, zero=True), default=6,
                    help="most effects to add")
+    for kind, what, default in (("rtest", "R-Test gauge reading", "2"),
+                                ("location", "R-Test nest (zero) position", "3"),
+                                ("point", "tool point of an instrument", "20")):
+        p.add_argument(f"--sigma-{kind}-um", type=positive(), default=None,
+                       help=f"stated noise of a {what} per coordinate, um, which the final "
+                            f"residual is judged against (default: campaign.json, else {default})")
     p.set_defaults(handler=_discover)
 
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
