@@ -10,6 +10,7 @@ model, whatever the number of samples.
 from __future__ import annotations
 
 import io
+import json
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -95,19 +96,22 @@ class ModelResiduals:
 
     @property
     def rms(self) -> float:
-        """RMS of the residual coordinates, m (comparable with ``report.json``'s ``fit_rms_um``)."""
+        """RMS of the residual coordinates, m: ``report.json``'s ``fit_rms_um`` (nests as estimated)."""
         return float(np.sqrt(np.mean(self.residual ** 2))) if len(self.residual) else 0.0
 
 
 def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: str | None = None
                     ) -> ModelResiduals:
     """Read a calibration (CALDIR, parameters.json or Parameters) and evaluate it on the campaign."""
+    offsets: dict[str, list[float]] = {}
     if isinstance(source, Parameters):
         params, default_label = source, "model"
     else:
         path = Path(source)
         params = read_parameters(path)
-        default_label = (path if path.is_dir() else path.parent).resolve().name or "model"
+        folder = path if path.is_dir() else path.parent
+        default_label = folder.resolve().name or "model"
+        offsets = _nest_offsets(folder / "report.json")
     arm = load_arm(params.arm)
     check_against_arm(params, arm)
     rot, trans = params.rotation(), params.translation
@@ -117,7 +121,9 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
         nest, predicted, measured = empty, empty, empty
     else:
         nest = (np.array([campaign.locations[int(m)] for m in spat.location]) - trans) @ rot
-        measured = (measured_positions(campaign) - trans) @ rot
+        # the nests where the calibration put them (report.json), as its fit RMS counts them
+        shift = np.array([offsets.get(str(int(m)), [0.0, 0.0, 0.0]) for m in spat.location]) * 1e-6
+        measured = (measured_positions(campaign) + shift - trans) @ rot
         predicted = predict(arm, params, spat.q, Samples.of_log(arm, spat))
     validation, sockets = None, {}
     bar = campaign.lengthbar
@@ -128,6 +134,19 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
             sockets[(int(k), str(s))] = points[(bar.placement == k) & (bar.socket == s)].mean(axis=0)
     name = re.sub(r"[^A-Za-z0-9_.+-]", "_", label or default_label)
     return ModelResiduals(name, params, arm, nest, predicted, measured, validation, sockets)
+
+
+def _nest_offsets(report: Path) -> dict[str, list[float]]:
+    """Return a calibration's estimated nest offsets (location -> um), {} if not recorded."""
+    try:
+        data = json.loads(report.read_text())
+    except (OSError, ValueError):
+        return {}
+    offsets = data.get("nest_offsets_um") if isinstance(data, dict) else None
+    if not isinstance(offsets, dict):
+        return {}
+    return {str(k): [float(x) for x in v] for k, v in offsets.items()
+            if isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)}
 
 
 class ArmPoser:
@@ -315,7 +334,7 @@ def legend_png(scene: Scene) -> tuple[bytes, float]:
             "arrow: predicted (dot) -> measured (dark dot); bar: its largest length error"]
     for m in scene.models:
         err = np.linalg.norm(m.residual, axis=1)
-        text = (f"models/{m.label}: RMS {m.rms * _UM:.2f} µm/coord, "
+        text = (f"models/{m.label}: RMS {m.rms * _UM:.2f} µm/coord (nests as identified), "
                 f"max {err.max() * _UM if len(err) else 0:.1f} µm")
         if m.validation is not None:
             text += f", bar RMS {m.validation.rms * _UM:.1f} µm"

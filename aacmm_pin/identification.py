@@ -185,6 +185,19 @@ class Calibration:
                   if isinstance(k, NestKey) and k.label}
         return labels.get(group, f"group {-group}" if group < 0 else str(group))
 
+    def nest_offsets_um(self) -> dict[str, list[float]]:
+        """Return the estimated offset of every R-Test nest from its measured zero position, um.
+
+        Location -> [dx, dy, dz] in the MT-CS; empty when the nests were held at their measured
+        positions. The measured centres plus these offsets are what the fit's residual is against.
+        """
+        n_arm = len(self.unknowns.names)
+        out: dict[str, list[float]] = {}
+        for key, value in zip(self.nuisance_keys, self.x[n_arm:]):
+            if isinstance(key, NestKey) and not key.label:
+                out.setdefault(str(key.location), []).append(float(value) * 1e6)
+        return out
+
     def report(self) -> dict[str, Any]:
         """Return the ``report.json`` content."""
         return {
@@ -199,6 +212,7 @@ class Calibration:
             "status": self.status, "message": self.message, "nfev": self.nfev,
             "unidentifiable": list(self.unidentifiable),
             "std": {n: float(s) for n, s in self.std.items()},
+            "nest_offsets_um": self.nest_offsets_um(),
             "robust": self.robust,
             "outliers": [o.to_dict() for o in self.outliers],
             "suspects": [o.to_dict() for o in self.suspects],

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import base64
 import io
+import json
 import os
 import re
 import shutil
@@ -108,9 +109,11 @@ def _independent_residuals(folders: Path, label: str) -> tuple[np.ndarray, np.nd
     rot, t = params.rotation(), params.translation
     spat = campaign.spat
     nest_mt = np.array([campaign.locations[int(m)] for m in spat.location])
+    offsets = json.loads((folders / label / "report.json").read_text())["nest_offsets_um"]
+    offset = np.array([offsets.get(str(int(m)), [0.0] * 3) for m in spat.location]) * 1e-6
     to_r = np.linalg.inv(rot)
     nest = (nest_mt - t) @ to_r.T
-    measured = (nest_mt + spat.displacement - t) @ to_r.T
+    measured = (nest_mt + offset + spat.displacement - t) @ to_r.T
     return nest, predict(load_arm(params.arm), params, spat.q), measured
 
 
@@ -146,6 +149,10 @@ def test_scene_draws_every_residual_magnified_in_few_objects(folders, static):
         assert info["rms_um"] == pytest.approx(np.sqrt(np.mean((pred - meas) ** 2)) * 1e6, rel=1e-6)
     rms = {m["label"]: m["rms_um"] for m in scene.info["models"]}
     assert rms["proposed"] < rms["dh"] / 3  # the encoder maps shrink the residuals
+    for label in ("dh", "proposed"):  # the same number identify reported for the calibration
+        report = json.loads((folders / label / "report.json").read_text())
+        # files round readouts to 1e-9 deg (~2e-11 m at 1 m reach) and mm to 9 decimals
+        assert rms[label] == pytest.approx(report["fit_rms_um"], rel=1e-5)
     objects = [p for kind, p, _ in scene.commands if kind == "set_object"]
     assert len(objects) < 60  # batched: not one object per sample
     assert scene.info["scale"] == 1000.0 and scene.info["vmax_um"] >= max(
