@@ -98,7 +98,7 @@ def test_trials_run_on_a_local_dask_cluster(paper_sized):
     np.testing.assert_allclose(remote.samples, serial.samples, rtol=0, atol=1e-15)
 
 
-def test_uncertainty_cli_writes_json_csv_and_figure(tmp_path):
+def test_uncertainty_cli_writes_json_csv_and_figure(tmp_path, capsys):
     """`aacmm-pin uncertainty` writes uncertainty.json, maps CSV with std_arcsec, and Fig. 6."""
     arm = load_arm()
     sim = simulate_campaign(arm, SimulationConfig(seed=2, samples_per_location=120,
@@ -106,6 +106,8 @@ def test_uncertainty_cli_writes_json_csv_and_figure(tmp_path):
     write_campaign(sim.campaign, tmp_path / "c")
     assert main(["uncertainty", str(tmp_path / "c"), "--trials", "8", "--workers", "1",
                  "--out", str(tmp_path / "u")]) == 0
+    printed = capsys.readouterr().out
+    assert "placement 1: A-B " in printed and "placement 2: A-B " in printed  # labelled, not bare
     report = json.loads((tmp_path / "u" / "uncertainty.json").read_text())
     assert report["trials"] == 8 and "dx21" in report["parameters"]
     assert {"std_mc", "std_linear"} <= set(report["parameters"]["dx21"])

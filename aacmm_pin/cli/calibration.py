@@ -238,7 +238,15 @@ def _uncertainty(args: argparse.Namespace) -> int:
     print(f"Monte Carlo / linearised std: median {np.median(ratio):.3f}, "
           f"{np.mean(np.abs(ratio - 1) <= 0.2):.0%} of {ratio.size} identified values within 20%")
     if mc.length_std is not None:
-        print(f"length-error std (um), Monte Carlo: {np.round(mc.length_std.ravel() * 1e6, 2)}")
+        lin = mc.length_linear_std if mc.length_linear_std is not None else mc.length_std
+        assert campaign.lengthbar is not None
+        pairs = [f"{a}-{b}" for a, b in campaign.bar]
+        placements = list(dict.fromkeys(int(k) for k in campaign.lengthbar.placement))
+        print("length-error std (um), Monte Carlo / linearised, per bar placement:")
+        for i, k in enumerate(placements):
+            cells = ", ".join(f"{pair} {mc.length_std[i, j] * 1e6:.2f} / {lin[i, j] * 1e6:.2f}"
+                              for j, pair in enumerate(pairs))
+            print(f"  placement {k}: {cells}")
     disagree = mc.disagreements()
     if disagree:
         print(f"differ by more than 20%: {', '.join(disagree[:12])}"
