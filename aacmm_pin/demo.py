@@ -26,8 +26,6 @@ MODELS = (("dh_rtest", "DH only, R-Test", "dh", True),
 
 def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, ValidationResult]:
     """Run the demo, print its table and return each model's validation (keyed by folder name)."""
-    from tqdm.auto import tqdm
-
     from aacmm_pin.plots import plot_encoder_maps, plot_length_errors, plot_rtest_displacement
 
     tic = time.perf_counter()
@@ -39,8 +37,9 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
     campaign = read_campaign(out / "campaign")  # what a user has: the files, not the truth
     results: dict[str, ValidationResult] = {}
     calibrations = {}
-    for folder, label, model, use_rtest in tqdm(MODELS, desc="identify", unit="model"):
-        cal = identify(campaign, arm, model=model, use_rtest=use_rtest)
+    for folder, label, model, use_rtest in MODELS:
+        print(f"  identifying {label} ...", flush=True)  # a line per step, on a terminal or not
+        cal = identify(campaign, arm, model=model, use_rtest=use_rtest, progress=True)
         write_calibration(cal, arm, out / folder, force=True)
         results[folder] = validate(arm, cal.parameters, campaign)
         calibrations[folder] = cal

@@ -23,6 +23,7 @@ from aacmm_pin.identifiability import GAUGE_WEIGHT, plausible_sizes
 from aacmm_pin.identification import Calibration
 from aacmm_pin.kinematics import stylus_ik
 from aacmm_pin.parameters import Parameters
+from aacmm_pin.progress import Progress
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION
 from aacmm_pin.unknowns import Unknowns
 from aacmm_pin.validation import bar_pairs, pair_errors, pair_weights
@@ -182,7 +183,7 @@ def _worst_ranges(std: np.ndarray, nodes_deg: np.ndarray, top: int = 2
 
 def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None,
          n_postures: int = 40, families: str = "auto", seed: int = 0,
-         sigma_location: float = SIGMA_LOCATION) -> Plan:
+         sigma_location: float = SIGMA_LOCATION, progress: bool = False) -> Plan:
     """Rank candidate SPATs by how much they would shrink the worst-axis map uncertainty.
 
     Args:
@@ -195,6 +196,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
             axes) or ``"any"``.
         seed: seed of the IK starts.
         sigma_location: prior std of a nest position per coordinate, m.
+        progress: show the candidates evaluated (log lines when stderr is not a terminal).
     """
     if not cal.unknowns.map_axes:
         raise ValueError("cal: plan needs a calibration of the proposed model (with maps)")
@@ -236,9 +238,12 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
     rng = np.random.default_rng(seed)
     rot, t = cal.parameters.rotation(), cal.parameters.translation
     out = []
-    for p_mt in np.atleast_2d(grid):
+    cells = np.atleast_2d(grid)
+    ticker = Progress("plan", "candidate", total=len(cells) * len(fams), enabled=progress)
+    for p_mt in cells:
         target = np.tile(rot.T @ (p_mt - t), (n_postures, 1))
         for name, box in fams:
+            ticker.update(1)
             try:
                 q = stylus_ik(arm, cal.parameters, target, rng, starts=box)
             except Exception:  # unreachable with this family: not a candidate
@@ -249,6 +254,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
             rms_after = {a: float(np.sqrt(np.mean(std_after[a] ** 2))) for a in u.map_axes}
             out.append(Candidate(np.asarray(p_mt, dtype=float), name, box, q, rms_after,
                                  rms_after[worst], _length_rms(length_grads, new_cov)))
+    ticker.close()
     out.sort(key=lambda c: c.worst_after)
     return Plan(worst, rms_now, ranges, length_now, out)
 

@@ -273,7 +273,8 @@ def _plan(args: argparse.Namespace) -> int:
         else np.zeros(1)
     heights = [float(h) * 1e-3 for h in args.heights_mm.split(",")]
     grid = np.array([centre + [dx, dy, dz] for dz in heights for dx in steps for dy in steps])
-    result = plan(cal, campaign, grid=grid, n_postures=args.postures, seed=args.seed)
+    result = plan(cal, campaign, grid=grid, n_postures=args.postures, seed=args.seed,
+                  progress=True)
     print(result.table(args.top))
     if args.json:
         Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
