@@ -40,6 +40,9 @@ def _simulate(args: argparse.Namespace) -> int:
                               samples_per_location=args.samples_per_location,
                               samples_per_socket=args.samples_per_socket)
     check_output(args.out, args.force)  # before the work, not after it
+    print(f"simulating {len(config.location_xy)} SPATs of {config.samples_per_location} postures "
+          f"and {config.bar_placements} bar placements (seed {config.seed}; a few seconds) ...",
+          flush=True)
     sim = simulate_campaign(load_arm(args.arm), config)
     write_simulation(sim, args.out, force=args.force)
     spat = sim.campaign.spat
