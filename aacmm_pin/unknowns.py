@@ -340,7 +340,7 @@ class AxisNodes(NamedTuple):
         weight[held] = 0.0
         col = column[node]
         col[held] = 0
-        return cls(col, weight, d_angle, offset, int(keep.sum()))
+        return cls(col, weight, np.ascontiguousarray(d_angle, dtype=float), offset, int(keep.sum()))
 
     def transposed_weights(self) -> sp.csr_matrix:
         """Return W^T, shape (size, N): ``W^T @ s`` sums s (N, ...) onto the columns."""
@@ -453,23 +453,29 @@ class BlockJacobian:
         """Return J @ m for m of shape (n_free,) or (n_free, k)."""
         nd = self.dense.shape[1]
         out: np.ndarray = self.dense @ m[:nd]
-        if not self.axes:
+        if m.ndim == 1:
+            flat3 = out.reshape(-1, 3)
+            for ax in self.axes:
+                v = m[nd + ax.offset:nd + ax.offset + ax.size]
+                g = ax.weight[:, 0] * v[ax.col[:, 0]]
+                g += ax.weight[:, 1] * v[ax.col[:, 1]]
+                flat3 += ax.d * g[:, None]
             return out
-        flat = m.ndim == 1
-        mn = m[nd:].reshape(self.n_nodes, -1)
-        out3 = out.reshape(-1, 3, mn.shape[1])
+        out3 = out.reshape(-1, 3, m.shape[1])
         for ax in self.axes:
-            v = mn[ax.offset:ax.offset + ax.size]
+            v = m[nd + ax.offset:nd + ax.offset + ax.size]
             g = ax.weight[:, :1] * v[ax.col[:, 0]] + ax.weight[:, 1:] * v[ax.col[:, 1]]  # (N, k)
             out3 += ax.d[:, :, None] * g[:, None, :]
-        return out3.reshape(-1) if flat else out3.reshape(-1, mn.shape[1])
+        return out
 
     def rmatmul(self, u: np.ndarray) -> np.ndarray:
         """Return J^T @ u for u of shape (3N,)."""
         u3 = u.reshape(-1, 3)
         nodes = np.zeros(self.n_nodes)
         for ax in self.axes:
-            s = np.einsum("ik,ik->i", ax.d, u3)
+            s = ax.d[:, 0] * u3[:, 0]
+            s += ax.d[:, 1] * u3[:, 1]
+            s += ax.d[:, 2] * u3[:, 2]
             nodes[ax.offset:ax.offset + ax.size] = (
                 np.bincount(ax.col[:, 0], ax.weight[:, 0] * s, minlength=ax.size)
                 + np.bincount(ax.col[:, 1], ax.weight[:, 1] * s, minlength=ax.size))
