@@ -154,7 +154,9 @@ determined).
 Against a hand-written identification of the same model (`benchmarks/handwritten_identify.py`:
 plain numpy forward kinematics of Eq. 1-4 vectorised over the samples, `scipy.optimize.least_squares`
 with `jac="2-point"`, the nests' offsets estimated with the 3 um prior, unvisited map nodes left out,
-zero-mean map rows, tolerances 1e-12 as aacmm_pin; {c['hand_unknowns']} unknowns), on the same
+zero-mean map rows and a 100 urad prior on every node (without it the directions the SPATs do not
+see wander and the length bar is off by 10 um to 1 mm), tolerances 1e-12 as aacmm_pin;
+{c['hand_unknowns']} unknowns), on the same
 campaign written to disk ({c['n']:,} samples), CPU time (user + system) in one run:
 
 | run | CPU (s) | vs hand-written | fit RMS (um) | length-bar error RMS (um) |
@@ -171,7 +173,8 @@ evaluations + finite differences) | {c['hand']:.2f} | 1x | {c['hand_rms'] * 1e6:
 The hand-written fit alone (after reading the files) took {c['hand_fit']:.2f} s of CPU; against
 it the in-process `identify` is {c['inproc'] / c['hand_fit']:.3f}x. The CLI's time includes
 starting Python, importing the package, reading and checking the campaign and writing the
-calibration folder (figures excluded: `identify` writes none).
+calibration folder (figures excluded: `identify` writes none); it runs as
+`python -m aacmm_pin identify ...`, the entry point of the `aacmm-pin` script.
 
 aacmm_pin's own problem solved by scipy with finite differences instead of the analytic Jacobian,
 best of 5 (analytic) and of 2 (finite differences) runs, in-process:
