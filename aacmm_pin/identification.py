@@ -794,6 +794,8 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
     x_loc = np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)
     nfev, held = 0, -1
     for _round in range(3):  # observability at the start, then at the solution
+        if _round:
+            jac_now = jacobian(x_arm)
         obs = ident.observability(unknowns, jac_now, gauge, sigma_class)
         if obs.hold.shape[0] == held:
             break
@@ -804,11 +806,11 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
         x_now = np.concatenate([x_arm, x_loc])
         problem = Problem(unknowns, q, measured, nuisance, constraints, obs.scale, x_start,
                           x_now, sigma_class, weight)
+        del jac_now  # a campaign's Jacobian can weigh hundreds of MB: not kept through the solve
         res = problem.solve(problem.z(x_now), settings, jac, on_evaluation=on_evaluation)
         nfev += res.nfev
         x_full = problem.x(res.x)
         x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
-        jac_now = jacobian(x_arm)
     return _Fit(unknowns, unvisited, gauges, used, constraints, problem, res, x_full, nfev)
 
 

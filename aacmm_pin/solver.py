@@ -366,8 +366,15 @@ class Problem:
 
     def jac_operator(self, z: np.ndarray) -> LinearOperator:
         """Return d(fun)/dz as an operator (products only), for large campaigns."""
+        return self._operator(z)[0]
+
+    def _operator(self, z: np.ndarray) -> tuple[LinearOperator, list[BlockJacobian]]:
+        """Return the operator of :meth:`jac_operator` and the list holding its data Jacobian.
+
+        The list is emptied when the operator is no longer used, so that its memory is freed.
+        """
         x = self.x(z)
-        jac = self.data_jacobian(x[:self.n_arm])
+        held = [self.data_jacobian(x[:self.n_arm])]
         nuis, lengths, prior = self.nuisance_jacobian(x), self.length_jacobian(x), self.prior
         p_arm, p_nuis = self.p[:self.n_arm], self.p[self.n_arm:]
         n_data, n_loc = self.n_data, self.n_loc
@@ -375,19 +382,20 @@ class Problem:
         def matvec(v: np.ndarray) -> np.ndarray:
             v = np.ravel(v)
             v_nuis = p_nuis @ v
-            return np.concatenate([jac.matmul(p_arm @ v) + nuis @ v_nuis, prior * v_nuis[:n_loc],
-                                   lengths @ v_nuis])
+            return np.concatenate([held[0].matmul(p_arm @ v) + nuis @ v_nuis,
+                                   prior * v_nuis[:n_loc], lengths @ v_nuis])
 
         def rmatvec(u: np.ndarray) -> np.ndarray:
             u = np.ravel(u)
             data, rest, tail = u[:n_data], u[n_data:n_data + n_loc], u[n_data + n_loc:]
             back = nuis.T @ data + lengths.T @ tail
             back[:n_loc] += prior * rest
-            out: np.ndarray = p_arm.T @ jac.rmatmul(data) + p_nuis.T @ back
+            out: np.ndarray = p_arm.T @ held[0].rmatmul(data) + p_nuis.T @ back
             return out
 
-        return LinearOperator(shape=(n_data + n_loc + self.n_lengths, self.p.shape[1]), dtype=float,
-                              matvec=matvec, rmatvec=rmatvec)
+        op = LinearOperator(shape=(n_data + n_loc + self.n_lengths, self.p.shape[1]), dtype=float,
+                            matvec=matvec, rmatvec=rmatvec)
+        return op, held
 
     def factor(self, z: np.ndarray) -> Factor:
         """Return the reduced QR factors of the dense Jacobian at z."""
@@ -401,7 +409,7 @@ class Problem:
         na, nn = self.n_arm, self.n_loc + self.n_frame
         info = np.empty((na + nn, na + nn))
         info[:na, :na] = jac.normal()
-        cross = np.vstack([np.asarray(nuis.T @ jac.dense).T, (jac.nodes.T @ nuis).toarray()])
+        cross = np.vstack([np.asarray(nuis.T @ jac.dense).T, jac.node_rmatmul(nuis.toarray())])
         info[:na, na:] = cross
         info[na:, :na] = cross.T
         info[na:, na:] = (nuis.T @ nuis + lengths.T @ lengths).toarray()
@@ -439,6 +447,10 @@ class Problem:
             jac: ``"analytic"`` or a scipy finite-difference scheme (``"2-point"``, ...).
             on_evaluation: called after every residual evaluation with the residual's RMS (m,
                 in units of the solve's sigma for weighted rows), for progress.
+
+        Returns:
+            scipy's result; with the analytic Jacobian without ``jac`` (the last Jacobian's
+            memory is released: :meth:`jac_operator` gives it again).
         """
         # The analytic Jacobian goes to LSMR as an operator at every size: in the preconditioned
         # coordinates its columns are nearly orthonormal, so LSMR takes a few products per step
@@ -453,12 +465,28 @@ class Problem:
             return out
 
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
+        previous: list[list[BlockJacobian]] = []
+
+        def operator(z: np.ndarray) -> LinearOperator:
+            # scipy keeps the first Jacobian and the current one while it builds the next: only
+            # the current one is used, so the others' data (hundreds of MB for a large campaign)
+            # is released first
+            while previous:
+                previous.pop().clear()
+            op, held = self._operator(z)
+            previous.append(held)
+            return op
+
         if jac == "analytic":
-            jac_fun = self.jac if dense else self.jac_operator
-        return least_squares(fun, z0, jac=jac_fun, method="trf",
-                             tr_solver="exact" if dense else "lsmr", loss=settings.loss,
-                             f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
-                             xtol=1e-12, gtol=1e-12)
+            jac_fun = self.jac if dense else operator
+        out = least_squares(fun, z0, jac=jac_fun, method="trf",
+                            tr_solver="exact" if dense else "lsmr", loss=settings.loss,
+                            f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
+                            xtol=1e-12, gtol=1e-12)
+        if previous:  # the last operator's Jacobian is not kept with the result
+            previous.pop().clear()
+            out.pop("jac", None)
+        return out
 
     def gauss_newton(self, z: np.ndarray, factor: Factor, iterations: int
                      ) -> tuple[np.ndarray, bool]:

@@ -21,7 +21,13 @@ import scipy.sparse as sp
 from aacmm_pin.arm import Arm
 from aacmm_pin.effects import Term, measurement_shift, term_columns
 from aacmm_pin.encoder_map import EncoderMap, node_angles
-from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians, stylus_positions
+from aacmm_pin.kinematics import (
+    StylusJacobians,
+    identification_configuration,
+    stylus_jacobians,
+    stylus_positions,
+    tool_rows,
+)
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
 
@@ -222,17 +228,27 @@ class Unknowns:
         pos = stylus_positions(self.arm, params, q, frame="mt", samples=self._samples(q))
         return pos + self.measurement_shift(params, q) if self.terms else pos
 
-    def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
-        """Return predicted positions (N, 3) and d(positions)/d(free entries) as blocks.
+    def _chain_blocks(self, params: Parameters, q: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return positions, free non-map columns and map axes' angle columns, without terms.
 
-        Rows are sample-major (row 3 i + k is coordinate k of sample i). The last result is cached.
+        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): views of one array the batched chain
+        writes, so no block is copied.
         """
-        key = x.tobytes()
-        cache = self._cache  # read once: other threads may replace it
-        if cache is not None and cache[0] == key and cache[1] is q:
-            return cache[2]
-        _release_cached_jacobians()  # their memory is free for the new one
-        params = self.parameters(x)
+        ident = self.arm.identification
+        fids = np.asarray(ident.tool_frames)[tool_rows(self.arm, q.shape[0], None,
+                                                       self._samples(q))]
+        config = identification_configuration(self.arm, params, q, "mt")
+        order = np.concatenate([ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.error_idx,
+                                ident.tool_idx])[self.free[:self.n_dense]]
+        maps = ident.axis_idx[[a - 1 for a in self.map_axes]]
+        pos, jac = ident.chain.jacobians(config, fids, np.concatenate([order, maps]))
+        k = order.size
+        return pos, jac.reshape(3 * q.shape[0], -1)[:, :k], jac[:, :, k:]
+
+    def _general_blocks(self, params: Parameters, q: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`_chain_blocks`, through :func:`stylus_jacobians` (terms, extensions)."""
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
         n = q.shape[0]
         free = self.free[:self.n_dense]
@@ -244,17 +260,33 @@ class Unknowns:
             k = int(sel.sum())
             dense[:, :, col:col + k] = part if k == sel.size else part[:, :, sel]
             at, col = at + sel.size, col + k
-        dense = dense.reshape(3 * n, -1)
-        angles, position = jac.angles.copy(), jac.position
-        del jac, part  # the whole stylus Jacobian, before the node columns are built
+        angles = jac.angles[:, :, [a - 1 for a in self.map_axes]]
+        return jac.position, dense.reshape(3 * n, -1), angles
+
+    def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
+        """Return predicted positions (N, 3) and d(positions)/d(free entries) as blocks.
+
+        Rows are sample-major (row 3 i + k is coordinate k of sample i). The last result is cached.
+        """
+        key = x.tobytes()
+        cache = self._cache  # read once: other threads may replace it
+        if cache is not None and cache[0] == key and cache[1] is q:
+            return cache[2]
+        _release_cached_jacobians()  # their memory is free for the new one
+        params = self.parameters(x)
+        if self.terms or params.extensions:
+            position, dense, angles = self._general_blocks(params, q)
+        else:  # straight from the chain into one array: no per-block copies
+            position, dense, angles = self._chain_blocks(params, q)
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
-        blocks = [params.map(a).node_columns(q[:, a - 1], angles[:, :, a - 1],
-                                             self.free[self.map_slice(a)]) for a in self.map_axes]
-        nodes = _hstack_csc(blocks, 3 * n)
-        del blocks
+        axes, at = [], 0
+        for k, a in enumerate(self.map_axes):
+            keep = self.free[self.map_slice(a)]
+            axes.append(AxisNodes.build(params.map(a), q[:, a - 1], angles[:, :, k], keep, at))
+            at += int(keep.sum())
         if self.terms:
             position = position + self.measurement_shift(params, q)
-        out = (position, BlockJacobian(dense, nodes))
+        out = (position, BlockJacobian(dense, tuple(axes), at))
         object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
         _CACHED.append(weakref.ref(self))
         return out
@@ -272,77 +304,182 @@ def _release_cached_jacobians() -> None:
             object.__setattr__(holder, "_cache", None)
 
 
-def _hstack_csc(blocks: list[sp.csc_matrix], n_rows: int) -> sp.csc_matrix:
-    """Return the CSC blocks side by side (their arrays concatenated, no conversion)."""
-    if not blocks:
-        return sp.csc_matrix((n_rows, 0))
-    ends = np.cumsum([0] + [b.nnz for b in blocks])
-    indptr = np.concatenate([[0], *(b.indptr[1:] + e for b, e in zip(blocks, ends))])
-    index = np.int32 if ends[-1] < 2 ** 31 else np.int64
-    out = sp.csc_matrix((np.concatenate([b.data for b in blocks]),
-                         np.concatenate([b.indices for b in blocks]).astype(index),
-                         indptr.astype(index)), shape=(n_rows, sum(b.shape[1] for b in blocks)))
-    out.has_sorted_indices = all(b.has_sorted_indices for b in blocks)
-    return out
+CHUNK = 16384
+"""Samples per block in the products over samples (keeps their temporaries in cache)."""
+
+
+class AxisNodes(NamedTuple):
+    """The map-node columns of one axis, per sample: two nodes, their weights and d(p)/d(angle).
+
+    Column ``offset + col[i, s]`` of the node block has the entries ``weight[i, s] * d[i, k]`` on
+    rows ``3 i + k``: the axis column times the interpolation weight (a held node or a zero
+    weight has weight 0).
+    """
+
+    col: np.ndarray
+    """Column of the lower and upper node within this axis' free nodes, shape (N, 2)."""
+    weight: np.ndarray
+    """Interpolation weight of each (0 where the node is held), shape (N, 2)."""
+    d: np.ndarray
+    """d(point)/d(true angle of the axis), rows weighted as the Jacobian's, shape (N, 3)."""
+    offset: int
+    """First column of this axis in the node block."""
+    size: int
+    """Number of this axis' columns (its free nodes)."""
+
+    @classmethod
+    def build(cls, emap: EncoderMap, readout: np.ndarray, d_angle: np.ndarray, keep: np.ndarray,
+              offset: int) -> AxisNodes:
+        """Return the columns of the free nodes ``keep`` (mask) of ``emap`` at these readouts."""
+        keep = np.asarray(keep, dtype=bool)
+        column = np.cumsum(keep) - 1
+        lower, upper, frac = emap.neighbours(readout)
+        node = np.column_stack([lower, upper])
+        held = ~keep[node]
+        weight = np.column_stack([1.0 - frac, frac])
+        weight[held] = 0.0
+        col = column[node]
+        col[held] = 0
+        return cls(col, weight, np.ascontiguousarray(d_angle, dtype=float), offset, int(keep.sum()))
+
+    def transposed_weights(self) -> sp.csr_matrix:
+        """Return W^T, shape (size, N): ``W^T @ s`` sums s (N, ...) onto the columns."""
+        n = self.col.shape[0]
+        return sp.csr_matrix((self.weight.ravel(), (self.col.ravel(), np.repeat(np.arange(n), 2))),
+                             shape=(self.size, n))
 
 
 @dataclass(frozen=True)
 class BlockJacobian:
     """Jacobian w.r.t. the free entries, as two blocks (columns in this order).
 
-    A dense block (X0, translation, DH, tool) and a sparse block (map nodes, two entries per sample
-    and axis).
+    A dense block (X0, translation, DH, tool) and the map nodes, kept per axis and sample
+    (:class:`AxisNodes`: two entries per sample, axis and coordinate); their products and the
+    normal matrix are computed from that structure, the sparse matrix only when asked
+    (:attr:`nodes`).
     """
 
     dense: np.ndarray
     """d(positions)/d(non-map entries), shape (3N, n_dense)."""
-    nodes: sp.csc_matrix
-    """d(positions)/d(map nodes), shape (3N, n_nodes)."""
+    axes: tuple[AxisNodes, ...]
+    """The map-node columns, one entry per map axis."""
+    n_nodes: int
+    """Number of node columns."""
     _normal: list[np.ndarray] = field(default_factory=list, init=False, repr=False, compare=False)
     """J^T J once computed (:meth:`normal`)."""
+    _csc: list[sp.csc_matrix] = field(default_factory=list, init=False, repr=False, compare=False)
 
     @property
     def shape(self) -> tuple[int, int]:
         """(3N, n_free)."""
-        return self.dense.shape[0], self.dense.shape[1] + self.nodes.shape[1]
+        return self.dense.shape[0], self.dense.shape[1] + self.n_nodes
+
+    @property
+    def nodes(self) -> sp.csc_matrix:
+        """d(positions)/d(map nodes) as a sparse matrix, shape (3N, n_nodes) (built once)."""
+        if not self._csc:
+            rows, cols, vals = [], [], []
+            for ax in self.axes:
+                n = ax.col.shape[0]
+                v = ax.weight[:, :, None] * ax.d[:, None, :]                    # (N, 2, 3)
+                keep = v.reshape(-1) != 0.0
+                rows.append(np.broadcast_to(3 * np.arange(n)[:, None, None] + np.arange(3),
+                                            (n, 2, 3)).reshape(-1)[keep])
+                cols.append(np.repeat(ax.col.reshape(-1) + ax.offset, 3)[keep])
+                vals.append(v.reshape(-1)[keep])
+            cat = (lambda a: np.concatenate(a)) if self.axes else (lambda a: np.zeros(0))
+            self._csc.append(sp.csc_matrix((cat(vals), (cat(rows).astype(np.int64),
+                                                        cat(cols).astype(np.int64))),
+                                           shape=(self.dense.shape[0], self.n_nodes)))
+        return self._csc[0]
 
     def sparse(self) -> sp.csr_matrix:
         """Return the whole Jacobian as one sparse matrix (for small campaigns and tests)."""
         return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
 
-    def normal(self) -> np.ndarray:
-        """Return J^T J, shape (n_free, n_free), from block products (no dense 3N x n matrix).
+    def node_rmatmul(self, u: np.ndarray) -> np.ndarray:
+        """Return (node block)^T @ u for u of shape (3N, k), shape (n_nodes, k)."""
+        out = np.zeros((self.n_nodes, u.shape[1]))
+        if not self.axes or not u.shape[1]:
+            return out
+        u3 = u.reshape(-1, 3, u.shape[1])
+        for ax in self.axes:
+            s = np.empty((u3.shape[0], u.shape[1]))
+            for lo in range(0, u3.shape[0], CHUNK):
+                s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], u3[lo:lo + CHUNK])
+            out[ax.offset:ax.offset + ax.size] = ax.transposed_weights() @ s
+        return out
 
+    def normal(self) -> np.ndarray:
+        """Return J^T J, shape (n_free, n_free), from the blocks (no dense 3N x n matrix).
+
+        The node-node part from the per-sample structure: samples touch two nodes per axis.
         Computed once per Jacobian (the identifiability analysis and the solver both ask for it).
         """
         if self._normal:
             cached: np.ndarray = self._normal[0].copy()
             return cached
         nd = self.dense.shape[1]
-        out = np.empty((self.shape[1], self.shape[1]))
+        out = np.zeros((self.shape[1], self.shape[1]))
         out[:nd, :nd] = self.dense.T @ self.dense
-        cross = np.asarray((self.nodes.T @ self.dense))
+        cross = self.node_rmatmul(self.dense)
         out[nd:, :nd] = cross
         out[:nd, nd:] = cross.T
-        out[nd:, nd:] = (self.nodes.T @ self.nodes).toarray()
+        for i, a in enumerate(self.axes):
+            for b in self.axes[i:]:
+                g = np.einsum("ik,ik->i", a.d, b.d)
+                flat = np.zeros(a.size * b.size)
+                for s in range(2):
+                    for t in range(2):
+                        flat += np.bincount(a.col[:, s] * b.size + b.col[:, t],
+                                             a.weight[:, s] * b.weight[:, t] * g,
+                                             minlength=a.size * b.size)
+                block = flat.reshape(a.size, b.size)
+                ra, rb = nd + a.offset, nd + b.offset
+                out[ra:ra + a.size, rb:rb + b.size] = block
+                if b is not a:
+                    out[rb:rb + b.size, ra:ra + a.size] = block.T
         self._normal.append(out)
         fresh: np.ndarray = out.copy()
         return fresh
 
     def scaled(self, row_weight: np.ndarray) -> BlockJacobian:
         """Return diag(row_weight) @ J (row_weight shape (3N,))."""
+        w3 = row_weight.reshape(-1, 3)
         return BlockJacobian(self.dense * row_weight[:, None],
-                             sp.csc_matrix(sp.diags(row_weight) @ self.nodes))
+                             tuple(ax._replace(d=ax.d * w3) for ax in self.axes), self.n_nodes)
 
     def matmul(self, m: np.ndarray) -> np.ndarray:
         """Return J @ m for m of shape (n_free,) or (n_free, k)."""
         nd = self.dense.shape[1]
-        out: np.ndarray = self.dense @ m[:nd] + self.nodes @ m[nd:]
+        out: np.ndarray = self.dense @ m[:nd]
+        if m.ndim == 1:
+            flat3 = out.reshape(-1, 3)
+            for ax in self.axes:
+                v = m[nd + ax.offset:nd + ax.offset + ax.size]
+                g = ax.weight[:, 0] * v[ax.col[:, 0]]
+                g += ax.weight[:, 1] * v[ax.col[:, 1]]
+                flat3 += ax.d * g[:, None]
+            return out
+        out3 = out.reshape(-1, 3, m.shape[1])
+        for ax in self.axes:
+            v = m[nd + ax.offset:nd + ax.offset + ax.size]
+            g = ax.weight[:, :1] * v[ax.col[:, 0]] + ax.weight[:, 1:] * v[ax.col[:, 1]]  # (N, k)
+            out3 += ax.d[:, :, None] * g[:, None, :]
         return out
 
     def rmatmul(self, u: np.ndarray) -> np.ndarray:
         """Return J^T @ u for u of shape (3N,)."""
-        return np.concatenate([self.dense.T @ u, self.nodes.T @ u])
+        u3 = u.reshape(-1, 3)
+        nodes = np.zeros(self.n_nodes)
+        for ax in self.axes:
+            s = ax.d[:, 0] * u3[:, 0]
+            s += ax.d[:, 1] * u3[:, 1]
+            s += ax.d[:, 2] * u3[:, 2]
+            nodes[ax.offset:ax.offset + ax.size] = (
+                np.bincount(ax.col[:, 0], ax.weight[:, 0] * s, minlength=ax.size)
+                + np.bincount(ax.col[:, 1], ax.weight[:, 1] * s, minlength=ax.size))
+        return np.concatenate([self.dense.T @ u, nodes])
 
     def columns_sum(self, cols: np.ndarray) -> np.ndarray:
         """Return the sum of the given columns (free-vector indices), shape (3N,)."""
@@ -350,5 +487,7 @@ class BlockJacobian:
         out: np.ndarray = self.dense[:, cols[cols < nd]].sum(axis=1)
         node_cols = cols[cols >= nd] - nd
         if node_cols.size:
-            out = out + np.asarray(self.nodes[:, node_cols].sum(axis=1)).ravel()
+            sel = np.zeros(self.n_nodes)
+            sel[node_cols] = 1.0
+            out = out + self.matmul(np.concatenate([np.zeros(nd), sel]))
         return out

@@ -128,6 +128,26 @@ def test_normal_matrix_equals_central_differences(case) -> None:
     assert np.all(np.abs(jac.normal() - fd.T @ fd) <= bound)
 
 
+def test_structured_products_equal_the_sparse_matrix(case) -> None:
+    """The map-node products from the per-sample structure (two nodes per axis and sample) equal
+    those of the assembled sparse Jacobian, weighted rows included (to rounding)."""
+    _, _, _, _, _, jac, _ = case
+    rng = np.random.default_rng(3)
+    weights = rng.uniform(0.5, 2.0, jac.shape[0])
+    for j in (jac, jac.scaled(weights)):
+        full = j.sparse().toarray()
+        scale = np.abs(full).max()
+        u = rng.normal(size=(full.shape[0], 4))
+        np.testing.assert_allclose(j.normal(), full.T @ full, rtol=0, atol=1e-12 * scale ** 2
+                                   * full.shape[0])
+        np.testing.assert_allclose(j.node_rmatmul(u), full[:, j.dense.shape[1]:].T @ u, rtol=0,
+                                   atol=1e-12 * scale * full.shape[0])
+        cols = np.flatnonzero(rng.random(full.shape[1]) < 0.3)
+        np.testing.assert_allclose(j.columns_sum(cols), full[:, cols].sum(axis=1), rtol=0,
+                                   atol=1e-12 * scale)
+        np.testing.assert_array_equal(j.nodes.toarray(), full[:, j.dense.shape[1]:])
+
+
 # ---------------------------------------------------------------- the solver's problem
 @pytest.fixture(scope="module", params=["dh", "proposed", "extended"])
 def problem_case(request, arm: ap.Arm, effects_sim: ap.Simulation):
