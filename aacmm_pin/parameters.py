@@ -31,6 +31,9 @@ import pinocchio as pin
 from aacmm_pin.arm import Arm
 from aacmm_pin.encoder_map import DEFAULT_STEP_DEG, EncoderMap
 from aacmm_pin.errors import FileFormatError, Problem
+from aacmm_pin.units import MAX_PARAMETER
+
+_IMPLAUSIBLE = f"beyond +-{MAX_PARAMETER:g} (m or rad): not a calibration value"
 
 
 def rotation_abc(abc: np.ndarray) -> np.ndarray:
@@ -175,6 +178,9 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         if arr.shape != (n,) or not np.all(np.isfinite(arr)):
             bad(key, f"needs {n} finite numbers, got {value!r}")
             return np.zeros(n)
+        if np.any(np.abs(arr) > MAX_PARAMETER):
+            bad(key, f"{value!r} is {_IMPLAUSIBLE}")
+            return np.zeros(n)
         return arr
 
     if not isinstance(data, dict):
@@ -189,10 +195,13 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
     dh: dict[str, float] = {}
     if isinstance(data.get("dh"), dict):
         for name, value in data["dh"].items():
-            if isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value):
-                dh[name] = float(value)
-            else:
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and np.isfinite(value)):
                 bad(f"dh.{name}", f"must be a finite number, got {value!r}")
+            elif abs(value) > MAX_PARAMETER:
+                bad(f"dh.{name}", f"{value!r} is {_IMPLAUSIBLE}")
+            else:
+                dh[name] = float(value)
     elif "dh" in data:
         bad("dh", "must be an object of name: value")
     base = data.get("base_to_mt", {})
@@ -225,6 +234,9 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                 maps[int(key)] = EncoderMap(np.asarray(values, dtype=float), float(step))
             except (TypeError, ValueError) as exc:
                 bad(f"encoder_maps.axes.{key}", str(exc))
+                continue
+            if np.any(np.abs(maps[int(key)].values) > MAX_PARAMETER):
+                bad(f"encoder_maps.axes.{key}", f"a value {_IMPLAUSIBLE}")
     extensions = _extensions(data.get("extensions") or {}, bad)
     if problems:
         raise FileFormatError(problems)
@@ -255,6 +267,9 @@ def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
             arr = np.zeros(0)
         if arr.size != len(term.names) or not np.all(np.isfinite(arr)):
             bad(f"extensions.{key}", f"needs {len(term.names)} finite numbers, got {values!r}")
+            continue
+        if np.any(np.abs(arr) > MAX_PARAMETER):
+            bad(f"extensions.{key}", f"{values!r} is {_IMPLAUSIBLE}")
             continue
         out[key] = arr
     return out
