@@ -170,6 +170,9 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         problems.append(Problem(path, None, key, reason))
 
     def vector(value: Any, key: str, n: int) -> np.ndarray:
+        if not _numbers(value):  # numpy would take "0.001" and True for numbers
+            bad(key, f"needs a list of {n} numbers, got {value!r}")
+            return np.zeros(n)
         try:
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -230,6 +233,9 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         bad("encoder_maps.step_deg", f"must divide 360, got {step!r}")
     else:
         for key, values in axes_data.items():
+            if not _numbers(values):
+                bad(f"encoder_maps.axes.{key}", f"needs a list of numbers, got {values!r:.80}")
+                continue
             try:
                 maps[int(key)] = EncoderMap(np.asarray(values, dtype=float), float(step))
             except (TypeError, ValueError) as exc:
@@ -244,6 +250,12 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                       translation=trans, encoder_maps=maps, extensions=extensions,
                       step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
                       extra={k: v for k, v in data.items() if k not in _KNOWN})
+
+
+def _numbers(value: Any) -> bool:
+    """Return whether ``value`` is a JSON list of numbers (not strings, booleans or lists)."""
+    return isinstance(value, list) and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
 
 
 def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
@@ -262,7 +274,7 @@ def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
                 "thermal, backlash[A3], crosstalk[A2<-A3], encoder_harmonic[A4], rtest)")
             continue
         try:
-            arr = np.asarray(values, dtype=float).reshape(-1)
+            arr = np.asarray(values if _numbers(values) else [], dtype=float).reshape(-1)
         except (TypeError, ValueError):
             arr = np.zeros(0)
         if arr.size != len(term.names) or not np.all(np.isfinite(arr)):

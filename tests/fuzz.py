@@ -199,7 +199,11 @@ def m_scale_column(folder: Path, rng: np.random.Generator) -> str:
     path = _pick_file(folder, rng)
     rows = _rows(path)
     j = int(rng.integers(len(rows[0])))
-    factor = [1e-3, 1e3, np.pi / 180, 180 / np.pi, 25.4, 1 / 25.4][int(rng.integers(6))]
+    # unit errors: deg <-> rad for angles, mm <-> m or inch for lengths, any of them elsewhere
+    angles, lengths = [np.pi / 180, 180 / np.pi], [1e-3, 1e3, 25.4, 1 / 25.4]
+    factors = (angles if rows[0][j].endswith("_deg") else
+               lengths if rows[0][j].endswith("_mm") else angles + lengths)
+    factor = factors[int(rng.integers(len(factors)))]
     for r in rows[1:]:
         try:
             r[j] = repr(float(r[j]) * factor)
@@ -295,9 +299,9 @@ errors come from a fit with 2 um R-Test noise; one sample more or less moves the
 
 
 def bar_errors(result: ap.ValidationResult) -> dict[tuple[int, str, str], float]:
-    """Return the length errors by (placement, from, to), measured ones only."""
-    return {(k, a, b): float(e) for k, row in zip(result.placements, result.errors)
-            for (a, b), e in zip(result.pairs, row) if np.isfinite(e)}
+    """Return the length errors by (placement, socket, socket) (sockets sorted), measured ones."""
+    return {(k, *sorted((a, b))): float(e) for k, row in zip(result.placements, result.errors)
+            for (a, b), e in zip(result.pairs, row) if np.isfinite(e)}  # A-B is B-A
 
 
 def run_campaign(folder: Path, arm: ap.Arm) -> tuple[ap.Calibration, ap.ValidationResult]:

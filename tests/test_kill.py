@@ -12,12 +12,14 @@ with ``-m slow``.
 from __future__ import annotations
 
 import filecmp
+import json
 import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -137,6 +139,68 @@ def kill_simulate(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
     return outcomes
 
 
+@pytest.fixture(scope="module")
+def fake_devices(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """A fake-devices process (location 1, Heidenhain gauges); yields its JSON description."""
+    folder = tmp_path_factory.mktemp("fakes")
+    path = folder / "fake.json"
+    with (folder / "fake.log").open("w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "aacmm_pin", "fake-devices", "--location",
+                                 "1", "--effects", "dh,rtest", "--rate-hz", "500", "--dwell-s",
+                                 "0.1", "--seconds", "300", "--json", str(path)],
+                                stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=ROOT)
+    deadline = time.monotonic() + 30
+    while not path.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert path.exists(), "fake-devices did not start"
+    time.sleep(0.2)  # the JSON is written whole before the ports play
+    yield json.loads(path.read_text())
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=10)
+
+
+def kill_acquire(devices: Any, work: Path, seed: int, n: int) -> list[int]:
+    """Kill ``acquire`` into one campaign n times, each run appending to what the last left.
+
+    After every kill spat.csv holds whole rows only (the kept file of the previous kill as its
+    prefix, bar an incomplete last line the next run removes and reports), every row's location
+    has its zero in locations.csv, and the campaign reads; returns the rows after each kill.
+    """
+    rng = np.random.default_rng(seed)
+    folder = work / "acquired"
+    spat = folder / "spat.csv"
+    before = b""
+    rows = []
+    for i in range(n):
+        proc = _start("acquire", str(folder), *devices["acquire_args"], "--timeout-s", "0.1",
+                      "--poll-hz", "500", "--fsync-s", "0.05", "--quiet", cwd=work)
+        code = _kill_after(proc, float(rng.uniform(0.0, 4.0)))
+        assert code is None, proc.stderr.read().decode() if proc.stderr else code
+        proc.stderr.close() if proc.stderr else None
+        assert _visible(work) <= {"acquired"}
+        if not spat.exists() or spat.stat().st_size == 0:
+            assert not before, f"kill #{i}: spat.csv lost its rows"
+            rows.append(0)
+            continue
+        now = spat.read_bytes()
+        complete = now[:now.rfind(b"\n") + 1]
+        assert complete.startswith(before), f"kill #{i}: earlier rows changed"
+        lines = complete.decode().splitlines()
+        width = len(lines[0].split(","))
+        assert all(len(line.split(",")) == width for line in lines), f"kill #{i}: a broken row"
+        if len(lines) > 1:
+            camp = ap.read_campaign(folder, min_samples_per_location=1)
+            assert camp.spat is not None and len(camp.spat.location) == len(lines) - 1
+        before = complete
+        rows.append(len(lines) - 1)
+    return rows
+
+
+def test_kill_acquire(fake_devices: Any, tmp_path: Path) -> None:
+    rows = kill_acquire(fake_devices, tmp_path, seed=14, n=3)
+    assert rows == sorted(rows)
+
+
 def test_kill_identify(campaign: Path, tmp_path: Path) -> None:
     outcomes = kill_identify(campaign, tmp_path, seed=14, n=3)
     assert len(outcomes) == 3
@@ -152,3 +216,9 @@ def test_kill_many(campaign: Path, tmp_path: Path) -> None:
     outcomes = kill_identify(campaign, tmp_path, seed=1, n=25)
     outcomes += kill_simulate(campaign, tmp_path, seed=1, n=25)
     assert {"old", "new"} <= set(outcomes)  # both ends were hit
+
+
+@pytest.mark.slow
+def test_kill_acquire_many(fake_devices: Any, tmp_path: Path) -> None:
+    rows = kill_acquire(fake_devices, tmp_path, seed=1, n=20)
+    assert rows == sorted(rows) and rows[-1] > 0

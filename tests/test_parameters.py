@@ -114,3 +114,19 @@ def test_implausible_values_are_refused(tmp_path):
         assert key in str(info.value)
     path.write_text(json.dumps({**good, "tool": [0.0, 0.0, -99.0]}))  # large but within the limit
     assert read_parameters(path).tool[2] == -99.0
+
+
+def test_numbers_given_as_text_or_booleans_are_refused(tmp_path):
+    """numpy reads ["0", "0", "0.001"] and true as numbers: a tool of strings was accepted and
+    moved every point by 0.12 m (fuzz, issue 14). Lists must hold JSON numbers."""
+    good = Parameters.nominal(load_arm()).to_dict()
+    path = tmp_path / "parameters.json"
+    for key, change in (("tool", {"tool": [0.0, 0.0, "0.001"]}),
+                        ("base_to_mt.rotation_abc",
+                         {"base_to_mt": {"rotation_abc": [True, 0, 0], "translation": [0, 0, 0]}}),
+                        ("encoder_maps.axes.3",
+                         {"encoder_maps": {"step_deg": 5.0, "axes": {"3": ["0"] * 72}}})):
+        path.write_text(json.dumps({**good, **change}))
+        with pytest.raises(FileFormatError, match="list of") as info:
+            read_parameters(path)
+        assert key in str(info.value)
