@@ -55,6 +55,11 @@ NOISE_P = 1e-3
 MIN_DOF_FRACTION = 0.1
 """An identification whose degrees of freedom are fewer than this fraction of its residual
 coordinates reports ``success`` False: its residual cannot estimate the noise."""
+MAX_FIT_RMS = 0.2e-3
+"""A fit of R-Test SPATs whose RMS residual exceeds this (m) reports ``success`` False: no
+articulated arm CMM leaves that after calibration, so the inputs disagree (units, R-Test zero
+positions, readouts). Fits of absolute points alone (robots on a laser tracker: a DH model leaves
+1 mm on real UR5 and WAM data) are not judged by it."""
 BAR_ID = 100_000
 """A length-bar socket used as a nest has id ``BAR_ID * placement + socket index`` (sorted names)."""
 
@@ -731,6 +736,12 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
                    f"{MIN_DOF_FRACTION:.0%} of the residuals), so neither the noise nor the "
                    f"uncertainty can be estimated from the fit (the stated noise "
                    f"{sig * 1e6:.2g} um is used); measure at least about {more} more postures")
+    rms = float(np.sqrt(np.mean(residual[kept] ** 2)))
+    if enough and has_spat and rms > MAX_FIT_RMS:
+        success = False
+        message = (f"fit RMS {rms * 1e6:.4g} um is beyond {MAX_FIT_RMS * 1e6:.3g} um, more than "
+                   "any articulated arm leaves after calibration: the inputs disagree (units of a "
+                   "column, R-Test zero positions in locations.csv, readouts); " + message)
     return Calibration(parameters=params, model=model, use_rtest=use_rtest, names=names,
                        x=x_full, covariance=covariance, sigma=sig,
                        fun=residual, location=group.copy(), success=success,

@@ -31,6 +31,9 @@ import pinocchio as pin
 from aacmm_pin.arm import Arm
 from aacmm_pin.encoder_map import DEFAULT_STEP_DEG, EncoderMap
 from aacmm_pin.errors import FileFormatError, Problem
+from aacmm_pin.units import MAX_PARAMETER
+
+_IMPLAUSIBLE = f"beyond +-{MAX_PARAMETER:g} (m or rad): not a calibration value"
 
 
 def rotation_abc(abc: np.ndarray) -> np.ndarray:
@@ -167,6 +170,9 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         problems.append(Problem(path, None, key, reason))
 
     def vector(value: Any, key: str, n: int) -> np.ndarray:
+        if not _numbers(value):  # numpy would take "0.001" and True for numbers
+            bad(key, f"needs a list of {n} numbers, got {value!r}")
+            return np.zeros(n)
         try:
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -174,6 +180,9 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
             return np.zeros(n)
         if arr.shape != (n,) or not np.all(np.isfinite(arr)):
             bad(key, f"needs {n} finite numbers, got {value!r}")
+            return np.zeros(n)
+        if np.any(np.abs(arr) > MAX_PARAMETER):
+            bad(key, f"{value!r} is {_IMPLAUSIBLE}")
             return np.zeros(n)
         return arr
 
@@ -189,10 +198,13 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
     dh: dict[str, float] = {}
     if isinstance(data.get("dh"), dict):
         for name, value in data["dh"].items():
-            if isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value):
-                dh[name] = float(value)
-            else:
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and np.isfinite(value)):
                 bad(f"dh.{name}", f"must be a finite number, got {value!r}")
+            elif abs(value) > MAX_PARAMETER:
+                bad(f"dh.{name}", f"{value!r} is {_IMPLAUSIBLE}")
+            else:
+                dh[name] = float(value)
     elif "dh" in data:
         bad("dh", "must be an object of name: value")
     base = data.get("base_to_mt", {})
@@ -221,10 +233,16 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         bad("encoder_maps.step_deg", f"must divide 360, got {step!r}")
     else:
         for key, values in axes_data.items():
+            if not _numbers(values):
+                bad(f"encoder_maps.axes.{key}", f"needs a list of numbers, got {values!r:.80}")
+                continue
             try:
                 maps[int(key)] = EncoderMap(np.asarray(values, dtype=float), float(step))
             except (TypeError, ValueError) as exc:
                 bad(f"encoder_maps.axes.{key}", str(exc))
+                continue
+            if np.any(np.abs(maps[int(key)].values) > MAX_PARAMETER):
+                bad(f"encoder_maps.axes.{key}", f"a value {_IMPLAUSIBLE}")
     extensions = _extensions(data.get("extensions") or {}, bad)
     if problems:
         raise FileFormatError(problems)
@@ -232,6 +250,12 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                       translation=trans, encoder_maps=maps, extensions=extensions,
                       step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
                       extra={k: v for k, v in data.items() if k not in _KNOWN})
+
+
+def _numbers(value: Any) -> bool:
+    """Return whether ``value`` is a JSON list of numbers (not strings, booleans or lists)."""
+    return isinstance(value, list) and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
 
 
 def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
@@ -250,11 +274,14 @@ def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
                 "thermal, backlash[A3], crosstalk[A2<-A3], encoder_harmonic[A4], rtest)")
             continue
         try:
-            arr = np.asarray(values, dtype=float).reshape(-1)
+            arr = np.asarray(values if _numbers(values) else [], dtype=float).reshape(-1)
         except (TypeError, ValueError):
             arr = np.zeros(0)
         if arr.size != len(term.names) or not np.all(np.isfinite(arr)):
             bad(f"extensions.{key}", f"needs {len(term.names)} finite numbers, got {values!r}")
+            continue
+        if np.any(np.abs(arr) > MAX_PARAMETER):
+            bad(f"extensions.{key}", f"{values!r} is {_IMPLAUSIBLE}")
             continue
         out[key] = arr
     return out

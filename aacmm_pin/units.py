@@ -41,6 +41,9 @@ BAR_LENGTH_MAX = 10.0
 """Calibrated bar lengths accepted, m (1 mm to 10 m)."""
 MAX_COORDINATE = 100.0
 """Largest absolute coordinate accepted (R-Test zero positions, tracker points), m."""
+MAX_PARAMETER = 100.0
+"""Largest absolute value accepted in parameters.json (DH errors, tool, translation, angles, maps,
+extensions), m or rad: beyond it a value is not a calibration (a unit error or a corrupt file)."""
 TEMPERATURE_RANGE_C = (-50.0, 150.0)
 """Arm temperatures accepted, deg C."""
 RADIAN_MIN_ROWS = 20

@@ -26,6 +26,10 @@ class ValidationResult:
     errors: np.ndarray
     """Measured minus calibrated distance, shape (n_placements, n_pairs), in m; NaN where a
     placement did not measure both sockets of a pair."""
+    warnings: tuple[str, ...] = ()
+    """What makes these errors doubtful, each naming the file and line: a readout whose stylus
+    centre is far from the other readouts of its socket (a wrong readout, socket or placement),
+    or a length error too large for a calibrated arm (a wrong bar.csv length, e.g. its units)."""
 
     @property
     def rms(self) -> float:
@@ -42,7 +46,8 @@ class ValidationResult:
         rows = [{"placement": int(k), **{f"{a}{b}_um": None if np.isnan(e) else float(e * 1e6)
                                          for (a, b), e in zip(self.pairs, errs)}}
                 for k, errs in zip(self.placements, self.errors)]
-        return {"placements": rows, "rms_um": self.rms * 1e6, "max_abs_um": self.max_abs * 1e6}
+        return {"placements": rows, "rms_um": self.rms * 1e6, "max_abs_um": self.max_abs * 1e6,
+                "warnings": list(self.warnings)}
 
     def table(self) -> str:
         """Return a plain-text table of the errors in um."""
@@ -50,6 +55,7 @@ class ValidationResult:
         lines = [head] + [f"{k:>9} " + " ".join(f"{e * 1e6:>12.2f}" for e in errs)
                           for k, errs in zip(self.placements, self.errors)]
         lines.append(f"RMS {self.rms * 1e6:.2f} um, max |error| {self.max_abs * 1e6:.2f} um")
+        lines += [f"WARNING: {w}" for w in self.warnings]
         return "\n".join(lines)
 
 
@@ -199,5 +205,54 @@ def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResu
     log = campaign.lengthbar
     assert log is not None
     points = predict(arm, params, log.q, Samples.of_log(arm, log))
-    return ValidationResult(pairs.placements, pairs.pairs,
-                            as_table(pairs, pair_errors(points, pairs)[0]))
+    errors = pair_errors(points, pairs)[0]
+    return ValidationResult(pairs.placements, pairs.pairs, as_table(pairs, errors),
+                            tuple(_socket_warnings(campaign, points)
+                                  + _length_warnings(campaign, pairs, errors)))
+
+
+SOCKET_SCATTER_K = 40.0
+"""A bar readout is flagged beyond this many robust scatters of all readouts about their socket's
+median point (the scatter of a calibrated arm is posture-dependent, its tail long: on simulated
+campaigns the farthest readout lies up to 30 such scatters out)."""
+SOCKET_SCATTER_MIN = 20e-6
+SOCKET_SCATTER_MAX = 0.5e-3
+"""The flag limit is kept within these, m: a readout 0.5 mm from its socket's median point is
+flagged whatever the scatter (no arm, calibrated or not, should scatter that much)."""
+LENGTH_ERROR_MAX = 0.01
+"""Largest length error, as a fraction of the calibrated length, taken for an arm's error
+(a larger one is a wrong length in bar.csv, e.g. in other units, or a wrong calibration)."""
+
+
+def _socket_warnings(campaign: Campaign, points: np.ndarray) -> list[str]:
+    """Flag readouts far from the median point of their (placement, socket), file lines named.
+
+    The limit is :data:`SOCKET_SCATTER_K` times the robust scatter of all readouts about their
+    socket's median, within :data:`SOCKET_SCATTER_MIN` .. :data:`SOCKET_SCATTER_MAX`.
+    """
+    log = campaign.lengthbar
+    assert log is not None
+    dist = np.zeros(len(points))
+    for key in set(zip(log.placement.tolist(), log.socket.tolist())):
+        rows = np.flatnonzero((log.placement == key[0]) & (log.socket == key[1]))
+        dist[rows] = np.linalg.norm(points[rows] - np.median(points[rows], axis=0), axis=1)
+    if not dist.size:
+        return []
+    limit = min(SOCKET_SCATTER_MAX,
+                max(SOCKET_SCATTER_K * 1.4826 * float(np.median(dist)), SOCKET_SCATTER_MIN))
+    where = log.lines if log.lines is not None else np.arange(len(points)) + 2
+    return [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
+            f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
+            "a wrong readout, socket or placement" for i in np.flatnonzero(dist > limit)]
+
+
+def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) -> list[str]:
+    """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length."""
+    out = []
+    for (i, j), e, length in zip(pairs.index, errors, pairs.length):
+        if abs(e) > LENGTH_ERROR_MAX * length:
+            a, b = pairs.pairs[j]
+            out.append(f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error "
+                       f"{e * 1e3:.4g} mm is over {LENGTH_ERROR_MAX:.0%} of the calibrated "
+                       f"{length * 1e3:.6g} mm: a wrong length (units?) or calibration")
+    return out

@@ -298,3 +298,15 @@ def test_lsmr_steps_reach_the_exact_solvers_solution(small_cal):
     std = np.sqrt(np.diag(small_cal.covariance))
     np.testing.assert_array_less(np.abs(problem.x(res.x) - problem.x(ref.x)), 1e-3 * std)
     assert abs(res.cost - ref.cost) <= 1e-9 * ref.cost
+
+
+def test_implausible_fit_rms_is_not_success(arm, small_sim):
+    """R-Test zero heights in inches (locations.csv z_mm / 25.4, still plausible numbers) left a
+    450 um fit RMS reported as success (fuzz, issue 14): now success False, saying why."""
+    from dataclasses import replace as dc_replace
+
+    locs = {m: p * np.array([1, 1, 1 / 25.4]) for m, p in small_sim.campaign.locations.items()}
+    cal = identify(dc_replace(small_sim.campaign, locations=locs), arm, model="dh")
+    assert not cal.success and cal.fit_rms > 200e-6
+    assert "inputs disagree" in cal.message and "locations.csv" in cal.message
+    assert identify(small_sim.campaign, arm, model="dh").success  # 27 um: a DH model's error

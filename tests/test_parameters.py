@@ -94,3 +94,39 @@ def test_bad_map_section_is_named(tmp_path, maps, key):
                                 "encoder_maps": maps}))
     with pytest.raises(FileFormatError, match=key.replace(".", r"\.")):
         read_parameters(path)
+
+
+def test_implausible_values_are_refused(tmp_path):
+    """Values beyond +-100 m or rad (fuzz: a tool of -1e300 m predicted points 1e300 m away) are
+    refused, each named; every field that holds lengths or angles is checked."""
+    arm = load_arm()
+    good = Parameters.nominal(arm).to_dict()
+    path = tmp_path / "parameters.json"
+    for key, change in (("tool", {"tool": [-1e300, 0, 0]}),
+                        ("dh.dx21", {"dh": {**good["dh"], "dx21": 1e3}}),
+                        ("base_to_mt.translation",
+                         {"base_to_mt": {"rotation_abc": [0, 0, 0], "translation": [0, 0, -5e4]}}),
+                        ("encoder_maps.axes.2",
+                         {"encoder_maps": {"step_deg": 5.0, "axes": {"2": [1e9] * 72}}})):
+        path.write_text(json.dumps({**good, **change}))
+        with pytest.raises(FileFormatError, match="not a calibration value") as info:
+            read_parameters(path)
+        assert key in str(info.value)
+    path.write_text(json.dumps({**good, "tool": [0.0, 0.0, -99.0]}))  # large but within the limit
+    assert read_parameters(path).tool[2] == -99.0
+
+
+def test_numbers_given_as_text_or_booleans_are_refused(tmp_path):
+    """numpy reads ["0", "0", "0.001"] and true as numbers: a tool of strings was accepted and
+    moved every point by 0.12 m (fuzz, issue 14). Lists must hold JSON numbers."""
+    good = Parameters.nominal(load_arm()).to_dict()
+    path = tmp_path / "parameters.json"
+    for key, change in (("tool", {"tool": [0.0, 0.0, "0.001"]}),
+                        ("base_to_mt.rotation_abc",
+                         {"base_to_mt": {"rotation_abc": [True, 0, 0], "translation": [0, 0, 0]}}),
+                        ("encoder_maps.axes.3",
+                         {"encoder_maps": {"step_deg": 5.0, "axes": {"3": ["0"] * 72}}})):
+        path.write_text(json.dumps({**good, **change}))
+        with pytest.raises(FileFormatError, match="list of") as info:
+            read_parameters(path)
+        assert key in str(info.value)
