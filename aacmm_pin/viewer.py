@@ -8,7 +8,7 @@ r"""MeshCat viewer of a calibration on its campaign: the arm, the R-Test nests, 
 * the R-Test nests (with a ring of 10 µm, magnified) and the length-bar sockets;
 * for every SPAT sample the predicted stylus centre with an arrow to the measured sphere centre,
   coloured by the magnitude of the residual (legend panel), the deviations from each nest
-  magnified ``scale`` times (1000x by default: 1 µm is drawn as 1 mm);
+  magnified ``scale`` times (by default so that the first model's RMS residual is ~20 mm long);
 * the bar of every placement coloured by its largest length error;
 * one group ``models/<label>`` per calibration, the first shown and the others hidden: tick them
   in Controls > Scene to see the residuals shrink from one model to the next;
@@ -101,7 +101,7 @@ class View:
 
 def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str | Path | None = None,
          open_browser: bool = False, compare: Sequence[Source] = (), location: int | None = None,
-         scale: float = 1000.0, max_postures: int = 200) -> View:
+         scale: float | None = None, max_postures: int = 200) -> View:
     """Show a calibration's residuals on its campaign in MeshCat, live or as one HTML file.
 
     Args:
@@ -112,7 +112,8 @@ def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str
         open_browser: open the page (the file, or the server's URL) in the default browser.
         compare: more calibrations to switch to (e.g. the ``dh`` model's CALDIR), hidden at first.
         location: R-Test location whose SPAT postures the animation steps through (default: first).
-        scale: magnification of the deviations from each R-Test nest (1000: 1 µm drawn as 1 mm).
+        scale: magnification of the deviations from each R-Test nest (1000: 1 µm drawn as 1 mm);
+            None: the first calibration's RMS residual drawn ~20 mm long (1-2-5 steps).
         max_postures: most postures in the animation (evenly subsampled beyond).
 
     Returns:

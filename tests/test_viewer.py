@@ -19,6 +19,7 @@ import subprocess
 import sys
 from html.parser import HTMLParser
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -136,15 +137,16 @@ def test_import_leaves_meshcat_and_matplotlib_out():
 
 
 def test_scene_draws_every_residual_magnified_in_few_objects(folders, static):
-    """Each model's N arrows go from the predicted to the measured centre, 1000x about the nest."""
+    """Each model's N arrows go from the predicted to the measured centre, magnified about the nest."""
     scene = static.scene
     assert static.labels == ["dh", "proposed"] and static.url is None
     for label in ("dh", "proposed"):
         nest, pred, meas = _independent_residuals(folders, label)
         seg = _buffer(scene, f"/meshcat/models/{label}/residuals")
         assert seg.shape == (2 * len(nest), 3)
-        np.testing.assert_allclose(seg[0::2], nest + 1000 * (pred - nest), atol=2e-6)
-        np.testing.assert_allclose(seg[1::2], nest + 1000 * (meas - nest), atol=2e-6)
+        k = scene.scale
+        np.testing.assert_allclose(seg[0::2], nest + k * (pred - nest), atol=2e-6)  # float32 buffers
+        np.testing.assert_allclose(seg[1::2], nest + k * (meas - nest), atol=2e-6)  # float32 buffers
         info = next(m for m in scene.info["models"] if m["label"] == label)
         assert info["rms_um"] == pytest.approx(np.sqrt(np.mean((pred - meas) ** 2)) * 1e6, rel=1e-6)
     rms = {m["label"]: m["rms_um"] for m in scene.info["models"]}
@@ -155,7 +157,9 @@ def test_scene_draws_every_residual_magnified_in_few_objects(folders, static):
         assert rms[label] == pytest.approx(report["fit_rms_um"], rel=1e-5)
     objects = [p for kind, p, _ in scene.commands if kind == "set_object"]
     assert len(objects) < 60  # batched: not one object per sample
-    assert scene.info["scale"] == 1000.0 and scene.info["vmax_um"] >= max(
+    # the first model's RMS residual drawn 10-20 mm long (1-2-5 steps): its arrows show
+    assert 0.01 <= scene.scale * rms["dh"] * 1e-6 <= 0.02 and scene.info["scale"] == scene.scale
+    assert scene.info["vmax_um"] >= max(
         m["max_um"] for m in scene.info["models"]) * 0.5
     q = read_campaign(folders / "campaign").spat.q
     for axis, counts in scene.coverage.items():
@@ -292,3 +296,17 @@ def _drawn_pixels(page, hide: list[str]) -> int:
     url = page.evaluate(JS_CAPTURE, hide)
     rgba = np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGBA"))
     return int((rgba[..., 3] > 0).sum())
+
+
+def test_auto_scale_shows_a_good_model_and_a_poor_one():
+    """The default magnification draws the first model's RMS residual 10-20 mm long (1-2-5
+    steps): 1.9 um -> 10000x, 26 um -> 500x; clamped to 100..100000."""
+    from aacmm_pin._viewer_scene import auto_scale
+
+    def model(rms_um: float):
+        return SimpleNamespace(rms=rms_um * 1e-6)
+
+    assert auto_scale(model(1.9)) == 10000.0 and auto_scale(model(26.0)) == 500.0
+    for rms_um in (0.7, 1.9, 3.3, 26.0, 140.0):
+        assert 0.01 <= auto_scale(model(rms_um)) * rms_um * 1e-6 <= 0.02
+    assert auto_scale(model(1e-6)) == 1e5 and auto_scale(model(1e6)) == 100.0

@@ -18,7 +18,7 @@ def _view(args: argparse.Namespace) -> int:
                   compare=args.compare, location=args.location, scale=args.scale)
     summary = ", ".join(f"{m['label']} RMS {m['rms_um']:.2f} um" for m in result.scene.info["models"])
     if result.html is not None:
-        print(f"wrote {result.html}: {summary} (deviations magnified {args.scale:g}x)")
+        print(f"wrote {result.html}: {summary} (deviations magnified {result.scene.scale:g}x)")
         return 0
     try:
         print(f"serving {result.url} : {summary}; Ctrl+C stops", flush=True)
@@ -50,8 +50,9 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--location", type=int, default=None,
                    help="R-Test location whose SPAT postures the animation steps through "
                         "(default: the first)")
-    p.add_argument("--scale", type=float, default=1000.0,
-                   help="magnification of the deviations from each nest")
+    p.add_argument("--scale", type=float, default=None,
+                   help="magnification of the deviations from each nest (default: the first "
+                        "calibration's RMS residual drawn ~20 mm long)")
     p.add_argument("--serve-for", type=float, default=None, metavar="SECONDS",
                    help="stop the live server after this long (default: at Ctrl+C)")
     p.set_defaults(handler=_view)
