@@ -318,10 +318,8 @@ class Measurements(NamedTuple):
     """Measured points, shape (N, 3), m: sphere centres in the MT-CS, tool points in their
     instrument frame; NaN for length-bar readouts (their socket's position is estimated)."""
     group: np.ndarray
-    """R-Test location, instrument group or bar socket of each sample, shape (N,) (ids as in
-    :attr:`labels`)."""
-    nests: bool
-    """Whether some samples sit in nests (R-Test locations, bar sockets) whose offsets are estimated."""
+    """R-Test location, instrument group or bar socket of each sample, shape (N,) (named by
+    :meth:`Calibration.group_label`)."""
     samples: Samples
     """What effects depend on, per sample."""
     sigma: np.ndarray | None
@@ -343,7 +341,7 @@ class Measurements(NamedTuple):
 def _spat_part(campaign: Campaign, arm: Arm, use_rtest: bool) -> Measurements:
     spat = check_campaign(campaign, arm)
     ids = np.unique(spat.location)
-    return Measurements(spat.q, measured_positions(campaign, use_rtest), spat.location, True,
+    return Measurements(spat.q, measured_positions(campaign, use_rtest), spat.location,
                         Samples.of_spat(arm, spat), None, np.searchsorted(ids, spat.location),
                         np.zeros(ids.size), tuple((int(m), "") for m in ids))
 
@@ -365,7 +363,7 @@ def _bar_part(campaign: Campaign, arm: Arm) -> Measurements:
     lengths = [(index[(p, a)], index[(p, b)], length) for (a, b), length in campaign.bar.items()
                for p in dict.fromkeys(int(v) for v in log.placement)
                if (p, a) in index and (p, b) in index]
-    return Measurements(log.q, np.full((len(nest), 3), np.nan), ids[nest], True,
+    return Measurements(log.q, np.full((len(nest), 3), np.nan), ids[nest],
                         Samples.of_log(arm, log), np.full(len(nest), SIGMA_SOCKET), nest,
                         np.full(len(keys), SOCKET_PRIOR),
                         tuple((int(i), f"bar{p}{s}") for i, (p, s) in zip(ids, keys)),
@@ -400,7 +398,7 @@ def _join(parts: list[Measurements], arm: Arm) -> Measurements:
         [np.zeros(x.n, dtype=np.int64) if x.tool is None else x.tool for x in s])
     q = np.concatenate([p.q for p in parts])
     return Measurements(q, np.concatenate([p.measured for p in parts]),
-                        np.concatenate([p.group for p in parts]), any(p.nests for p in parts),
+                        np.concatenate([p.group for p in parts]),
                         Samples(arm, q, temp, t, disp, tool=tool), sigma, np.concatenate(nest),
                         np.concatenate([p.nest_sigma for p in parts]),
                         tuple(k for p in parts for k in p.nest_keys), np.concatenate(frame),
@@ -426,7 +424,7 @@ def measurements(campaign: Campaign, arm: Arm, use_rtest: bool, use_bar: bool = 
         own = ids if parts else ids[1:]  # groups with a frame of their own
         frame = np.where(np.isin(points.group, own), np.searchsorted(own, points.group), -1)
         parts.append(Measurements(points.q, points.point, points.group if not parts
-                                  else -points.group, False, Samples.of_log(arm, points),
+                                  else -points.group, Samples.of_log(arm, points),
                                   points.sigma, frame=frame if own.size else None,
                                   frame_groups=tuple(int(g) for g in own)))
     if use_bar:
@@ -500,18 +498,16 @@ def _nuisance(arm: Arm, start: Parameters, meas: Measurements, sigma_class: floa
     socket = np.isnan(measured[:, 0])
     frame_start = np.zeros((len(meas.frame_groups), 3, 4))
     if socket.any() or meas.frame_groups:
-        assert meas.nest is not None or not socket.any()
         pred = stylus_positions(arm, start, meas.q, frame="mt", samples=meas.samples)
-        if meas.nest is not None:
+        if meas.nest is not None:  # sockets are nests
             for j in np.unique(meas.nest[socket]):
                 rows = meas.nest == j
                 measured[rows] = pred[rows].mean(axis=0)
-        assert meas.frame is not None or not meas.frame_groups
-        for f in range(len(meas.frame_groups)):
-            assert meas.frame is not None
-            rows = meas.frame == f
-            rot, trans = _kabsch(measured[rows], pred[rows])
-            frame_start[f] = np.column_stack([rot, trans])
+        if meas.frame is not None:  # frame_groups come with a frame per sample
+            for f in range(len(meas.frame_groups)):
+                rows = meas.frame == f
+                rot, trans = _kabsch(measured[rows], pred[rows])
+                frame_start[f] = np.column_stack([rot, trans])
     nest_sigma = np.where(meas.nest_sigma > 0, meas.nest_sigma, sigma_location)
     keys: list[UnknownKey] = [NestKey(m, c, label) for m, label in meas.nest_keys for c in "xyz"]
     keys += [FrameKey(g, c) for g in meas.frame_groups for c in ("rx", "ry", "rz", "tx", "ty", "tz")]
