@@ -262,7 +262,11 @@ def _plain_dh_fixed_nests(arm, campaign):
     return params(fit.x)
 
 
-def test_dh_fit_is_no_worse_than_a_plain_dh_fit_with_fixed_nests():
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow),
+                                  pytest.param(2, marks=pytest.mark.slow),
+                                  pytest.param(3, marks=pytest.mark.slow),
+                                  pytest.param(4, marks=pytest.mark.slow)])
+def test_dh_fit_is_no_worse_than_a_plain_dh_fit_with_fixed_nests(seed):
     """The DH baseline at its best (issue: estimated nests took up its model error).
 
     The DH model's residual is ~13x the stated R-Test noise, so `nests="auto"` holds the nests at
@@ -271,12 +275,14 @@ def test_dh_fit_is_no_worse_than_a_plain_dh_fit_with_fixed_nests():
     the noise: its nests are estimated.
     """
     arm = load_arm()
-    sim = simulate_campaign(arm, SimulationConfig(seed=0))
+    sim = simulate_campaign(arm, SimulationConfig(seed=seed))
     cal = identify(sim.campaign, arm, "dh")
     assert cal.nests.startswith("fixed") and cal.report()["nests"] == cal.nests
     ours = validate(arm, cal.parameters, sim.campaign).errors
     plain = validate(arm, _plain_dh_fixed_nests(arm, sim.campaign), sim.campaign).errors
     rms = [float(np.sqrt(np.nanmean(e ** 2))) for e in (ours, plain)]
+    print(f"seed {seed}: DH length RMS {rms[0] * 1e6:.2f} um, plain DH fit {rms[1] * 1e6:.2f} um, "
+          f"ratio {rms[0] / rms[1]:.3f}")
     assert rms[0] <= 1.05 * rms[1], rms
     proposed = identify(sim.campaign, arm, "proposed")
     assert proposed.nests.startswith("estimated")
