@@ -271,7 +271,7 @@ def test_dh_fit_is_no_worse_than_a_plain_dh_fit_with_fixed_nests(seed):
 
     The DH model's residual is ~13x the stated R-Test noise, so `nests="auto"` holds the nests at
     their measured positions, and its length errors equal a plain DH fit's (seeds 0-4: ratios
-    0.995-1.003; with estimated nests they were 0.6-2.1x). The proposed model's residual matches
+    0.996-1.003; with estimated nests they were 0.6-2.1x). The proposed model's residual matches
     the noise: its nests are estimated.
     """
     arm = load_arm()
