@@ -81,7 +81,7 @@ class MonteCarloResult:
         return np.array([lookup.get(NodeKey.at(axis, d), np.nan) for d in nodes_deg])
 
 
-def _trial_batch(cal: Calibration, factor: Factor, base: np.ndarray, location: np.ndarray,
+def _trial_batch(cal: Calibration, factor: Factor | None, base: np.ndarray, location: np.ndarray,
                  use_rtest: bool, sigma_rtest: float, sigma_location: float, seeds: list[int],
                  campaign: Campaign | None = None) -> tuple[np.ndarray, int, np.ndarray | None]:
     """Run trials with these seeds.
@@ -89,12 +89,19 @@ def _trial_batch(cal: Calibration, factor: Factor, base: np.ndarray, location: n
     Returns their solutions (k, n), how many converged, and their length errors
     (k, n_placements, n_pairs) on the campaign's bar (None without one).
 
+    ``factor`` is the factored Jacobian at the calibration's solution; None: factor it here, once
+    for the batch (a worker gets the calibration only: the factor's orthonormal block is larger
+    than the calibration, e.g. 7.8 vs 6.7 MB on a paper-sized campaign, and would make every
+    batch a "large graph" for Dask).
+
     BLAS runs single-threaded here: a trial's small products gain nothing from threads, and
     spinning BLAS threads of several workers on few cores slow everything down many times.
     """
     from aacmm_pin._blas import single_threaded_blas
 
     with single_threaded_blas():
+        if factor is None:
+            factor = cal.problem.factor(cal.problem.z(cal.x))
         x, ok = _trials(cal, factor, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
         lengths = None
         if campaign is not None and campaign.lengthbar is not None and campaign.bar:
@@ -175,11 +182,10 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     workers = workers or os.cpu_count() or 1
     seeds = [seed + i for i in range(trials)]
     parallel = executor is not None or workers > 1
-    # few large batches: each ships the problem once; the Jacobian is factored here, once
+    # few large batches: each ships the calibration once and factors its Jacobian once
     n_batches = 2 * workers if parallel else max(1, trials // 10)
     chunk = max(1, -(-trials // n_batches))
     batches = [seeds[i:i + chunk] for i in range(0, trials, chunk)]
-    factor = cal.problem.factor(cal.problem.z(cal.x))
     has_bar = campaign.lengthbar is not None and bool(campaign.bar)
     bar_only = Campaign(spat=None, locations={}, lengthbar=campaign.lengthbar,
                         bar=campaign.bar) if has_bar else None
@@ -188,13 +194,14 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     pool = ProcessPoolExecutor(workers) if own else executor
     with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
+            factor = cal.problem.factor(cal.problem.z(cal.x))
             for batch in batches:
                 results.append(_trial_batch(cal, factor, base, spat.location, cal.use_rtest, sigma_rtest,
                                             sigma_location, batch, bar_only))
                 bar.update(len(batch))
         else:
             try:
-                futures = [pool.submit(_trial_batch, cal, factor, base, spat.location, cal.use_rtest,
+                futures = [pool.submit(_trial_batch, cal, None, base, spat.location, cal.use_rtest,
                                        sigma_rtest, sigma_location, batch, bar_only)
                            for batch in batches]
                 for future, batch in zip(futures, batches):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import numpy as np
@@ -94,8 +95,12 @@ def test_trials_run_on_a_local_dask_cluster(paper_sized):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
-        remote = monte_carlo(cal, sim.campaign, 4, executor=client.get_executor(), seed=5)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            remote = monte_carlo(cal, sim.campaign, 4, executor=client.get_executor(), seed=5)
     np.testing.assert_allclose(remote.samples, serial.samples, rtol=0, atol=1e-15)
+    large = [str(w.message) for w in caught if "large graph" in str(w.message)]
+    assert not large, large  # a batch ships the calibration, not its 7.8 MB factor as well
 
 
 def test_uncertainty_cli_writes_json_csv_and_figure(tmp_path, capsys):
