@@ -27,11 +27,13 @@ MODELS = (("dh_rtest", "DH only, R-Test", "dh", True),
 def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, ValidationResult]:
     """Run the demo, print its table and return each model's validation (keyed by folder name)."""
     from aacmm_pin.plots import plot_encoder_maps, plot_length_errors, plot_rtest_displacement
+    from aacmm_pin.progress import phase
 
     tic = time.perf_counter()
     out = Path(out)
     arm = load_arm()
-    print(f"aacmm-pin demo: simulating a campaign on the default arm (seed {seed}) ...")
+    print(f"aacmm-pin demo: simulating a campaign on the default arm (seed {seed}) ...", flush=True)
+    phase("simulating")
     sim = simulate_campaign(arm, SimulationConfig(seed=seed))
     write_simulation(sim, out / "campaign", force=True)  # the demo redoes its own output
     campaign = read_campaign(out / "campaign")  # what a user has: the files, not the truth
@@ -39,6 +41,7 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
     calibrations = {}
     for folder, label, model, use_rtest in MODELS:
         print(f"  identifying {label} ...", flush=True)  # a line per step, on a terminal or not
+        phase(f"identifying {label}")
         cal = identify(campaign, arm, model=model, use_rtest=use_rtest, progress=True)
         write_calibration(cal, arm, out / folder, force=True)
         results[folder] = validate(arm, cal.parameters, campaign)
@@ -46,6 +49,15 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
         (out / folder / "validation.json").write_text(
             json.dumps(results[folder].to_dict(), indent=2) + "\n")
     labels = {folder: label for folder, label, _, _ in MODELS}
+    print(_table(results, labels))
+    for folder, cal in calibrations.items():
+        print(f"  {labels[folder]:<20} fit RMS {cal.fit_rms * 1e6:6.2f} um, "
+              f"{cal.n_determined} parameters, {cal.runtime_s:.1f} s, "
+              f"{'converged' if cal.success else 'NOT converged'}, nests "
+              f"{cal.nests.split(':')[0].replace(' at their measured positions', '')} "
+              f"-> {out / folder}")
+    print("  writing figures 5, 6 and 9 ...", flush=True)
+    phase("writing figures")
     plot_rtest_displacement(campaign, out / "fig5_rtest_displacement.png")
     best = calibrations["proposed_rtest"]
     truth = sim.truth
@@ -56,13 +68,6 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
                              for a in best.node_identifiable})
     plot_length_errors({labels[k]: v for k, v in results.items()},
                        out / "fig9_length_errors.png")
-    print(_table(results, labels))
-    for folder, cal in calibrations.items():
-        print(f"  {labels[folder]:<20} fit RMS {cal.fit_rms * 1e6:6.2f} um, "
-              f"{cal.n_determined} parameters, {cal.runtime_s:.1f} s, "
-              f"{'converged' if cal.success else 'NOT converged'}, nests "
-              f"{cal.nests.split(':')[0].replace(' at their measured positions', '')} "
-              f"-> {out / folder}")
     print(f"figures: {out}/fig5_rtest_displacement.png, fig6_encoder_maps.png, "
           f"fig9_length_errors.png ({time.perf_counter() - tic:.0f} s in all)")
     return results

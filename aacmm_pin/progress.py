@@ -5,11 +5,16 @@ A solver that iterates to a tolerance has no honest total: it shows how many eva
 made and its cost, never an ETA. On a terminal this is a tqdm line; when stderr is a pipe or a file
 (a log, CI), one plain line every :data:`LOG_EVERY_S` seconds and a last one at the end, so that a
 long command is never silent.
+
+Work that counts nothing (reading files, a single long solve, writing figures) is covered by
+:class:`Heartbeat`: around a whole command, it prints ``<what>: still working, <t> s`` whenever
+the command has written nothing for :data:`HEARTBEAT_S` seconds.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from types import TracebackType
 from typing import IO, Any
@@ -80,6 +85,120 @@ class Progress:
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.close()
+
+
+HEARTBEAT_S = 1.5
+"""Seconds of silence after which :class:`Heartbeat` prints a line (below 2 s: a user never waits
+two seconds for a sign of life)."""
+
+FIRST_BEAT_S = 1.0
+"""Seconds after the start of a silent command for its first line (Python's start-up, before the
+heartbeat runs, takes 0.1-0.5 s of the user's first two seconds)."""
+
+
+class _Stamped:
+    """A text stream that notes when it was last written to (all other attributes delegated)."""
+
+    def __init__(self, stream: IO[str], beat: Heartbeat):
+        self._stream, self._beat = stream, beat
+
+    def write(self, text: str) -> int:
+        with self._beat.lock:
+            n = self._stream.write(text)
+            if text:
+                self._beat.last_write = time.monotonic()
+                self._beat.line_open = not text.endswith("\n")
+            return n
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+class Heartbeat:
+    """Print a line whenever a command has been silent for :data:`HEARTBEAT_S` seconds.
+
+    A context manager around a whole command: ``sys.stdout`` and ``sys.stderr`` are wrapped so
+    that every write is noted; a daemon thread writes ``<desc>: still working[, <phase>], <t> s``
+    to stderr after each silence of :data:`HEARTBEAT_S` (:data:`FIRST_BEAT_S` for a command that
+    has said nothing yet). A progress bar's or a log line's writes count as signs of life, so it
+    stays quiet while they run. :meth:`stop` ends it early, e.g. before a server waits for the
+    user.
+
+    Args:
+        desc: what runs, e.g. ``"aacmm-pin identify"``.
+        enabled: False does nothing.
+    """
+
+    def __init__(self, desc: str, enabled: bool = True):
+        self.desc, self.enabled = desc, enabled
+        self.lock = threading.Lock()
+        self.last_write = self._start = time.monotonic()
+        self.line_open = False
+        self.phase = ""
+        """What runs now, shown in the line (empty: nothing said)."""
+        self._done = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._saved: tuple[Any, Any] | None = None
+
+    def __enter__(self) -> Heartbeat:
+        global _current
+        if self.enabled:
+            _current = self
+            self._saved = (sys.stdout, sys.stderr)
+            sys.stdout = _Stamped(sys.stdout, self)
+            sys.stderr = _Stamped(sys.stderr, self)
+            self._thread = threading.Thread(target=self._run, name="heartbeat", daemon=True)
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._done.wait(0.1):
+            with self.lock:
+                now = time.monotonic()
+                first = self.last_write == self._start
+                if now - self.last_write < (FIRST_BEAT_S if first else HEARTBEAT_S) \
+                        or self._saved is None:
+                    continue
+                err = self._saved[1]
+                phase = f", {self.phase}" if self.phase else ""
+                err.write(("\n" if self.line_open else "")
+                          + f"{self.desc}: still working{phase}, {now - self._start:.1f} s\n")
+                err.flush()
+                self.last_write, self.line_open = now, False
+
+    def stop(self) -> None:
+        """Stop the heartbeat and give back the streams (idempotent)."""
+        global _current
+        if _current is self:
+            _current = None
+        self._done.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        if self._saved is not None:
+            with self.lock:
+                sys.stdout, sys.stderr = self._saved
+                self._saved = None
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.stop()
+
+
+_current: Heartbeat | None = None
+"""The running heartbeat, if any (one command runs at a time)."""
+
+
+def phase(text: str) -> None:
+    """Say what runs now in the running heartbeat's lines (no heartbeat: nothing happens)."""
+    if _current is not None:
+        _current.phase = text
+
+
+def idle() -> None:
+    """Stop the running heartbeat: the work is done and the command now waits (e.g. a server)."""
+    if _current is not None:
+        _current.stop()
 
 
 def _is_terminal(stream: IO[str]) -> bool:

@@ -58,3 +58,54 @@ def test_a_reader_that_leaves_early_gets_no_traceback():
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 1
     assert "Traceback" not in err and "BrokenPipe" not in err, err
+
+
+def test_heartbeat_speaks_after_a_silence_and_gives_the_streams_back(monkeypatch, capsys):
+    """A silent stretch longer than HEARTBEAT_S gets a "still working" line with the phase."""
+    import sys
+    import time
+
+    from aacmm_pin.progress import Heartbeat, phase
+
+    monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.2)
+    monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.2)
+    before = sys.stdout, sys.stderr
+    with Heartbeat("aacmm-pin demo"):
+        print("started", end="")  # an open line: the heartbeat starts a new one
+        phase("writing figures")
+        time.sleep(0.7)
+    assert (sys.stdout, sys.stderr) == before
+    captured = capsys.readouterr()
+    assert captured.out == "started"
+    lines = captured.err.splitlines()
+    assert lines and all(re.fullmatch(r"aacmm-pin demo: still working, writing figures, [0-9.]+ s",
+                                      line) for line in lines if line), lines
+
+
+def test_heartbeat_is_quiet_while_the_command_talks(monkeypatch, capsys):
+    """Writes more often than HEARTBEAT_S (a progress log, prints) leave no heartbeat line."""
+    import time
+
+    from aacmm_pin.progress import Heartbeat
+
+    monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.3)
+    monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.3)
+    with Heartbeat("aacmm-pin plan"):
+        for _ in range(10):
+            print("candidate", flush=True)
+            time.sleep(0.05)
+    captured = capsys.readouterr()
+    assert "still working" not in captured.err + captured.out
+
+
+def test_idle_stops_the_heartbeat_before_a_server_waits(monkeypatch, capsys):
+    import time
+
+    from aacmm_pin.progress import Heartbeat, idle
+
+    monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.1)
+    monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.1)
+    with Heartbeat("aacmm-pin view"):
+        idle()
+        time.sleep(0.4)
+    assert "still working" not in capsys.readouterr().err

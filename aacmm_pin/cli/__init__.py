@@ -70,12 +70,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+QUIET_COMMANDS = ("acquire", "fake-devices")
+"""Commands without a heartbeat: they run until stopped and print their own status."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
+    from aacmm_pin.progress import Heartbeat
+
     args = build_parser().parse_args(argv)
+    # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
+    beat = args.command not in QUIET_COMMANDS
     try:
         handler: Handler = args.handler
-        return handler(args)
+        with Heartbeat(f"aacmm-pin {args.command}", enabled=beat):
+            return handler(args)
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -20,6 +20,9 @@ def _view(args: argparse.Namespace) -> int:
     if result.html is not None:
         print(f"wrote {result.html}: {summary} (deviations magnified {result.scene.scale:g}x)")
         return 0
+    from aacmm_pin.progress import idle
+
+    idle()  # from here on the server waits for the user: no "still working" lines
     try:
         print(f"serving {result.url} : {summary}; Ctrl+C stops", flush=True)
         deadline = None if args.serve_for is None else time.monotonic() + args.serve_for
