@@ -77,6 +77,7 @@ def test_linearised_term_change_matches_a_refit(arm: ap.Arm, sim: ap.Simulation,
     assert predicted < before  # the hidden effect: the bar sees it
 
 
+@pytest.mark.slow  # four paper-like campaigns: a statistic
 def test_predicted_covariance_covers_the_errors_of_a_right_model(arm: ap.Arm) -> None:
     """Nothing hidden beyond the proposed model: the normalised bar error is O(1).
 

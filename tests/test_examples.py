@@ -29,6 +29,7 @@ def _run(script: str, *args: str, cwd: Path) -> str:
     return proc.stdout
 
 
+@pytest.mark.slow  # the demo's own test (tests/test_demo.py) runs the same pipeline by default
 def test_01_reproduce_paper_prints_fig9_and_copies_the_figures(tmp_path: Path) -> None:
     """Example 01 prints the Fig. 9 table (7 placements x 2 pairs, 3 models, RMS and max rows),
     writes the demo folder and copies the three figures where --figures says, not into the repo."""

@@ -92,7 +92,8 @@ def test_same_seed_same_files(simulated, tmp_path):
     names = ["spat.csv", "locations.csv", "lengthbar.csv", "bar.csv", "truth.json"]
     match, mismatch, errors = filecmp.cmpfiles(simulated, tmp_path / "again", names, shallow=False)
     assert match == names, (mismatch, errors)
-    assert main(["simulate", str(tmp_path / "other"), "--seed", "4"]) == 0
+    assert main(["simulate", str(tmp_path / "other"), "--seed", "4", "--samples-per-location", "5",
+                 "--samples-per-socket", "2"]) == 0
     assert not filecmp.cmp(simulated / "spat.csv", tmp_path / "other" / "spat.csv", shallow=False)
 
 
