@@ -39,6 +39,7 @@ from aacmm_pin.units import (
     SIGMA_LOCATION,
     SIGMA_POINT,
     SIGMA_RTEST,
+    SIGMA_SOCKET,
     TEMPERATURE_RANGE_C,
     UM,
 )
@@ -79,7 +80,8 @@ _ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
 
 NOISE_FILE = "campaign.json"
 """Optional file beside the CSVs stating the campaign's noise: ``{"noise_um": {"rtest": 2.0,
-"location": 3.0, "point": 20.0}}`` (any subset of the keys; the others keep the paper's values)."""
+"location": 3.0, "point": 20.0, "socket": 2.0}}`` (any subset of the keys; the others keep the paper's
+values)."""
 
 
 @dataclass(frozen=True)
@@ -95,16 +97,19 @@ class StatedNoise:
     """R-Test nest (zero) position, m."""
     point: float = SIGMA_POINT
     """Absolute tool point of an instrument (laser tracker), m (a ``sigma_um`` column overrides)."""
+    socket: float = SIGMA_SOCKET
+    """Stylus centre seated in a length-bar socket (its seating repeatability), m."""
 
     def __post_init__(self) -> None:
-        for name in ("rtest", "location", "point"):
+        for name in ("rtest", "location", "point", "socket"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: a positive noise in m expected, got {value!r}")
 
     def to_um(self) -> dict[str, float]:
         """Return the ``campaign.json`` form: kind -> noise, um."""
-        return {"rtest": self.rtest / UM, "location": self.location / UM, "point": self.point / UM}
+        return {"rtest": self.rtest / UM, "location": self.location / UM, "point": self.point / UM,
+                "socket": self.socket / UM}
 
 
 def read_noise(path: str | Path) -> StatedNoise:
@@ -112,7 +117,7 @@ def read_noise(path: str | Path) -> StatedNoise:
 
     Raises:
         CampaignFormatError: if the file is not JSON, or ``noise_um`` is not an object of positive
-            numbers with the keys rtest, location, point (each one optional).
+            numbers with the keys rtest, location, point, socket (each one optional).
     """
     path = Path(path)
     try:

@@ -174,6 +174,16 @@ class Calibration:
         kept = self.fun if self.inlier is None else self.fun[self.inlier]
         return float(np.sqrt(np.mean(kept ** 2)))
 
+    @property
+    def accuracy(self) -> float:
+        """Accuracy per coordinate the calibration claims, m.
+
+        :attr:`sigma` (the fit RMS with the dof of the determined parameters removed, or the stated
+        noise), at least :attr:`fit_rms`: what :func:`aacmm_pin.validate` compares the bar
+        readouts' socket scatter with.
+        """
+        return max(self.sigma, self.fit_rms)
+
     def fit_rms_by_location(self) -> dict[int, float]:
         """RMS of the residual coordinates per R-Test location (samples kept), m."""
         keep = np.ones(len(self.fun), bool) if self.inlier is None else self.inlier
@@ -363,8 +373,9 @@ def _bar_part(campaign: Campaign, arm: Arm) -> Measurements:
     lengths = [(index[(p, a)], index[(p, b)], length) for (a, b), length in campaign.bar.items()
                for p in dict.fromkeys(int(v) for v in log.placement)
                if (p, a) in index and (p, b) in index]
+    sigma = campaign.noise.socket if campaign.noise else SIGMA_SOCKET
     return Measurements(log.q, np.full((len(nest), 3), np.nan), ids[nest],
-                        Samples.of_log(arm, log), np.full(len(nest), SIGMA_SOCKET), nest,
+                        Samples.of_log(arm, log), np.full(len(nest), sigma), nest,
                         np.full(len(keys), SOCKET_PRIOR),
                         tuple((int(i), f"bar{p}{s}") for i, (p, s) in zip(ids, keys)),
                         lengths=np.array(lengths, dtype=float).reshape(-1, 3))
@@ -560,8 +571,9 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             take up its error (the choice and why are in :attr:`Calibration.nests`).
         use_bar: fit the length-bar readouts too (a calibration input, not only a check): every
             socket's position is estimated from its readouts and the calibrated distances
-            between a placement's sockets are residuals (stated noise ``units.SIGMA_SOCKET`` per
-            readout coordinate, ``units.SIGMA_BAR`` per length).
+            between a placement's sockets are residuals (stated noise per readout coordinate:
+            ``campaign.json``'s socket, else ``units.SIGMA_SOCKET``; ``units.SIGMA_BAR`` per
+            length).
         robust: reject outliers (:mod:`aacmm_pin.robust`): iteratively reweighted least squares,
             Huber then hard rejection of every sample (its three coordinates together) whose
             whitened residual norm exceeds ``robust.OUTLIER_K`` robust sigmas; they are listed in

@@ -8,11 +8,13 @@ from typing import Any
 import numpy as np
 
 from aacmm_pin.arm import Arm
+from aacmm_pin.bar_scatter import SocketScatter, socket_scatter
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.kinematics import predict, stylus_positions
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples
+from aacmm_pin.units import SIGMA_SOCKET
 
 
 @dataclass(frozen=True)
@@ -29,7 +31,12 @@ class ValidationResult:
     warnings: tuple[str, ...] = ()
     """What makes these errors doubtful, each naming the file and line: a readout whose stylus
     centre is far from the other readouts of its socket (a wrong readout, socket or placement),
-    or a length error too large for a calibrated arm (a wrong bar.csv length, e.g. its units)."""
+    a length error too large for a calibrated arm (a wrong bar.csv length, e.g. its units), or
+    readouts that scatter about their sockets far more than the calibration's accuracy allows
+    (:mod:`aacmm_pin.bar_scatter`: a readout column in other units, another or a changed arm)."""
+    scatter: SocketScatter | None = None
+    """The readouts' scatter about their sockets against the calibration's accuracy (None: not
+    computed)."""
 
     @property
     def rms(self) -> float:
@@ -47,6 +54,7 @@ class ValidationResult:
                                          for (a, b), e in zip(self.pairs, errs)}}
                 for k, errs in zip(self.placements, self.errors)]
         return {"placements": rows, "rms_um": self.rms * 1e6, "max_abs_um": self.max_abs * 1e6,
+                "socket_scatter": None if self.scatter is None else self.scatter.to_dict(),
                 "warnings": list(self.warnings)}
 
     def table(self) -> str:
@@ -55,6 +63,8 @@ class ValidationResult:
         lines = [head] + [f"{k:>9} " + " ".join(f"{e * 1e6:>12.2f}" for e in errs)
                           for k, errs in zip(self.placements, self.errors)]
         lines.append(f"RMS {self.rms * 1e6:.2f} um, max |error| {self.max_abs * 1e6:.2f} um")
+        if self.scatter is not None:
+            lines.append(self.scatter.summary())
         lines += [f"WARNING: {w}" for w in self.warnings]
         return "\n".join(lines)
 
@@ -192,11 +202,22 @@ def validate_points(arm: Arm, params: Parameters, campaign: Campaign) -> PointVa
     return PointValidation(pred - points.point, points.lines)
 
 
-def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResult:
+def validate(arm: Arm, params: Parameters, campaign: Campaign,
+             accuracy: float | None = None) -> ValidationResult:
     """Compare the calibrated arm's mean socket distances with the calibrated bar.
 
     For every placement, the mean stylus centre of the postures in each socket is taken (r-CS), and
     the distance between the sockets of every pair of bar.csv is compared with its calibrated length.
+
+    Args:
+        arm: the arm the parameters belong to.
+        params: the calibration.
+        campaign: a campaign with length-bar data.
+        accuracy: the accuracy per coordinate the calibration claims, m
+            (:attr:`Calibration.accuracy <aacmm_pin.identification.Calibration.accuracy>`, or
+            :func:`aacmm_pin.bar_scatter.read_accuracy` of its folder): the readouts' scatter about
+            their sockets is compared with it (a warning beyond the limit of
+            :mod:`aacmm_pin.bar_scatter`); None: the scatter is reported, not compared.
 
     Raises:
         AacmmError: if the campaign has no length-bar data.
@@ -206,9 +227,13 @@ def validate(arm: Arm, params: Parameters, campaign: Campaign) -> ValidationResu
     assert log is not None
     points = predict(arm, params, log.q, Samples.of_log(arm, log))
     errors = pair_errors(points, pairs)[0]
+    scatter = socket_scatter(points, log.placement, log.socket, accuracy,
+                             campaign.noise.socket if campaign.noise else SIGMA_SOCKET)
+    warning = scatter.warning()
     return ValidationResult(pairs.placements, pairs.pairs, as_table(pairs, errors),
                             tuple(_socket_warnings(campaign, points)
-                                  + _length_warnings(campaign, pairs, errors)))
+                                  + _length_warnings(campaign, pairs, errors)
+                                  + ([warning] if warning else [])), scatter)
 
 
 SOCKET_SCATTER_K = 40.0

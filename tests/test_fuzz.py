@@ -66,12 +66,11 @@ def fuzz_campaign(arm: ap.Arm, clean: Clean, seed: int, n: int) -> Counter[str]:
             except (OSError, IndexError, UnicodeDecodeError, ValueError):
                 pass  # the first mutation left nothing to mutate (a file deleted, binary)
         verdict, detail = fuzz.judge_campaign(folder, arm, clean.errors, same,
-                                              clean.unidentifiable, " + ".join(labels))
+                                              clean.unidentifiable)
         verdicts[verdict] += 1
         if verdict == "FAIL":
             failures.append(f"#{i} {' + '.join(labels)}: {detail}")
     assert not failures, "\n".join(failures)
-    assert verdicts["gap"] <= 0.01 * n  # the known gaps (fuzz.KNOWN_GAPS) stay rare
     return verdicts
 
 
@@ -97,16 +96,31 @@ def fuzz_calibration(clean: Clean, seed: int, n: int) -> Counter[str]:
 
 def test_fuzz_campaign(arm: ap.Arm, clean: Clean) -> None:
     verdicts = fuzz_campaign(arm, clean, seed=14, n=250)  # 5 x 400 more in the slow run
+    print(f"campaign, seed 14: {dict(verdicts)}")
     assert verdicts["refused"] > 100 and verdicts["same"] > 40  # the mix is exercised
 
 
 def test_fuzz_calibration(clean: Clean) -> None:
     verdicts = fuzz_calibration(clean, seed=14, n=400)
+    print(f"calibration, seed 14: {dict(verdicts)}")
     assert verdicts["refused"] > 160 and verdicts["same"] > 40
+
+
+@pytest.mark.parametrize("factor", [np.pi / 180, 180 / np.pi])
+def test_the_stylus_axis_in_other_units_is_not_silent(arm: ap.Arm, clean: Clean,
+                                                       factor: float) -> None:
+    """The former known gap: lengthbar.csv's q7_deg column x pi/180 moves the bar errors by ~60 um
+    with plausible readouts; the socket scatter against the fit RMS flags it (x 180/pi: refused)."""
+    folder = fuzz.copy_folder(clean.root / "campaign", clean.root / "mutated")
+    header = (folder / "lengthbar.csv").read_text().splitlines()[0].split(",")
+    fuzz.scale_column(folder / "lengthbar.csv", header.index("q7_deg"), factor)
+    verdict, detail = fuzz.judge_campaign(folder, arm, clean.errors, False, clean.unidentifiable)
+    assert verdict == ("flagged" if factor < 1 else "refused"), detail
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(1, 6))
 def test_fuzz_many_seeds(arm: ap.Arm, clean: Clean, seed: int) -> None:
-    fuzz_campaign(arm, clean, seed=seed, n=400)
-    fuzz_calibration(clean, seed=seed, n=400)
+    campaign = fuzz_campaign(arm, clean, seed=seed, n=400)
+    calibration = fuzz_calibration(clean, seed=seed, n=400)
+    print(f"seed {seed}: campaign {dict(campaign)}, calibration {dict(calibration)}")

@@ -196,7 +196,7 @@ def test_cli_reports_unexplained_with_stated_noise(arm: ap.Arm, tmp_path, capsys
            "residual follows time" in printed
     report = json.loads((out / "discovery.json").read_text())
     assert report["stated_noise_um"] == pytest.approx({"rtest": 2.0, "location": 4.0,
-                                                       "point": 20.0})
+                                                       "point": 20.0, "socket": 2.0})
     assert report["unexplained"]["structure"][0]["variable"] == TIME
     assert set(report["unexplained"]) >= {"fit_rms_um", "noise_um", "p_value", "structure", "hint"}
     assert (out / "discovery_unexplained.png").stat().st_size > 10_000

@@ -178,6 +178,7 @@ def _validate(args: argparse.Namespace) -> int:
     import json
 
     from aacmm_pin.arm import load_arm
+    from aacmm_pin.bar_scatter import read_accuracy
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.parameters import check_against_arm, read_parameters
     from aacmm_pin.validation import validate, validate_points
@@ -188,7 +189,7 @@ def _validate(args: argparse.Namespace) -> int:
     campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
     if campaign.lengthbar is not None or campaign.points is None:
-        result = validate(arm, params, campaign)
+        result = validate(arm, params, campaign, read_accuracy(args.caldir))
         print(result.table())
         data = result.to_dict()
     if campaign.points is not None:
