@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import beta, chi2
+from scipy.special import betaincinv, chdtri  # not scipy.stats: its import takes ~0.5 s
 
 from aacmm_pin.parameters import MAX_PARAMETERS_BYTES
 from aacmm_pin.units import UM
@@ -52,7 +52,7 @@ The stylus axis in radians gives ratios of 8-90 with the proposed model or an ex
 (1.1-10 with a DH model on an arm it does not describe, whose own scatter is ~30 um)."""
 CAUSES = "a unit error in a readout column (degrees/radians), a different arm, or an arm changed " \
          "since calibration"
-_CHI2_3_MEDIAN = float(chi2.median(3))
+_CHI2_3_MEDIAN = float(chdtri(3, 0.5))  # chdtri(k, q): the chi-square quantile 1 - q
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,7 @@ class SocketScatter:
         if m < 2:
             return math.inf
         k = m // 2 + 1
-        quantile = float(chi2.ppf(float(beta.ppf(1.0 - FALSE_ALARM, k, m - k + 1)), 3))
+        quantile = float(chdtri(3, 1.0 - float(betaincinv(k, m - k + 1, 1.0 - FALSE_ALARM))))
         return MODEL_ALLOWANCE * math.sqrt(quantile / _CHI2_3_MEDIAN)
 
     def warning(self) -> str | None:

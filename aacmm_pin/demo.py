@@ -44,7 +44,7 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
         phase(f"identifying {label}")
         cal = identify(campaign, arm, model=model, use_rtest=use_rtest, progress=True)
         write_calibration(cal, arm, out / folder, force=True)
-        results[folder] = validate(arm, cal.parameters, campaign)
+        results[folder] = validate(arm, cal.parameters, campaign, cal.accuracy)
         calibrations[folder] = cal
         (out / folder / "validation.json").write_text(
             json.dumps(results[folder].to_dict(), indent=2) + "\n")

@@ -30,10 +30,11 @@ class ValidationResult:
     placement did not measure both sockets of a pair."""
     warnings: tuple[str, ...] = ()
     """What makes these errors doubtful, each naming the file and line: a readout whose stylus
-    centre is far from the other readouts of its socket (a wrong readout, socket or placement),
-    a length error too large for a calibrated arm (a wrong bar.csv length, e.g. its units), or
-    readouts that scatter about their sockets far more than the calibration's accuracy allows
-    (:mod:`aacmm_pin.bar_scatter`: a readout column in other units, another or a changed arm)."""
+    centre is far from the other readouts of its socket (a wrong readout, socket or placement, or
+    a posture the calibration's SPATs did not cover), a length error too large for a calibrated
+    arm (a wrong bar.csv length, e.g. its units), or readouts that scatter about their sockets far
+    more than the calibration's accuracy allows (:mod:`aacmm_pin.bar_scatter`: a readout column in
+    other units, another or a changed arm)."""
     scatter: SocketScatter | None = None
     """The readouts' scatter about their sockets against the calibration's accuracy (None: not
     computed)."""
@@ -268,7 +269,9 @@ def _socket_warnings(campaign: Campaign, points: np.ndarray) -> list[str]:
     where = log.lines if log.lines is not None else np.arange(len(points)) + 2
     return [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
             f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
-            "a wrong readout, socket or placement" for i in np.flatnonzero(dist > limit)]
+            "a wrong readout, socket or placement, or a posture in an angular range the "
+            "calibration's SPATs did not cover (aacmm-pin plan names those ranges)"
+            for i in np.flatnonzero(dist > limit)]
 
 
 def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) -> list[str]:
