@@ -208,7 +208,8 @@ class Problem:
         frame_scale = np.tile([FRAME_ANGLE, FRAME_ANGLE, FRAME_ANGLE, FRAME_LENGTH, FRAME_LENGTH,
                                FRAME_LENGTH], nuisance.n_frames)
         t[self.n_arm:, n_null:] = np.diag(np.concatenate([self.nest_sigma, frame_scale]))
-        info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t  # any nearby point preconditions
+        # any nearby point preconditions well
+        info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t
         chol = np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info) * np.eye(len(info)))
         self.basis = t
         self.r_inv = np.linalg.inv(chol.T)

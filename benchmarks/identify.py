@@ -241,13 +241,14 @@ evaluation (residuals and Jacobian) costs less than linearly more; the factor co
 of evaluations. `identify` decides which directions the data determine (singular value of a
 plausible change >= 2 sigma, an absolute threshold) at the start values, solves, and checks the
 decision at the solution; a second solve follows only when the check holds a different number of
-directions. At 160,000 samples it does: two directions of the A7 map (the stylus sits on the A7
-axis in the nominal model, so the A7 map is invisible at the start values; the identified tool is
-slightly off that axis) have singular values below 1 sigma at the start and 3.2 and 3.3 sigma at
-the solution, so they are held in the first solve and determined in the second. With 16,000
-samples they are at 1.0 sigma at the solution (held either way, one solve). The singular values
-grow as the square root of the number of samples, so this is the data determining more, not a
-numerical effect: the second solve is needed for the same result. Both solves, the checks and
+directions. At 160,000 samples it does: two directions, one mixing dth60 with dx76 and one a76
+with dy76, have singular values below 0.5 sigma at the start values and 3.2 and 3.3 sigma at the
+solution, so they are held in the first solve and determined in the second. They tell apart
+only through a stylus off the A7 axis: the nominal tool sits on it, the identified one is 75 um
+off. With 16,000 samples they are at 1.0 sigma at the solution (held either way, one solve). The
+singular values grow as the square root of the number of samples, so this is the data determining
+more, not a numerical effect: the second solve is needed for the same result. Both solves, the
+checks and
 the covariance share their Jacobians (the solver's last one, at the solution, is not computed
 again), and which map constants are gauges is decided by a blocked QR of the dense block and the
 map constants (R only) instead of an SVD of the tall dense block."""
