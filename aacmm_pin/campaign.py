@@ -340,28 +340,37 @@ def _parse(text: str, kind: str) -> tuple[Any, str | None]:
         value = int(text) if kind == "id" else float(text)
     except ValueError:
         return None, f"'{text}' is not {'an integer' if kind == 'id' else 'a number'}"
-    checks = ((kind == "id" and value < 1, "is not an integer >= 1"),
-              (kind == "id" and value >= 2**63, "is too large for an id"),
-              (not math.isfinite(value), "is not a finite number"),
-              (kind == "angle" and abs(value) > MAX_ANGLE_DEG,
-               f"deg is outside +-{MAX_ANGLE_DEG:g} deg"),
-              (kind == "length" and value <= 0, "mm is not a positive bar length"),
-              (kind == "length" and not BAR_LENGTH_MIN * 1e3 <= value <= BAR_LENGTH_MAX * 1e3,
-               f"mm is not a plausible bar length ({BAR_LENGTH_MIN * 1e3:g} mm to "
-               f"{BAR_LENGTH_MAX:g} m)"),
-              (kind == "displacement" and abs(value) > RTEST_RANGE * 1e3,
-               f"mm is beyond an R-Test's measuring range (+-{RTEST_RANGE * 1e3:g} mm): a unit "
-               "or sensor error"),
-              (kind == "coordinate" and abs(value) > MAX_COORDINATE * 1e3,
-               f"mm is beyond +-{MAX_COORDINATE:g} m: not a position an arm or tracker measures"),
-              (kind == "temperature" and not TEMPERATURE_RANGE_C[0] <= value
-               <= TEMPERATURE_RANGE_C[1], f"deg C is outside {TEMPERATURE_RANGE_C[0]:g} to "
-                                          f"{TEMPERATURE_RANGE_C[1]:g} deg C"),
-              (kind == "sigma" and value <= 0, "um is not a positive standard uncertainty"),
-              (kind == "sigma" and value > MAX_COORDINATE * 1e6, "um is not a plausible "
-                                                                  "standard uncertainty"))
-    reason = next((f"{text} {why}" for bad, why in checks if bad), None)
+    why = _bad_value(value, kind)
+    reason = None if why is None else f"{text} {why}"
     return (None if reason else value), reason
+
+
+def _bad_value(value: float, kind: str) -> str | None:
+    """Return why a parsed cell's value is not acceptable for its kind, or None (first failed check)."""
+    if kind == "id":
+        return ("is not an integer >= 1" if value < 1
+                else "is too large for an id" if value >= 2**63 else None)
+    if not math.isfinite(value):
+        return "is not a finite number"
+    if kind == "angle" and abs(value) > MAX_ANGLE_DEG:
+        return f"deg is outside +-{MAX_ANGLE_DEG:g} deg"
+    if kind == "length" and value <= 0:
+        return "mm is not a positive bar length"
+    if kind == "length" and not BAR_LENGTH_MIN * 1e3 <= value <= BAR_LENGTH_MAX * 1e3:
+        return (f"mm is not a plausible bar length ({BAR_LENGTH_MIN * 1e3:g} mm to "
+                f"{BAR_LENGTH_MAX:g} m)")
+    if kind == "displacement" and abs(value) > RTEST_RANGE * 1e3:
+        return (f"mm is beyond an R-Test's measuring range (+-{RTEST_RANGE * 1e3:g} mm): a unit "
+                "or sensor error")
+    if kind == "coordinate" and abs(value) > MAX_COORDINATE * 1e3:
+        return f"mm is beyond +-{MAX_COORDINATE:g} m: not a position an arm or tracker measures"
+    if kind == "temperature" and not TEMPERATURE_RANGE_C[0] <= value <= TEMPERATURE_RANGE_C[1]:
+        return f"deg C is outside {TEMPERATURE_RANGE_C[0]:g} to {TEMPERATURE_RANGE_C[1]:g} deg C"
+    if kind == "sigma" and value <= 0:
+        return "um is not a positive standard uncertainty"
+    if kind == "sigma" and value > MAX_COORDINATE * 1e6:
+        return "um is not a plausible standard uncertainty"
+    return None
 
 
 def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
@@ -440,6 +449,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
     if q_missing or any(name in q_columns or name == "q1_deg" for name in missing):
         q_columns = []  # unknown
     table = _Table(path, q_columns, [], {name: [] for name in index})
+    kinds = {name: ("angle" if name in q_columns or _Q_COLUMN.fullmatch(name) or name in named
+                    else _KINDS.get(name, "number")) for name in index}
     for line, cells in rows[1:]:
         if not any(cells):
             add(line, None, "blank line among the data rows")
@@ -448,9 +459,7 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         else:
             table.lines.append(line)
             for name, k in index.items():
-                kind = ("angle" if name in q_columns or _Q_COLUMN.fullmatch(name) or name in named
-                        else _KINDS.get(name, "number"))
-                value, reason = _parse(cells[k], kind)
+                value, reason = _parse(cells[k], kinds[name])
                 table.cols[name].append(value)
                 if reason:
                     add(line, name, reason)

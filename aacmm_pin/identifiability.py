@@ -27,11 +27,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from aacmm_pin.encoder_map import touched_nodes
-from aacmm_pin.unknowns import BlockJacobian, NodeKey, UnknownKey, Unknowns
+from aacmm_pin.unknowns import BlockJacobian, NodeKey, Unknowns
 
 GAUGE_TOL = 1e-6
 GAUGE_WEIGHT = 1e3
 """Weight of a gauge or hold row, m per unit: 1e-9 of violation costs as much as 1 um of data."""
+QR_ROWS = 30_000
+"""Rows per block of the blocked QR in :func:`gauge_axes` (a few MB each)."""
 DETERMINED_K = 2.0
 """A direction is determined when a plausible change along it moves the data by >= K sigma."""
 
@@ -79,21 +81,40 @@ def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
     """
     full_cols = np.flatnonzero(unknowns.free)
     dense = jac.dense
-    # one SVD for every axis: the least-squares fit of a column is its projection on the dense
-    # block's numerical range (the singular vectors that numpy's lstsq keeps, rcond=None)
-    u, sv, _ = np.linalg.svd(dense, full_matrices=False)
-    rng = u[:, sv > (sv.max(initial=0.0) * np.finfo(float).eps * max(dense.shape))]
-    out = []
+    axes, constants = [], []
     for axis in unknowns.map_axes:
         sl = unknowns.map_slice(axis)
         cols = np.flatnonzero((full_cols >= sl.start) & (full_cols < sl.stop))
-        if cols.size == 0:
-            continue
-        constant = jac.columns_sum(cols)
-        norm = np.linalg.norm(constant)
-        if norm == 0.0 or np.linalg.norm(constant - rng @ (rng.T @ constant)) / norm < GAUGE_TOL:
-            out.append(axis)
-    return out
+        if cols.size:
+            axes.append(axis)
+            constants.append(jac.columns_sum(cols))
+    if not axes:
+        return []
+    # The least-squares fit of a constant column is its projection on the dense block's numerical
+    # range (the singular vectors numpy's lstsq keeps, rcond=None). One QR of [dense | constants]
+    # (R only) gives it without a tall factor: [dense | C] = Q [[R11, R12], [0, R22]], the dense
+    # block's singular values and left vectors are R11's (u), and the residual of column j is
+    # ||(I - u u^T) R12[:, j]||^2 + ||R22[:, j]||^2. R is taken by blocks of rows (the blocks'
+    # R stacked and factored again): no copy of the tall matrix.
+    nd = dense.shape[1]
+    blocks = [_r_factor(np.column_stack([dense[i:i + QR_ROWS], *(c[i:i + QR_ROWS]
+                                                                 for c in constants)]))
+              for i in range(0, dense.shape[0], QR_ROWS)]
+    r = _r_factor(np.vstack(blocks)) if len(blocks) > 1 else blocks[0]
+    u, sv, _ = np.linalg.svd(r[:nd, :nd], full_matrices=False)
+    rng = u[:, sv > (sv.max(initial=0.0) * np.finfo(float).eps * max(dense.shape))]
+    r12 = r[:nd, nd:]
+    off = r12 - rng @ (rng.T @ r12)
+    residual = np.sqrt(np.sum(off ** 2, axis=0) + np.sum(r[nd:, nd:] ** 2, axis=0))
+    norm = np.linalg.norm(r[:, nd:], axis=0)  # = the constants' norms (Q is orthonormal)
+    return [axis for axis, res, nrm in zip(axes, residual, norm)
+            if nrm == 0.0 or res / nrm < GAUGE_TOL]
+
+
+def _r_factor(a: np.ndarray) -> np.ndarray:
+    """Return R of the reduced QR factorisation of a, shape (min(m, n), n) (Q not formed)."""
+    r: np.ndarray = np.asarray(np.linalg.qr(a, mode="r"))
+    return r
 
 
 def gauge_rows(unknowns: Unknowns, axes: list[int]) -> sp.csr_matrix:
@@ -136,13 +157,25 @@ def observability(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, 
         sigma: noise per coordinate, m.
     """
     scale = plausible_sizes(unknowns)[unknowns.free]
-    info = (jac.normal() + (extra.T @ extra).toarray()) * np.outer(scale, scale)
-    eigval, eigvec = np.linalg.eigh(info)
+    eigval, eigvec = np.linalg.eigh(_scaled_information(jac, extra, scale))
     singular = np.sqrt(np.clip(eigval, 0.0, None))
     held = singular < DETERMINED_K * sigma
     determined = eigvec[:, ~held]
     identifiable = np.sum(determined ** 2, axis=1) > 0.5
     return Observability(eigvec[:, held].T, singular[held], identifiable, scale)
+
+
+def held_count(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, sigma: float) -> int:
+    """Return how many directions :func:`observability` would hold (eigenvalues only, cheaper)."""
+    scale = plausible_sizes(unknowns)[unknowns.free]
+    eigval = np.linalg.eigvalsh(_scaled_information(jac, extra, scale))
+    return int(np.sum(np.sqrt(np.clip(eigval, 0.0, None)) < DETERMINED_K * sigma))
+
+
+def _scaled_information(jac: BlockJacobian, extra: sp.csr_matrix, scale: np.ndarray) -> np.ndarray:
+    """Return (J^T J + extra^T extra) with rows and columns scaled by ``scale``, (n_free, n_free)."""
+    out: np.ndarray = (jac.normal() + (extra.T @ extra).toarray()) * np.outer(scale, scale)
+    return out
 
 
 def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> list[str]:
@@ -168,8 +201,12 @@ def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> l
             lines.append(f"{key}: not identifiable from these measurements (other parameters can imitate "
                          "it in these postures); held near its start value")
     groups: dict[str, int] = {}
+    labels = [f"A{key.axis} map" if isinstance(key, NodeKey) else str(key) for key in free_keys]
+    names = list(dict.fromkeys(labels))  # the groups in order of first appearance
+    position = {g: i for i, g in enumerate(names)}
+    index = np.array([position[g] for g in labels], dtype=np.intp)
     for row in obs.hold:
-        mix = ", ".join(_main_groups(free_keys, row))
+        mix = ", ".join(_main_groups(names, index, row))
         groups[mix] = groups.get(mix, 0) + 1
     for mix, count in groups.items():
         lines.append(f"{count} undetermined direction{'s' if count > 1 else ''} mixing {mix}: "
@@ -177,13 +214,15 @@ def describe(unknowns: Unknowns, unvisited: np.ndarray, obs: Observability) -> l
     return lines
 
 
-def _main_groups(keys: list[UnknownKey], row: np.ndarray, share: float = 0.1) -> list[str]:
-    """Return the parameter groups (a DH name or 'A<n> map') holding > share of a direction."""
-    weight: dict[str, float] = {}
-    for key, v in zip(keys, row):
-        group = f"A{key.axis} map" if isinstance(key, NodeKey) else str(key)
-        weight[group] = weight.get(group, 0.0) + float(v) ** 2
-    return sorted((g for g, w in weight.items() if w > share), key=lambda g: -weight[g])
+def _main_groups(names: list[str], index: np.ndarray, row: np.ndarray, share: float = 0.1
+                 ) -> list[str]:
+    """Return the parameter groups (a DH name or 'A<n> map') holding > share of a direction.
+
+    ``names``: the groups; ``index``: each entry's group in ``names``, shape (n_free,); ``row``: the
+    direction (unit), shape (n_free,). Largest share first (ties in the order of ``names``).
+    """
+    weight = np.bincount(index, row ** 2, minlength=len(names))
+    return [names[g] for g in sorted(np.flatnonzero(weight > share), key=lambda g: -weight[g])]
 
 
 def _ranges(values: np.ndarray) -> str:

@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import OptimizeResult
+from scipy.special import chdtrc
 
 from aacmm_pin import identifiability as ident
 from aacmm_pin import robust as rob
@@ -631,8 +632,6 @@ def _noise_consistency(cal: Calibration, stated: float) -> tuple[float, float]:
     their own stated noise relative to it (the row weights). Degrees of freedom: the residual
     coordinates less the determined parameters.
     """
-    from scipy.stats import chi2
-
     res = cal.fun.ravel() / stated
     if cal.problem.row_weight is not None:  # weight = (the solve's sigma) / (the row's noise)
         res = res * cal.problem.row_weight * stated / cal.problem.sigma_class
@@ -640,7 +639,7 @@ def _noise_consistency(cal: Calibration, stated: float) -> tuple[float, float]:
         res = res[np.repeat(cal.inlier, 3)]
     dof = max(res.size - cal.n_determined, 1)
     stat = float(np.sum(res ** 2))
-    return float(chi2.sf(stat, dof)), float(np.sqrt(stat / res.size))
+    return float(chdtrc(dof, stat)), float(np.sqrt(stat / res.size))  # = scipy.stats.chi2.sf
 
 
 def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: Parameters | None,
@@ -683,16 +682,19 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
             prob = Problem(f.unknowns, q, measured, nuisance, f.constraints, f.obs.scale,
                            f.problem.x_ref, f.x, sigma_class, base_w * np.sqrt(w))
             out = prob.solve(prob.z(f.x), settings, jac, on_evaluation=evaluated)
-            return f._replace(problem=prob, res=out, x=prob.x(out.x), nfev=int(out.nfev))
+            return f._replace(problem=prob, res=out, x=prob.x(out.x), nfev=int(out.nfev),
+                              jac=None)
 
         now = fit(None)
         inlier: np.ndarray | None = None
         settled = True
         if robust:
-            inlier, settled, now = _robust(now, fit, reweight, base_w)
+            # the first fit's Jacobian is not held through the refits
+            inlier, settled, now = _robust(now._replace(jac=None), fit, reweight, base_w)
     unknowns, unvisited, gauges, obs, constraints = (now.unknowns, now.unvisited, now.gauges,
                                                      now.obs, now.constraints)
-    problem, res, x_full, nfev = now.problem, now.res, now.x, now.nfev
+    problem, res, x_full, nfev, jac_x = now.problem, now.res, now.x, now.nfev, now.jac
+    now = now._replace(jac=None)
     x_arm = x_full[:problem.n_arm]
     n_det = problem.n_arm - obs.hold.shape[0] - len(gauges) + problem.n_frame
     kept = np.ones(n, bool) if inlier is None else inlier
@@ -707,7 +709,8 @@ def _identify(campaign: Campaign, arm: Arm, model: str, use_rtest: bool, start: 
     enough = dof >= MIN_DOF_FRACTION * data_res.size
     # too few residuals: the residual says nothing about the noise; the stated noise stands
     sig = _sigma(data_res, n_det, sigma) if enough else float(sigma or sigma_class)
-    covariance = problem.covariance(x_full, sig)
+    covariance = problem.covariance(x_full, sig, jac_x)
+    del jac_x
     names = unknowns.names + [str(k) for k in nuisance_keys]
     params = unknowns.parameters(x_arm)
     lines = ident.describe(unknowns, unvisited, obs)
@@ -787,6 +790,8 @@ class _Fit(NamedTuple):
     res: OptimizeResult
     x: np.ndarray
     nfev: int
+    jac: BlockJacobian | None = None
+    """The data Jacobian at ``x`` when the fit has it (for the covariance; then released)."""
 
 
 def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.ndarray,
@@ -807,30 +812,41 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
         _, jac_x = unknowns.jacobian(x, q)
         return jac_x if rows is None else jac_x.scaled(rows)
 
+    # without row weights the solver's data Jacobian is this one: computed once per point
+    same = rows is None and weight is None
     jac_now = jacobian(x_arm)
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
     x_loc = np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)
     nfev, held = 0, -1
+    last: BlockJacobian | None = None  # the solver's last, taken at its solution: jacobian(x_arm)
+    at_solution: BlockJacobian | None = None  # the data Jacobian at the final x, for the covariance
     for _round in range(3):  # observability at the start, then at the solution
         if _round:
-            jac_now = jacobian(x_arm)
+            jac_now = last if last is not None else jacobian(x_arm)
+            last = None
+            if ident.held_count(unknowns, jac_now, gauge, sigma_class) == held:
+                at_solution = jac_now  # the same number held: the decision stands
+                break
         obs = ident.observability(unknowns, jac_now, gauge, sigma_class)
-        if obs.hold.shape[0] == held:
-            break
         held = obs.hold.shape[0]
         used = obs  # the observability the constraints (and the results below) come from
         constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
         x_start = np.concatenate([unknowns.vector(start), np.zeros_like(x_loc)])
         x_now = np.concatenate([x_arm, x_loc])
         problem = Problem(unknowns, q, measured, nuisance, constraints, obs.scale, x_start,
-                          x_now, sigma_class, weight)
+                          x_now, sigma_class, weight, jac_now if same else None)
         del jac_now  # a campaign's Jacobian can weigh hundreds of MB: not kept through the solve
-        res = problem.solve(problem.z(x_now), settings, jac, on_evaluation=on_evaluation)
+        res = problem.solve(problem.z(x_now), settings, jac, on_evaluation=on_evaluation,
+                            keep_jacobian=same)
+        last = problem.take_jacobian(res.x)
         nfev += res.nfev
         x_full = problem.x(res.x)
         x_arm, x_loc = x_full[:problem.n_arm], x_full[problem.n_arm:]
-    return _Fit(unknowns, unvisited, gauges, used, constraints, problem, res, x_full, nfev)
+    else:
+        at_solution = last  # three rounds: the last solve's (None if it kept none)
+    return _Fit(unknowns, unvisited, gauges, used, constraints, problem, res, x_full, nfev,
+                at_solution if same else None)
 
 
 def _robust(first: _Fit, fit: Callable[[np.ndarray | None], _Fit],

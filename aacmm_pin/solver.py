@@ -126,6 +126,7 @@ class Problem:
         sigma: noise per coordinate assumed by the solve, m (weights the nests' prior rows).
         weight: per sample, ``sigma / (its stated noise)``, shape (N,); None: all 1 (generalised
             least squares with per-sample noise: the data rows are multiplied by it).
+        jac_lin: :meth:`data_jacobian` at x_lin when the caller has it (not computed again).
     """
 
     unknowns: Unknowns
@@ -168,9 +169,10 @@ class Problem:
     def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
                  nuisance: Nuisance, constraints: sp.csr_matrix, scale: np.ndarray,
                  x_ref: np.ndarray, x_lin: np.ndarray, sigma: float,
-                 weight: np.ndarray | None = None):
+                 weight: np.ndarray | None = None, jac_lin: BlockJacobian | None = None):
         self.unknowns, self.q, self.measured = unknowns, q, measured
         self.nuisance = nuisance
+        self._last: tuple[np.ndarray, BlockJacobian] | None = None
         n = len(q)
         self.n_arm = int(unknowns.free.sum())
         self.n_loc = 3 * nuisance.n_nests
@@ -206,7 +208,8 @@ class Problem:
         frame_scale = np.tile([FRAME_ANGLE, FRAME_ANGLE, FRAME_ANGLE, FRAME_LENGTH, FRAME_LENGTH,
                                FRAME_LENGTH], nuisance.n_frames)
         t[self.n_arm:, n_null:] = np.diag(np.concatenate([self.nest_sigma, frame_scale]))
-        info = t.T @ self.normal_matrix(x_lin) @ t  # any nearby point preconditions well
+        # any nearby point preconditions well
+        info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t
         chol = np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info) * np.eye(len(info)))
         self.basis = t
         self.r_inv = np.linalg.inv(chol.T)
@@ -402,9 +405,12 @@ class Problem:
         q, r = np.linalg.qr(self.jac(z))
         return Factor(q, r)
 
-    def normal_matrix(self, x: np.ndarray) -> np.ndarray:
-        """Return J^T J of the data, prior and length rows w.r.t. the full vector at x, (n_x, n_x)."""
-        jac = self.data_jacobian(x[:self.n_arm])
+    def normal_matrix(self, x: np.ndarray, jac: BlockJacobian | None = None) -> np.ndarray:
+        """Return J^T J of the data, prior and length rows w.r.t. the full vector at x, (n_x, n_x).
+
+        ``jac``: :meth:`data_jacobian` at x when the caller has it (not computed again).
+        """
+        jac = self.data_jacobian(x[:self.n_arm]) if jac is None else jac
         nuis, lengths = self.nuisance_jacobian(x), self.length_jacobian(x)
         na, nn = self.n_arm, self.n_loc + self.n_frame
         info = np.empty((na + nn, na + nn))
@@ -416,13 +422,14 @@ class Problem:
         info[na:na + self.n_loc, na:na + self.n_loc] += np.diag(self.prior ** 2)
         return info
 
-    def covariance(self, x: np.ndarray, sigma: float) -> np.ndarray:
+    def covariance(self, x: np.ndarray, sigma: float, jac: BlockJacobian | None = None
+                   ) -> np.ndarray:
         """Return the linearised covariance of the full vector at x for data noise sigma (m).
 
         ``T^T (J^T J / sigma^2 + blockdiag(0, I / sigma_nest^2, 0)) T``, inverted: the data and
         length rows with this sigma, the nest offsets' prior with its own sigma whatever the data's.
         """
-        info = self.normal_matrix(x)
+        info = self.normal_matrix(x, jac)  # jac: data_jacobian at x, if the caller has it
         na, nl = self.n_arm, self.n_loc
         info[na:na + nl, na:na + nl] -= np.diag(self.prior ** 2)  # the solve's weighting, removed
         info /= sigma ** 2
@@ -438,7 +445,8 @@ class Problem:
         return bool(n_z * self.q.shape[0] * 3 < DENSE_LIMIT)
 
     def solve(self, z0: np.ndarray, settings: SolverSettings, jac: str = "analytic",
-              on_evaluation: Callable[[float], None] | None = None) -> OptimizeResult:
+              on_evaluation: Callable[[float], None] | None = None,
+              keep_jacobian: bool = False) -> OptimizeResult:
         """Minimise from z0 with scipy's trust-region reflective solver (LSMR steps).
 
         Args:
@@ -447,11 +455,14 @@ class Problem:
             jac: ``"analytic"`` or a scipy finite-difference scheme (``"2-point"``, ...).
             on_evaluation: called after every residual evaluation with the residual's RMS (m,
                 in units of the solve's sigma for weighted rows), for progress.
+            keep_jacobian: keep the last data Jacobian (:meth:`data_jacobian`, the solver's last,
+                at the solution) for :meth:`take_jacobian` instead of releasing it.
 
         Returns:
             scipy's result; with the analytic Jacobian without ``jac`` (the last Jacobian's
             memory is released: :meth:`jac_operator` gives it again).
         """
+        self._last = None
         # The analytic Jacobian goes to LSMR as an operator at every size: in the preconditioned
         # coordinates its columns are nearly orthonormal, so LSMR takes a few products per step
         # where the exact solver takes a dense SVD (paper-sized campaign: 3x less CPU, the same
@@ -467,6 +478,8 @@ class Problem:
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
         previous: list[list[BlockJacobian]] = []
 
+        at: list[np.ndarray] = []
+
         def operator(z: np.ndarray) -> LinearOperator:
             # scipy keeps the first Jacobian and the current one while it builds the next: only
             # the current one is used, so the others' data (hundreds of MB for a large campaign)
@@ -475,6 +488,7 @@ class Problem:
                 previous.pop().clear()
             op, held = self._operator(z)
             previous.append(held)
+            at[:] = [np.array(z, dtype=float)]
             return op
 
         if jac == "analytic":
@@ -484,9 +498,17 @@ class Problem:
                             f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
                             xtol=1e-12, gtol=1e-12)
         if previous:  # the last operator's Jacobian is not kept with the result
-            previous.pop().clear()
+            held = previous.pop()
+            if keep_jacobian and held and np.array_equal(at[0], out.x):
+                self._last = (at[0], held[0])
+            held.clear()
             out.pop("jac", None)
         return out
+
+    def take_jacobian(self, z: np.ndarray) -> BlockJacobian | None:
+        """Return (and release) the data Jacobian :meth:`solve` kept, if it was taken at z."""
+        last, self._last = self._last, None
+        return last[1] if last is not None and np.array_equal(last[0], z) else None
 
     def gauss_newton(self, z: np.ndarray, factor: Factor, iterations: int
                      ) -> tuple[np.ndarray, bool]:
