@@ -117,7 +117,8 @@ def stated_noise(campaign: Campaign, meas: Measurements, noise: StatedNoise) -> 
     """Return the stated noise of every sample per coordinate, shape (N,), m.
 
     SPAT samples: the R-Test's; tool points: their ``sigma_um`` column, else the instrument's;
-    length-bar readouts: :data:`aacmm_pin.units.SIGMA_SOCKET`.
+    length-bar readouts: the campaign's stated socket noise (``campaign.json`` ``socket``, else
+    :data:`aacmm_pin.units.SIGMA_SOCKET`).
     """
     if meas.sigma is None:
         return np.full(len(meas.q), noise.rtest if campaign.spat is not None else noise.point)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
-import errno
 import os
 import shutil
 import tempfile
@@ -64,14 +63,14 @@ def check_output(target: str | Path, force: bool = False) -> Path:
     """Check that ``target`` can be written: absent, an empty folder, or ``force``; return it.
 
     Raises:
-        OutputExistsError: if it is a non-empty folder (and not ``force``) or not a folder.
-        NotADirectoryError: if a file stands where one of its parent folders should be.
+        OutputExistsError: if it is a non-empty folder (and not ``force``), not a folder, or a
+            file stands where one of its parent folders should be.
     """
     target = Path(target)
     for above in target.absolute().parents:  # a file on the way: say so before any work
         if above.exists():
             if not above.is_dir():
-                raise NotADirectoryError(errno.ENOTDIR, "is not a folder", str(above))
+                raise OutputExistsError(above, "is a file, not a folder; choose another output")
             break
     if target.exists() or target.is_symlink():
         if not target.is_dir() or target.is_symlink():

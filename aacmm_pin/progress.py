@@ -7,20 +7,24 @@ made and its cost, never an ETA. On a terminal this is a tqdm line; when stderr 
 long command is never silent.
 
 Work that counts nothing (reading files, a single long solve, writing figures) is covered by
-:class:`Heartbeat`: around a whole command, it prints ``<what>: still working, <t> s`` whenever
-the command has written nothing for :data:`HEARTBEAT_S` seconds.
+:class:`Heartbeat`: around a whole command, it prints ``<desc>: still working[, <phase>], <t> s``
+(e.g. ``aacmm-pin demo: still working, writing figures, 7.8 s``) whenever the command has shown
+nothing for :data:`HEARTBEAT_S` seconds.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
 from types import TracebackType
 from typing import IO, Any
 
-LOG_EVERY_S = 2.0
-"""Seconds between two log lines when stderr is not a terminal."""
+LOG_EVERY_S = 1.0
+"""Seconds between two log lines when stderr is not a terminal, counted from the last line the
+command showed (under a :class:`Heartbeat`, which speaks only after :data:`HEARTBEAT_S`, longer:
+work that progresses logs its own lines, silent work gets the heartbeat's)."""
 
 
 class Progress:
@@ -61,7 +65,7 @@ class Progress:
                 self._bar.set_postfix({k: _format(v) for k, v in self.state.items()}, refresh=False)
             return
         now = time.perf_counter()
-        if now - self._last_log >= LOG_EVERY_S:
+        if now - max(self._last_log, _last_shown(now)) >= LOG_EVERY_S:
             self._last_log = now
             self._log(now)
 
@@ -97,17 +101,25 @@ heartbeat runs, takes 0.1-0.5 s of the user's first two seconds)."""
 
 
 class _Stamped:
-    """A text stream that notes when it was last written to (all other attributes delegated)."""
+    """A text stream that notes when it was last written to (all other attributes delegated).
+
+    A write that ends a line is flushed at once (as on a terminal): text in a pipe's buffer is
+    not a sign of life the user can see, and lines keep their order beside the heartbeat's.
+    """
 
     def __init__(self, stream: IO[str], beat: Heartbeat):
         self._stream, self._beat = stream, beat
+        self.line_open = False
+        """The last write did not end its line."""
 
     def write(self, text: str) -> int:
         with self._beat.lock:
             n = self._stream.write(text)
             if text:
+                if "\n" in text:
+                    self._stream.flush()
                 self._beat.last_write = time.monotonic()
-                self._beat.line_open = not text.endswith("\n")
+                self.line_open = not text.endswith("\n")
             return n
 
     def __getattr__(self, name: str) -> Any:
@@ -120,9 +132,11 @@ class Heartbeat:
     A context manager around a whole command: ``sys.stdout`` and ``sys.stderr`` are wrapped so
     that every write is noted; a daemon thread writes ``<desc>: still working[, <phase>], <t> s``
     to stderr after each silence of :data:`HEARTBEAT_S` (:data:`FIRST_BEAT_S` for a command that
-    has said nothing yet). A progress bar's or a log line's writes count as signs of life, so it
-    stays quiet while they run. :meth:`stop` ends it early, e.g. before a server waits for the
-    user.
+    has said nothing yet). A :class:`Progress` that counts work logs its own line after
+    :data:`LOG_EVERY_S` of silence, before the heartbeat would speak, so it stays quiet while work
+    progresses. :meth:`stop`
+    ends it early, e.g. before a server waits for the user. Heartbeats nest (the inner one speaks
+    while it runs); a forked child process starts without one.
 
     Args:
         desc: what runs, e.g. ``"aacmm-pin identify"``.
@@ -133,17 +147,18 @@ class Heartbeat:
         self.desc, self.enabled = desc, enabled
         self.lock = threading.Lock()
         self.last_write = self._start = time.monotonic()
-        self.line_open = False
         self.phase = ""
         """What runs now, shown in the line (empty: nothing said)."""
         self._done = threading.Event()
         self._thread: threading.Thread | None = None
         self._saved: tuple[Any, Any] | None = None
+        self._outer: Heartbeat | None = None
 
     def __enter__(self) -> Heartbeat:
         global _current
         if self.enabled:
-            _current = self
+            _register_fork_handler()
+            self._outer, _current = _current, self
             self._saved = (sys.stdout, sys.stderr)
             sys.stdout = _Stamped(sys.stdout, self)
             sys.stderr = _Stamped(sys.stderr, self)
@@ -152,25 +167,39 @@ class Heartbeat:
         return self
 
     def _run(self) -> None:
-        while not self._done.wait(0.1):
-            with self.lock:
-                now = time.monotonic()
-                first = self.last_write == self._start
-                if now - self.last_write < (FIRST_BEAT_S if first else HEARTBEAT_S) \
-                        or self._saved is None:
-                    continue
-                err = self._saved[1]
-                phase = f", {self.phase}" if self.phase else ""
-                err.write(("\n" if self.line_open else "")
-                          + f"{self.desc}: still working{phase}, {now - self._start:.1f} s\n")
-                err.flush()
-                self.last_write, self.line_open = now, False
+        try:
+            while not self._done.wait(0.1):
+                with self.lock:
+                    self._beat(time.monotonic())
+        except (OSError, ValueError):  # the reader left or the stream closed: stop quietly
+            return
+
+    def _beat(self, now: float) -> None:
+        """Write the line if the command has been silent long enough (called under the lock)."""
+        if self._saved is None:
+            return
+        first = self.last_write == self._start
+        if now - self.last_write < (FIRST_BEAT_S if first else HEARTBEAT_S):
+            return
+        out, err = sys.stdout, sys.stderr
+        # a line left open on stderr, or on stdout when both show on one terminal, is ended first
+        open_line = (isinstance(err, _Stamped) and err.line_open) or (
+            isinstance(out, _Stamped) and out.line_open and _is_terminal(out))
+        phase = f", {self.phase}" if self.phase else ""
+        self._saved[1].write(("\n" if open_line else "")
+                             + f"{self.desc}: still working{phase}, {now - self._start:.1f} s\n")
+        self._saved[1].flush()
+        self.last_write = now
+        if isinstance(err, _Stamped):
+            err.line_open = False
+        if isinstance(out, _Stamped) and _is_terminal(out):
+            out.line_open = False
 
     def stop(self) -> None:
         """Stop the heartbeat and give back the streams (idempotent)."""
         global _current
         if _current is self:
-            _current = None
+            _current = self._outer
         self._done.set()
         if self._thread is not None:
             self._thread.join()
@@ -186,7 +215,32 @@ class Heartbeat:
 
 
 _current: Heartbeat | None = None
-"""The running heartbeat, if any (one command runs at a time)."""
+"""The running heartbeat, if any (the innermost)."""
+_fork_handler = False
+
+
+def _register_fork_handler() -> None:
+    """Make forked children (worker processes) start without a heartbeat.
+
+    The heartbeat's thread does not come along, and its lock may have been held at the fork.
+    """
+    global _fork_handler
+    if not _fork_handler and hasattr(os, "register_at_fork"):
+        os.register_at_fork(after_in_child=_after_fork_in_child)
+        _fork_handler = True
+
+
+def _after_fork_in_child() -> None:
+    global _current
+    beat = _current
+    while beat is not None:
+        beat.lock = threading.Lock()
+        if beat._saved is not None:
+            sys.stdout, sys.stderr = beat._saved
+            beat._saved = None
+        beat._thread = None
+        beat = beat._outer
+    _current = None
 
 
 def phase(text: str) -> None:
@@ -195,13 +249,23 @@ def phase(text: str) -> None:
         _current.phase = text
 
 
+def _last_shown(now: float) -> float:
+    """Return when the running heartbeat's command last showed a line (``-inf`` without one).
+
+    On the clock of ``time.perf_counter``, as ``now``.
+    """
+    if _current is None:
+        return float("-inf")
+    return now - (time.monotonic() - _current.last_write)
+
+
 def idle() -> None:
     """Stop the running heartbeat: the work is done and the command now waits (e.g. a server)."""
     if _current is not None:
         _current.stop()
 
 
-def _is_terminal(stream: IO[str]) -> bool:
+def _is_terminal(stream: object) -> bool:
     isatty = getattr(stream, "isatty", None)
     return bool(isatty is not None and isatty())
 

@@ -194,7 +194,10 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
     pool = ProcessPoolExecutor(workers) if own else executor
     with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
-            factor = cal.problem.factor(cal.problem.z(cal.x))
+            from aacmm_pin._blas import single_threaded_blas
+
+            with single_threaded_blas():  # as in a worker's batch: the same bits either way
+                factor = cal.problem.factor(cal.problem.z(cal.x))
             for batch in batches:
                 results.append(_trial_batch(cal, factor, base, spat.location, cal.use_rtest, sigma_rtest,
                                             sigma_location, batch, bar_only))

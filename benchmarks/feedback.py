@@ -8,6 +8,7 @@ line within 2 s of the start and never 2 s without one (the heartbeat speaks aft
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -32,7 +33,8 @@ STEPS = [
 def silences(args: list[str], cwd: Path) -> tuple[float, float, float, int]:
     """Run ``aacmm-pin ARGS``; return (total s, first line s, longest silence s, lines)."""
     start = time.monotonic()
-    proc = subprocess.Popen([sys.executable, "-m", "aacmm_pin", *args], cwd=cwd, text=True,
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # a pipe buffers
+    proc = subprocess.Popen([sys.executable, "-m", "aacmm_pin", *args], cwd=cwd, text=True, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, bufsize=1)
     assert proc.stdout is not None
     first, last, longest, lines = None, start, 0.0, 0
@@ -55,11 +57,12 @@ def main() -> None:
             print(rows[-1], flush=True)
     write_section("feedback", f"""## Feedback of long commands (`python benchmarks/feedback.py`)
 
-{machine()}. Each command a whole process with stdout and stderr piped (a log, not a terminal):
+{machine()}. Each command a whole process with stdout and stderr piped (a log, not a terminal;
+Python's output buffered as in a pipe, `PYTHONUNBUFFERED` unset):
 wall seconds to its first line and its longest silence (the end of the run included); issue
 target: a line within 2 s and no silence of 2 s. Identification, Monte Carlo, discovery and plan
-log a line every 2 s; whatever else runs long is covered by the heartbeat (`aacmm_pin.progress.Heartbeat`,
-"still working" after 1.5 s of silence).
+log a line after 1 s without one; whatever else runs long is covered by the heartbeat
+(`aacmm_pin.progress.Heartbeat`, "still working" after 1.5 s of silence).
 
 | command | total (s) | first line (s) | longest silence (s) | lines |
 |---|---|---|---|---|

@@ -8,6 +8,10 @@ BLAS runs single-threaded in the test process and in what it starts (worker proc
 examples): the work is many products of a few hundred columns, which gain nothing from BLAS threads,
 while threads spinning on two busy cores slow them down many times (``aacmm_pin._blas``). Set
 ``OPENBLAS_NUM_THREADS`` (or ``OMP_NUM_THREADS``) to choose otherwise.
+
+The CLI's heartbeat ("still working" after a silence, :class:`aacmm_pin.progress.Heartbeat`) is
+silenced in-process: a command's output is then the same on a busy machine as on an idle one
+(``tests/test_progress.py`` sets its own times).
 """
 
 from __future__ import annotations
@@ -23,6 +27,15 @@ if not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
     threadpool_limits(limits=1)  # this process, whose BLAS may be loaded already
 
 import aacmm_pin as ap  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _no_heartbeat(monkeypatch: pytest.MonkeyPatch) -> None:
+    import aacmm_pin.progress as progress
+
+    monkeypatch.setattr(progress, "FIRST_BEAT_S", float("inf"))
+    monkeypatch.setattr(progress, "HEARTBEAT_S", float("inf"))
+
 
 SMALL = {"samples_per_location": 50, "samples_per_socket": 5, "bar_placements": 2}
 """A small campaign (seed 0, default effects): 4 x 50 SPAT samples, a bar at 2 placements."""

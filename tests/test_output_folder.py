@@ -33,9 +33,7 @@ def run_cli(argv: list[str]) -> tuple[int, str]:
             status = main(argv)
         except SystemExit as exc:  # argparse
             status = int(exc.code or 0)
-    # the error lines only: a slow run may also print the heartbeat's "still working" lines
-    return status, "".join(line for line in err.getvalue().splitlines(keepends=True)
-                           if ": still working" not in line)
+    return status, err.getvalue()
 
 
 def tree(folder: Path) -> dict[str, bytes]:

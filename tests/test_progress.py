@@ -61,7 +61,8 @@ def test_a_reader_that_leaves_early_gets_no_traceback():
 
 
 def test_heartbeat_speaks_after_a_silence_and_gives_the_streams_back(monkeypatch, capsys):
-    """A silent stretch longer than HEARTBEAT_S gets a "still working" line with the phase."""
+    """A silent stretch longer than HEARTBEAT_S gets a "still working" line with the phase; a
+    line left open on stderr is ended first."""
     import sys
     import time
 
@@ -71,37 +72,46 @@ def test_heartbeat_speaks_after_a_silence_and_gives_the_streams_back(monkeypatch
     monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.2)
     before = sys.stdout, sys.stderr
     with Heartbeat("aacmm-pin demo"):
-        print("started", end="")  # an open line: the heartbeat starts a new one
+        print("table", flush=True)
+        print("reading ...", end="", file=sys.stderr)  # an open line
         phase("writing figures")
         time.sleep(0.7)
     assert (sys.stdout, sys.stderr) == before
     captured = capsys.readouterr()
-    assert captured.out == "started"
-    lines = captured.err.splitlines()
-    assert lines and all(re.fullmatch(r"aacmm-pin demo: still working, writing figures, [0-9.]+ s",
-                                      line) for line in lines if line), lines
+    assert captured.out == "table\n"
+    first, *beats = captured.err.split("\n")
+    assert first == "reading ..." and beats[-1] == "" and len(beats) >= 3, captured.err
+    assert all(re.fullmatch(r"aacmm-pin demo: still working, writing figures, [0-9.]+ s", b)
+               for b in beats[:-1]), beats
 
 
-def test_heartbeat_is_quiet_while_the_command_talks(monkeypatch, capsys):
-    """Writes more often than HEARTBEAT_S (a progress log, prints) leave no heartbeat line."""
+def test_heartbeat_is_quiet_while_the_command_talks_or_counts(monkeypatch, capsys):
+    """Writes, and a Progress that counts work (its log line comes first), leave no heartbeat
+    line."""
     import time
 
     from aacmm_pin.progress import Heartbeat
 
     monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.3)
     monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.3)
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.1)  # after 0.1 s of silence
     with Heartbeat("aacmm-pin plan"):
-        for _ in range(10):
+        for _ in range(5):
             print("candidate", flush=True)
             time.sleep(0.05)
+        with Progress("identify", "evaluation") as bar:  # its stream: the wrapped stderr
+            for _ in range(24):
+                bar.update(rms_um=2.0)
+                time.sleep(0.05)
     captured = capsys.readouterr()
     assert "still working" not in captured.err + captured.out
+    assert "identify: " in captured.err  # the log lines themselves
 
 
-def test_idle_stops_the_heartbeat_before_a_server_waits(monkeypatch, capsys):
+def test_idle_stops_the_heartbeat_and_heartbeats_nest(monkeypatch, capsys):
     import time
 
-    from aacmm_pin.progress import Heartbeat, idle
+    from aacmm_pin.progress import Heartbeat, idle, phase
 
     monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.1)
     monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.1)
@@ -109,3 +119,29 @@ def test_idle_stops_the_heartbeat_before_a_server_waits(monkeypatch, capsys):
         idle()
         time.sleep(0.4)
     assert "still working" not in capsys.readouterr().err
+    with Heartbeat("outer") as outer:
+        with Heartbeat("inner"):
+            pass
+        phase("after the inner one")
+        assert outer.phase == "after the inner one" and progress_module._current is outer
+    assert progress_module._current is None
+
+
+def _child_streams() -> tuple[str, bool]:
+    import sys
+
+    print("a worker may print", file=sys.stderr)
+    return type(sys.stderr).__name__, progress_module._current is None
+
+
+def test_a_forked_worker_starts_without_the_heartbeat(monkeypatch):
+    """A worker process forked while the heartbeat runs gets the plain streams and no lock."""
+    import multiprocessing
+
+    from aacmm_pin.progress import Heartbeat
+
+    monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.05)
+    with Heartbeat("aacmm-pin uncertainty"), \
+            multiprocessing.get_context("fork").Pool(1) as pool:
+        name, none = pool.apply(_child_streams)
+    assert name != "_Stamped" and none

@@ -127,6 +127,9 @@ def test_cli_validate_compares_the_scatter_with_report_json(small_sim: ap.Simula
     ap.write_campaign(small_sim.campaign, tmp_path / "camp")
     ap.write_calibration(small_cal, arm, tmp_path / "cal")
     assert read_accuracy(tmp_path / "cal" / "parameters.json") == pytest.approx(small_cal.accuracy)
+    (tmp_path / "cal" / "parameters.json").rename(tmp_path / "cal" / "other.json")
+    assert read_accuracy(tmp_path / "cal" / "other.json") is None  # not the neighbour's report
+    (tmp_path / "cal" / "other.json").rename(tmp_path / "cal" / "parameters.json")
     header = (tmp_path / "camp" / "lengthbar.csv").read_text().splitlines()[0].split(",")
     fuzz.scale_column(tmp_path / "camp" / "lengthbar.csv", header.index("q7_deg"), np.pi / 180)
     out = tmp_path / "v.json"
