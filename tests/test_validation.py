@@ -144,3 +144,18 @@ def test_cli_validate_compares_the_scatter_with_report_json(small_sim: ap.Simula
     printed = capsys.readouterr().out
     assert printed.count("not compared with the calibration's accuracy") == 1
     assert CAUSES not in printed and json.loads(out.read_text())["socket_scatter"]["ratio"] is None
+
+
+def test_cli_validate_says_when_the_bar_was_an_input_of_the_fit(small_sim: ap.Simulation,
+                                                               tmp_path: Path, capsys) -> None:
+    """A calibration fitted with the bar (--use-bar): validate says its test is not independent."""
+    arm = ap.load_arm()
+    ap.write_campaign(small_sim.campaign, tmp_path / "camp")
+    for use_bar in (False, True):
+        cal = ap.identify(small_sim.campaign, arm, "dh", use_bar=use_bar)
+        ap.write_calibration(cal, arm, tmp_path / f"cal{use_bar}")
+        out = tmp_path / f"v{use_bar}.json"
+        assert main(["validate", str(tmp_path / f"cal{use_bar}"), str(tmp_path / "camp"),
+                     "--json", str(out)]) == 0
+        noted = "not an independent test" in capsys.readouterr().out
+        assert noted == use_bar and ("note" in json.loads(out.read_text())) == use_bar

@@ -178,7 +178,7 @@ def _validate(args: argparse.Namespace) -> int:
     import json
 
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.bar_scatter import read_accuracy
+    from aacmm_pin.bar_scatter import fitted_with_bar, read_accuracy
     from aacmm_pin.campaign import read_campaign
     from aacmm_pin.parameters import check_against_arm, read_parameters
     from aacmm_pin.validation import validate, validate_points
@@ -192,6 +192,11 @@ def _validate(args: argparse.Namespace) -> int:
         result = validate(arm, params, campaign, read_accuracy(args.caldir))
         print(result.table())
         data = result.to_dict()
+        if fitted_with_bar(args.caldir):
+            data["note"] = ("this calibration was fitted with a length bar (identify --use-bar): on "
+                            "that bar's campaign these errors and the scatter check are not an "
+                            "independent test")
+            print(f"NOTE: {data['note']}")
     if campaign.points is not None:
         points = validate_points(arm, params, campaign)
         print(points.table())
