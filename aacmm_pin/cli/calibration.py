@@ -33,6 +33,7 @@ if TYPE_CHECKING:
 def _simulate(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
     from aacmm_pin.output_folder import check_output
+    from aacmm_pin.progress import phase
     from aacmm_pin.simulate import SimulationConfig, simulate_campaign, write_simulation
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
@@ -43,7 +44,9 @@ def _simulate(args: argparse.Namespace) -> int:
     print(f"simulating {len(config.location_xy)} SPATs of {config.samples_per_location} postures "
           f"and {config.bar_placements} bar placements (seed {config.seed}; a few seconds) ...",
           flush=True)
+    phase("simulating")
     sim = simulate_campaign(load_arm(args.arm), config)
+    phase(f"writing {args.out}")
     write_simulation(sim, args.out, force=args.force)
     spat = sim.campaign.spat
     n_spat = 0 if spat is None else len(spat.location)
@@ -84,14 +87,20 @@ def _identify(args: argparse.Namespace) -> int:
     from aacmm_pin.export import write_calibration
     from aacmm_pin.identification import identify
     from aacmm_pin.output_folder import check_output
+    from aacmm_pin.progress import phase
 
     check_output(args.out, args.force)
+    phase("loading the arm")
     arm = load_arm(args.arm)
-    cal = identify(read_campaign(args.campaign, arm=arm), arm, model=args.model,
+    phase(f"reading {args.campaign}")
+    campaign = read_campaign(args.campaign, arm=arm)
+    phase(f"identifying the {args.model} model")
+    cal = identify(campaign, arm, model=args.model,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
                    max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
                    nests=args.nests, robust=args.robust)
+    phase(f"writing {args.out}")
     write_calibration(cal, arm, args.out, force=args.force)
     _print_calibration(cal, args.out)
     return 0 if cal.success else 1
