@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -82,66 +83,67 @@ def _timed(args: list[str], cwd: Path) -> float:
     return time.monotonic() - t0
 
 
-def kill_identify(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
-    """Kill ``identify --force`` over an old calibration (and into no folder) n times."""
-    old = campaign.parent / "old_cal"
-    args = ["identify", str(campaign), "--model", "proposed", "--force"]
-    full = _timed([*args, "--out", str(work / "probe")], work)
+def _kill_over(old: Path, what: str, work: Path, name: str, command: Callable[[Path], list[str]],
+               full: float, seed: int, n: int, check_new: Callable[[Path], None],
+               codes: tuple[int | None, ...]) -> list[str]:
+    """Kill ``aacmm-pin command(out)`` n times at a random moment, over a copy of ``old`` (70 %)
+    or into no folder; return each outcome ("old", "new" or "none"), never a mix.
+
+    ``full`` is the uninterrupted run's time; ``check_new`` asserts that ``out`` is the new output,
+    whole; ``codes`` are the exit statuses a run that was not killed may have.
+    """
     rng = np.random.default_rng(seed)
     outcomes = []
     for i in range(n):
-        parent = work / f"id{i}"
+        parent = work / f"{name}{i}"
         parent.mkdir()
-        out = parent / "cal"
+        out = parent / name
         existed = rng.random() < 0.7
         if existed:
             subprocess.run(["cp", "-a", str(old), str(out)], check=True)
-        code = _kill_after(_start(*args, "--out", str(out), cwd=parent),
-                           _delay(rng, full))
-        assert _visible(parent) <= {"cal"}, f"stray output beside {out}: {_visible(parent)}"
+        code = _kill_after(_start(*command(out), cwd=parent), _delay(rng, full))
+        assert _visible(parent) <= {name}, f"stray output beside {out}: {_visible(parent)}"
         if not out.exists():
-            assert not existed, f"kill #{i}: the old calibration is gone"
+            assert not existed, f"kill #{i}: the old {what} is gone"
             outcomes.append("none")
         elif existed and _same_tree(out, old):
             outcomes.append("old")
         else:  # the new one, whole
-            params = ap.read_parameters(out)
-            assert params.encoder_maps, f"kill #{i}: {out} is not the new (proposed) calibration"
-            assert {p.name for p in out.iterdir()} == {"parameters.json", "calibrated.urdf",
-                                                       "encoder_maps.csv", "report.json"}
+            check_new(out)
             outcomes.append("new")
-        assert code in (None, 0, 1)
+        assert code in codes
     return outcomes
+
+
+def kill_identify(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
+    """Kill ``identify --force`` over an old calibration (and into no folder) n times."""
+    args = ["identify", str(campaign), "--model", "proposed", "--force"]
+
+    def new_calibration(out: Path) -> None:
+        params = ap.read_parameters(out)
+        assert params.encoder_maps, f"{out} is not the new (proposed) calibration"
+        assert {p.name for p in out.iterdir()} == {"parameters.json", "calibrated.urdf",
+                                                   "encoder_maps.csv", "report.json"}
+
+    return _kill_over(campaign.parent / "old_cal", "calibration", work, "cal",
+                      lambda out: [*args, "--out", str(out)],
+                      _timed([*args, "--out", str(work / "probe")], work), seed, n,
+                      new_calibration, (None, 0, 1))
 
 
 def kill_simulate(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
     """Kill ``simulate --force`` over an old campaign (and into no folder) n times."""
     args = ["simulate", "--samples-per-location", "30", "--samples-per-socket", "5", "--seed",
             "7", "--force"]
-    full = _timed([*args, str(work / "probe_sim")], work)
-    rng = np.random.default_rng(seed)
-    outcomes = []
-    for i in range(n):
-        parent = work / f"sim{i}"
-        parent.mkdir()
-        out = parent / "camp"
-        existed = rng.random() < 0.7
-        if existed:
-            subprocess.run(["cp", "-a", str(campaign), str(out)], check=True)
-        code = _kill_after(_start(*args, str(out), cwd=parent), _delay(rng, full))
-        assert _visible(parent) <= {"camp"}, f"stray output beside {out}: {_visible(parent)}"
-        if not out.exists():
-            assert not existed, f"kill #{i}: the old campaign is gone"
-            outcomes.append("none")
-        elif existed and _same_tree(out, campaign):
-            outcomes.append("old")
-        else:
-            camp = ap.read_campaign(out)
-            assert camp.spat is not None and len(camp.spat.location) == 4 * 30
-            assert (out / "truth.json").is_file() and (out / "truth_sockets.csv").is_file()
-            outcomes.append("new")
-        assert code in (None, 0)
-    return outcomes
+
+    def new_campaign(out: Path) -> None:
+        camp = ap.read_campaign(out)
+        assert camp.spat is not None and len(camp.spat.location) == 4 * 30
+        assert (out / "truth.json").is_file() and (out / "truth_sockets.csv").is_file()
+
+    return _kill_over(campaign, "campaign", work, "camp", lambda out: [*args, str(out)],
+                      _timed([*args, str(work / "probe_sim")], work), seed, n, new_campaign,
+                      (None, 0))
 
 
 @pytest.fixture(scope="module")
