@@ -10,7 +10,6 @@ model, whatever the number of samples.
 from __future__ import annotations
 
 import io
-import json
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.arm import Arm, load_arm
+from aacmm_pin.bar_scatter import read_report
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.encoder_map import correct_readouts
 from aacmm_pin.identification import measured_positions
@@ -111,7 +111,7 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
         params = read_parameters(path)
         folder = path if path.is_dir() else path.parent
         default_label = folder.resolve().name or "model"
-        offsets = _nest_offsets(folder / "report.json")
+        offsets = _nest_offsets(path)
     arm = load_arm(params.arm)
     check_against_arm(params, arm)
     rot, trans = params.rotation(), params.translation
@@ -136,13 +136,13 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
     return ModelResiduals(name, params, arm, nest, predicted, measured, validation, sockets)
 
 
-def _nest_offsets(report: Path) -> dict[str, list[float]]:
-    """Return a calibration's estimated nest offsets (location -> um), {} if not recorded."""
-    try:
-        data = json.loads(report.read_text())
-    except (OSError, ValueError):
-        return {}
-    offsets = data.get("nest_offsets_um") if isinstance(data, dict) else None
+def _nest_offsets(caldir: Path) -> dict[str, list[float]]:
+    """Return a calibration's estimated nest offsets (location -> um), {} if not recorded.
+
+    ``caldir``: the folder or its ``parameters.json`` (its ``report.json``, read as
+    :func:`aacmm_pin.bar_scatter.read_report` reads it: bounded, never a neighbour's).
+    """
+    offsets = (read_report(caldir) or {}).get("nest_offsets_um")
     if not isinstance(offsets, dict):
         return {}
     return {str(k): [float(x) for x in v] for k, v in offsets.items()

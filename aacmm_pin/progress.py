@@ -44,7 +44,7 @@ class Progress:
         self.stream = stream if stream is not None else sys.stderr
         self.n = 0
         self.state: dict[str, Any] = {}
-        self._start = time.perf_counter()
+        self._start = time.monotonic()
         self._last_log = self._start
         self._logged = False
         self._bar: Any = None
@@ -64,8 +64,8 @@ class Progress:
             if state:
                 self._bar.set_postfix({k: _format(v) for k, v in self.state.items()}, refresh=False)
             return
-        now = time.perf_counter()
-        if now - max(self._last_log, _last_shown(now)) >= LOG_EVERY_S:
+        now = time.monotonic()
+        if now - max(self._last_log, _last_shown()) >= LOG_EVERY_S:
             self._last_log = now
             self._log(now)
 
@@ -74,7 +74,7 @@ class Progress:
         if self._bar is not None:
             self._bar.close()
         elif self.enabled and self._logged:
-            self._log(time.perf_counter(), done=True)
+            self._log(time.monotonic(), done=True)
 
     def _log(self, now: float, done: bool = False) -> None:
         count = f"{self.n}" + (f"/{self.total}" if self.total is not None else "")
@@ -249,14 +249,9 @@ def phase(text: str) -> None:
         _current.phase = text
 
 
-def _last_shown(now: float) -> float:
-    """Return when the running heartbeat's command last showed a line (``-inf`` without one).
-
-    On the clock of ``time.perf_counter``, as ``now``.
-    """
-    if _current is None:
-        return float("-inf")
-    return now - (time.monotonic() - _current.last_write)
+def _last_shown() -> float:
+    """Return the ``time.monotonic`` of the running command's last shown line (-inf: none)."""
+    return float("-inf") if _current is None else _current.last_write
 
 
 def idle() -> None:
