@@ -1,4 +1,4 @@
-r"""The arm: a URDF following aacmm_pin's conventions, read with yourdfpy, run on Pinocchio.
+r"""The arm: a URDF following aacmm_pin's conventions, read as an XML tree, run on Pinocchio.
 
 Conventions (the default arm ``urdf/aacmm7.urdf`` follows them; a user's arm is another URDF that
 does too):
@@ -37,7 +37,6 @@ Two Pinocchio views of one arm:
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import re
 import threading
@@ -46,15 +45,18 @@ from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from xml.etree import ElementTree
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
-import yourdfpy
 
 from aacmm_pin._chain import BatchedChain
 from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.sizes import Sizes, sizes_of_urdf, sizes_path
+from aacmm_pin.urdf_tree import Joint, UrdfTree, read_urdf
+
+if TYPE_CHECKING:
+    import yourdfpy
 
 DEFAULT_ARM = "aacmm7"
 ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
@@ -118,13 +120,13 @@ def resolve_arm_path(arm: str | Path) -> Path:
                              f"(embedded: {', '.join(EMBEDDED)})")
 
 
-def _chains(robot: yourdfpy.Robot, path: Path | str) -> dict[str, list[yourdfpy.Joint]]:
+def _chains(joints: list[Joint], path: Path | str) -> dict[str, list[Joint]]:
     """Return tool joint name -> the joints from the root link to that tool joint, root first."""
-    by_child = {j.child: j for j in robot.joints}
-    tools = [j for j in robot.joints if j.type == "fixed" and TOOL_PATTERN.match(j.name)]
+    by_child = {j.child: j for j in joints}
+    tools = [j for j in joints if j.type == "fixed" and TOOL_PATTERN.match(j.name)]
     if not tools:
         raise ArmModelError(path, f"no fixed joint named '{TOOL_JOINT}' (or 'tool_<name>') carrying "
-                                  f"the stylus (joints: {', '.join(j.name for j in robot.joints)})")
+                                  f"the stylus (joints: {', '.join(j.name for j in joints)})")
     if len(tools) > 1 and any(j.name == TOOL_JOINT for j in tools):
         raise ArmModelError(path, f"tool joints {', '.join(j.name for j in tools)}: name one tool "
                                   f"'{TOOL_JOINT}', or several 'tool_<name>', not both")
@@ -133,44 +135,55 @@ def _chains(robot: yourdfpy.Robot, path: Path | str) -> dict[str, list[yourdfpy.
         chain = [tool]
         while chain[-1].parent in by_child:
             chain.append(by_child[chain[-1].parent])
-            if len(chain) > len(robot.joints):
+            if len(chain) > len(joints):
                 raise ArmModelError(path, "the joints form a loop")
         out[tool.name] = chain[::-1]
     return out
 
 
-def _next_axis(joints: list[yourdfpy.Joint]) -> np.ndarray | None:
+def _next_axis(joints: list[Joint]) -> np.ndarray | None:
     """Return the axis of the first revolute joint of ``joints`` in the frame before them.
 
     The origins on the way (nominal geometry, and the revolute's own) rotate it.
     """
     rot = np.eye(3)
     for joint in joints:
-        if joint.origin is not None:
-            rot = rot @ np.asarray(joint.origin, dtype=float)[:3, :3]
+        rot = rot @ joint.origin[:3, :3]
         if joint.type in _MOVABLE:
-            axis: np.ndarray = rot @ np.asarray(joint.axis, dtype=float)
+            axis: np.ndarray = rot @ joint.axis
             return axis
     return None
 
 
-def _tree_order(robot: yourdfpy.Robot) -> dict[str, int]:
+def build_model(urdf: UrdfTree) -> pin.Model:
+    """Return Pinocchio's model of a URDF tree.
+
+    Raises:
+        ArmModelError: naming the file and what Pinocchio's URDF parser said.
+    """
+    try:
+        return pin.buildModelFromXML(urdf.xml())
+    except (RuntimeError, ValueError) as exc:
+        raise ArmModelError(urdf.path, f"Pinocchio cannot build a model from it: {exc}") from None
+
+
+def _tree_order(urdf: UrdfTree) -> dict[str, int]:
     """Return joint name -> rank in the depth-first order in which Pinocchio numbers the tree."""
-    model = pin.buildModelFromXML(_to_xml(robot))
+    model = build_model(urdf)
     kinds = (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)
     return {f.name: k for k, f in enumerate(model.frames) if f.type in kinds}
 
 
-def _error_frame(joint: yourdfpy.Joint, next_axis: np.ndarray | None, path: Path | str
-                 ) -> ErrorFrame:
+def _error_frame(joint: Joint, next_axis: np.ndarray | None, path: Path | str) -> ErrorFrame:
     """Read one error frame from its fixed joint, checking it holds one elementary transform."""
     match = ERROR_FRAME_PATTERN.match(joint.name)
     assert match is not None
     kind = match.group(1)
-    origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=float)
+    origin = joint.origin
     if kind == "dth":
         if next_axis is None:
-            raise ArmModelError(path, f"error frame '{joint.name}' has no revolute joint after it")
+            raise ArmModelError(path, f"line {joint.line}: error frame '{joint.name}' has no "
+                                      "revolute joint after it")
         axis, is_angle = next_axis, True
     elif kind in _ROT_LETTER:
         axis, is_angle = _UNIT[_ROT_LETTER[kind]], True
@@ -186,7 +199,7 @@ def _error_frame(joint: yourdfpy.Joint, next_axis: np.ndarray | None, path: Path
                or np.linalg.norm(origin[:3, :3] - np.eye(3)) > 1e-9)
     if bad:
         what = "rotation about" if is_angle else "translation along"
-        raise ArmModelError(path, f"error frame '{joint.name}' must hold a pure {what} "
+        raise ArmModelError(path, f"line {joint.line}: error frame '{joint.name}' must hold a pure {what} "
                                   f"{np.round(axis, 6).tolist()} (its origin is {origin.tolist()})")
     return ErrorFrame(joint.name, is_angle, axis, value)
 
@@ -197,17 +210,18 @@ class Arm:
     Use :func:`load_arm` to make one.
     """
 
-    def __init__(self, urdf: yourdfpy.URDF, source: Path | str, name: str):
+    def __init__(self, urdf: UrdfTree, source: Path | str, name: str):
         self.source = source
         """Where the URDF came from (path)."""
         self.name = name
         """Arm name as given by the user: an embedded arm's name or a URDF path."""
-        self._robot = urdf.robot
-        chains = _chains(self._robot, source)
-        rank = _tree_order(self._robot)
+        self._urdf = urdf
+        all_joints = urdf.joints()
+        chains = _chains(all_joints, source)
+        rank = _tree_order(urdf)
         on_chain = {j.name: j for chain in chains.values() for j in chain}
         joints = sorted(on_chain.values(), key=lambda j: rank[j.name])
-        self._joints = {j.name: j for j in self._robot.joints}
+        self._joints = {j.name: j for j in all_joints}
         self.axis_names: list[str] = [j.name for j in joints if j.type in _MOVABLE]
         """Encoder axes (revolute joints on the tools' chains) in tree order (see the module
         docstring): axis n is ``axis_names[n - 1]``, readout column ``q<n>_deg``."""
@@ -215,7 +229,7 @@ class Arm:
             raise ArmModelError(source, "no revolute joint between the root link and the tool")
         self.tool_joints: list[str] = sorted(chains, key=rank.__getitem__)
         """The tool joints (``tool`` or ``tool_<name>``), in tree order."""
-        self.off_chain: list[str] = [j.name for j in self._robot.joints
+        self.off_chain: list[str] = [j.name for j in all_joints
                                      if j.type != "fixed" and j.name not in on_chain]
         """Movable joints on no tool's chain: held fixed at zero in the Pinocchio models."""
         next_axis: dict[str, np.ndarray | None] = {}
@@ -227,18 +241,18 @@ class Arm:
                     seen = next_axis.setdefault(joint.name, axis)
                     if (seen is None) != (axis is None) or (
                             seen is not None and axis is not None and not np.allclose(seen, axis)):
-                        raise ArmModelError(source, f"error frame '{joint.name}' sits before a "
-                                                    "branch whose next revolute axes differ")
+                        raise ArmModelError(source, f"line {joint.line}: error frame "
+                                                    f"'{joint.name}' sits before a branch whose "
+                                                    "next revolute axes differ")
                 elif joint.type not in ("fixed", *_MOVABLE):
-                    raise ArmModelError(source, f"joint '{joint.name}' is {joint.type}; an AACMM "
-                                                "chain holds only revolute and fixed joints")
+                    raise ArmModelError(source, f"line {joint.line}: joint '{joint.name}' is "
+                                                f"{joint.type}; an AACMM chain holds only "
+                                                "revolute and fixed joints")
         self.error_frames: list[ErrorFrame] = [_error_frame(j, next_axis[j.name], source)
                                                for j in joints if j.name in next_axis]
         """The DH error parameters in tree order (chain order for a serial arm)."""
         self.nominal_tools: dict[str, np.ndarray] = {
-            name: (np.eye(4) if chains[name][-1].origin is None
-                   else np.asarray(chains[name][-1].origin, dtype=float))[:3, 3].copy()
-            for name in self.tool_joints}
+            name: chains[name][-1].origin[:3, 3].copy() for name in self.tool_joints}
         """Tool joint -> tool vector held by the URDF, shape (3,), in m, in its parent's frame."""
         self.nominal_tool: np.ndarray = self.nominal_tools[self.tool_joints[0]]
         """Tool vector of the first (for a serial arm: the only) tool, shape (3,), in m."""
@@ -328,18 +342,25 @@ class Arm:
 
     @cached_property
     def joint_limits(self) -> np.ndarray:
-        """Lower and upper readout limits of each axis, shape (n_axes, 2), in rad."""
+        """Lower and upper readout limits of each axis, shape (n_axes, 2), in rad.
+
+        A revolute joint's ``<limit lower upper>``; -pi / pi where the URDF states none (and for
+        continuous joints).
+        """
         out = np.tile([-np.pi, np.pi], (self.n_axes, 1))
         for i, name in enumerate(self.axis_names):
             joint = self._joints[name]
-            if joint.type == "revolute" and joint.limit is not None:
-                out[i] = [joint.limit.lower, joint.limit.upper]
+            if joint.type == "revolute":
+                out[i] = [v if v is not None else d
+                          for v, d in zip((joint.lower, joint.upper), out[i])]
         return out
 
     # ------------------------------------------------------------------ URDF views
-    def urdf_robot(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
-                   tools: dict[str, np.ndarray] | None = None) -> yourdfpy.Robot:
-        """Return a copy of the URDF description with error frames and tools set to these values.
+    def urdf_tree(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                  tools: dict[str, np.ndarray] | None = None) -> UrdfTree:
+        """Return a copy of the URDF's tree with error frames and tools set to these values.
+
+        Everything else in the file is kept as written (see :mod:`aacmm_pin.urdf_tree`).
 
         Args:
             dh: error frame name -> value (m or rad); missing names keep the URDF's values.
@@ -359,20 +380,40 @@ class Arm:
             if name not in self.tool_joints:
                 raise FrameNotFound(name, self.tool_joints)
             vectors[name] = value
-        robot = copy.deepcopy(self._robot)
-        for joint in robot.joints:
-            if joint.name in dh:
-                joint.origin = self.error_frame(joint.name).transform(dh[joint.name])
-            elif joint.name in vectors:
-                origin = np.eye(4) if joint.origin is None else np.array(joint.origin, dtype=float)
-                origin[:3, 3] = np.asarray(vectors[joint.name], dtype=float).reshape(3)
-                joint.origin = origin
-        return robot
+        tree = self._urdf.copy()
+        for name, entry in dh.items():
+            frame = self.error_frame(name)
+            # a translation's rotation text stays as written
+            tree.set_origin(name, frame.transform(float(entry)), keep_rotation=not frame.is_angle)
+        for name, vector in vectors.items():
+            origin = np.eye(4)
+            origin[:3, 3] = np.asarray(vector, dtype=float).reshape(3)
+            tree.set_origin(name, origin, keep_rotation=True)
+        return tree
 
     def urdf_string(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
                     tools: dict[str, np.ndarray] | None = None) -> str:
-        """Return the URDF text with error frames and tools set to these values."""
-        return _to_xml(self.urdf_robot(dh, tool, tools))
+        """Return the URDF text with error frames and tools set to these values.
+
+        The rest of the file stays as written: visuals, transmissions, ``<gazebo>``, comments.
+        """
+        return self.urdf_tree(dh, tool, tools).xml()
+
+    def urdf_robot(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                   tools: dict[str, np.ndarray] | None = None) -> yourdfpy.Robot:
+        """Return yourdfpy's description of :meth:`urdf_string` (for its scene graph and meshes).
+
+        Raises:
+            FrameNotFound: if ``dh`` or ``tools`` names a parameter the arm does not have.
+        """
+        import io
+
+        import yourdfpy  # its import (trimesh, scipy.spatial) costs ~0.3 s: only here
+
+        text = self.urdf_string(dh, tool, tools).encode()
+        urdf = yourdfpy.URDF.load(io.BytesIO(text), build_scene_graph=False, load_meshes=False,
+                                  build_collision_scene_graph=False, load_collision_meshes=False)
+        return urdf.robot
 
     def runtime_model(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
                       tools: dict[str, np.ndarray] | None = None) -> pin.Model:
@@ -382,9 +423,10 @@ class Arm:
         by the encoder maps, see :func:`aacmm_pin.encoder_map.correct_readouts`); the frames
         ``tool_links`` are the tool points. Movable joints on no tool's chain are fixed at zero.
         """
-        robot = self.urdf_robot(dh, tool, tools)
-        _fix_joints(robot, self.off_chain)
-        return pin.buildModelFromXML(_to_xml(robot))
+        tree = self.urdf_tree(dh, tool, tools)
+        for name in self.off_chain:
+            tree.make_fixed(name)
+        return build_model(tree)
 
     @cached_property
     def identification(self) -> IdentificationModel:
@@ -402,44 +444,35 @@ class IdentificationModel:
     """
 
     def __init__(self, arm: Arm):
-        robot = copy.deepcopy(arm._robot)
-        by_name = {f.name: f for f in arm.error_frames}
-        big = yourdfpy.Limit(effort=0.0, velocity=1.0, lower=-1e3, upper=1e3)
-        for joint in robot.joints:
-            if joint.name in by_name:
-                frame = by_name[joint.name]
-                joint.type = "revolute" if frame.is_angle else "prismatic"
-                joint.axis = frame.axis.copy()
-                joint.origin = np.eye(4)
-                joint.limit = big
-            elif joint.type in ("revolute", "continuous"):
-                joint.type, joint.limit = "revolute", big
-        _fix_joints(robot, arm.off_chain)
+        tree = arm._urdf.copy()
+        for frame in arm.error_frames:
+            tree.make_one_dof(frame.name, "revolute" if frame.is_angle else "prismatic", frame.axis,
+                              zero_origin=True)
+        for name in arm.axis_names:
+            tree.make_one_dof(name, "revolute", arm._joints[name].axis, zero_origin=False)
+        for name in arm.off_chain:
+            tree.make_fixed(name)
         for tool_name in arm.tool_joints:
-            tool = next(j for j in robot.joints if j.name == tool_name)
-            robot.joints.remove(tool)
+            tool = arm._joints[tool_name]
+            tree.remove_joint(tool_name)
             parent = tool.parent
             for i, c in enumerate("xyz"):
                 name = f"{tool_name}_{c}"
                 child = tool.child if i == 2 else f"{name}_frame"
-                robot.joints.append(yourdfpy.Joint(name=name, type="prismatic", parent=parent,
-                                                   child=child, origin=np.eye(4),
-                                                   axis=np.eye(3)[i], limit=big))
                 if i < 2:
-                    robot.links.append(yourdfpy.Link(name=child))
+                    tree.add_link(child)
+                tree.add_joint(name, "prismatic", parent, child, np.eye(3)[i])
                 parent = child
         parent = "mt"
-        robot.links.append(yourdfpy.Link(name="mt"))
+        tree.add_link("mt")
         for i, name in enumerate(BASE_JOINTS):
             child = arm.root_link if i == 5 else f"{name}_frame"
-            axis = np.eye(3)[[0, 1, 2, 1, 0, 2][i]]
-            robot.joints.append(yourdfpy.Joint(name=name, type="prismatic" if i < 3 else "revolute",
-                                               parent=parent, child=child, origin=np.eye(4),
-                                               axis=axis, limit=big))
             if i < 5:
-                robot.links.append(yourdfpy.Link(name=child))
+                tree.add_link(child)
+            tree.add_joint(name, "prismatic" if i < 3 else "revolute", parent, child,
+                           np.eye(3)[[0, 1, 2, 1, 0, 2][i]])
             parent = child
-        self.model: pin.Model = pin.buildModelFromXML(_to_xml(robot))
+        self.model: pin.Model = build_model(tree)
         """The Pinocchio model."""
         self._local = threading.local()
         self.tool_frames: list[int] = [self.model.getFrameId(link) for link in arm.tool_links]
@@ -469,39 +502,6 @@ class IdentificationModel:
         return data
 
 
-def _fix_joints(robot: yourdfpy.Robot, names: list[str]) -> None:
-    """Turn the named joints into fixed joints at zero (their origin kept), in place."""
-    for joint in robot.joints:
-        if joint.name in names:
-            joint.type, joint.axis, joint.limit, joint.mimic = "fixed", None, None, None
-
-
-def _to_xml(robot: yourdfpy.Robot) -> str:
-    """Serialise a yourdfpy robot description to URDF text."""
-    text = yourdfpy.URDF(robot=robot, build_scene_graph=False, load_meshes=False).write_xml_string()
-    return text.decode() if isinstance(text, bytes) else text
-
-
-def _refuse_entities(path: str | Path) -> None:
-    """Raise if the URDF declares an XML entity (an entity could move a link unseen).
-
-    Raises:
-        ArmModelError: naming the entity, its line and column.
-    """
-    from xml.parsers import expat
-
-    parser = expat.ParserCreate()
-
-    def declared(name: str, *_: object) -> None:
-        raise ArmModelError(path, f"line {parser.CurrentLineNumber}, column "
-                                  f"{parser.CurrentColumnNumber + 1}: the XML entity '{name}' is "
-                                  "declared; entities are not expanded: write the values out")
-
-    parser.EntityDeclHandler = declared
-    with open(path, "rb") as f:
-        parser.ParseFile(f)
-
-
 def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
     """Load an arm from a URDF path or an embedded arm's name (default: ``aacmm7``).
 
@@ -510,19 +510,7 @@ def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
             file, and the line and column for XML syntax errors).
     """
     path = resolve_arm_path(arm)
-    try:  # strict syntax check first: yourdfpy silently recovers from broken XML
-        ElementTree.parse(path)
-    except ElementTree.ParseError as exc:
-        line, column = exc.position
-        raise ArmModelError(path, f"line {line}, column {column + 1}: invalid XML: {exc}") from None
-    _refuse_entities(path)  # neither ElementTree nor yourdfpy's lxml then sees one expanded
-    try:
-        urdf = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
-                                  build_collision_scene_graph=False, load_collision_meshes=False)
-    except Exception as exc:  # lxml syntax errors carry line/column; others name the problem
-        lineno = getattr(exc, "lineno", None)
-        where = f" (line {lineno}, column {getattr(exc, 'offset', '?')})" if lineno else ""
-        raise ArmModelError(path, f"cannot read URDF{where}: {exc}") from exc
+    urdf = read_urdf(path)
     return Arm(urdf, path, str(arm))
 
 

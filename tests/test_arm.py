@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -89,6 +94,54 @@ def test_urdf_string_writes_values_that_load_back(arm, tmp_path):
     assert model.nq == 7
 
 
+EXTRAS = """
+  <!-- the integrator's note -->
+  <gazebo reference="base_link"><material>Gazebo/Grey</material></gazebo>
+  <transmission name="t1"><type>transmission_interface/SimpleTransmission</type>
+    <joint name="A1"><hardwareInterface>EffortJointInterface</hardwareInterface></joint>
+    <actuator name="m1"><mechanicalReduction>50</mechanicalReduction></actuator></transmission>
+  <ros2_control name="arm" type="system"><hardware><plugin>mock_components/GenericSystem</plugin>
+    </hardware></ros2_control>
+</robot>"""
+
+
+def test_calibrated_urdf_keeps_everything_else_the_user_wrote(arm, tmp_path):
+    """Writing calibrated values changes the error frames' and the tool's origins only: comments,
+    <gazebo>, <transmission>, <ros2_control>, visuals and inertias stay as written, and an
+    independent reader (yourdfpy) reads the values back."""
+    path = tmp_path / "mine.urdf"
+    path.write_text(arm.source.read_text().replace("</robot>", EXTRAS))
+    mine = load_arm(path)
+    values = {name: 1e-4 * (k + 1) for k, name in enumerate(mine.error_names)}
+    text = mine.urdf_string(values, np.array([0.001, 0.002, -0.121]))
+    for kept in ("the integrator's note", "Gazebo/Grey", "<mechanicalReduction>50<",
+                 "mock_components/GenericSystem", "<inertia ", "<cylinder "):
+        assert kept in text, kept
+    assert text.count("<joint ") == arm.source.read_text().count("<joint ") + 1  # + transmission's
+    out = tmp_path / "calibrated.urdf"
+    out.write_text(text)
+    robot = yourdfpy.URDF.load(str(out), build_scene_graph=False, load_meshes=False).robot
+    origins = {j.name: np.asarray(j.origin, float) for j in robot.joints}
+    for name, value in values.items():
+        np.testing.assert_allclose(origins[name], mine.error_frame(name).transform(value),
+                                   atol=1e-15)
+    np.testing.assert_allclose(origins["tool"][:3, 3], [0.001, 0.002, -0.121], atol=1e-15)
+    assert mine.urdf_robot(values).name == "aacmm7"  # the yourdfpy view of the same text
+
+
+def test_loading_an_arm_does_not_import_yourdfpy():
+    """The arm is read as an XML tree: neither yourdfpy nor trimesh (~0.3 s of imports) is loaded
+    to load an arm, build its models or write its URDF."""
+    code = ("import sys\nfrom aacmm_pin import load_arm\narm = load_arm()\n"
+            "arm.identification; arm.runtime_model(); arm.urdf_string()\n"
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'yourdfpy', 'trimesh'}))\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         check=True, timeout=120).stdout
+    assert out.strip() == "[]"
+
+
 def test_unknown_parameter_name_lists_choices(arm):
     """Setting a parameter the arm lacks names it and lists the valid ones."""
     with pytest.raises(FrameNotFound, match="dx99.*dx21"):
@@ -102,6 +155,21 @@ def test_unknown_parameter_name_lists_choices(arm):
     (lambda s: s.replace('<origin rpy="{a} 0 0"/>', '<origin rpy="0 {a} 0"/>'),
      "must hold a pure rotation about"),
     (lambda s: s.replace("</robot>", "<robot>"), "line"),
+    (lambda s: s.replace('<origin xyz="0 0 0.3"/>', '<origin xyz="0 0 0,3"/>'),
+     r"line 7: joint 'H': origin xyz: 3 finite numbers expected, got '0 0 0,3'"),
+    (lambda s: s.replace('<origin xyz="0 0 0.3"/>', '<origin xyz="0 0 nan"/>'),
+     "line 7: joint 'H': origin xyz"),
+    (lambda s: s.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>'),
+     "joint 'J2': axis xyz is zero"),
+    (lambda s: s.replace('type="revolute"><parent link="base"/>', 'type="hinge"><parent link="base"/>'),
+     "line 5: joint 'J1': type 'hinge'"),
+    (lambda s: s.replace('<child link="tip"/>', '<child link="tipp"/>'),
+     "joint 'tool': child link 'tipp' is not declared"),
+    (lambda s: s.replace('<parent link="l2"/><child link="tip"/>', '<child link="tip"/>'),
+     "joint 'tool': no <parent link"),
+    (lambda s: s.replace('name="H"', 'name="J1"'), "line 7: joint 'J1': a second joint"),
+    (lambda s: s.replace('<robot name="two_axis">', '<robt name="two_axis">').replace(
+        "</robot>", "</robt>"), "root element is <robt>"),
 ])
 def test_bad_urdf_is_named(tmp_path, edit, message):
     """A URDF that breaks a convention or XML syntax raises ArmModelError naming file and cause."""

@@ -20,7 +20,7 @@ from aacmm_pin import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-HEAVY = ("pinocchio", "yourdfpy", "scipy", "matplotlib")
+HEAVY = ("numpy", "pinocchio", "yourdfpy", "scipy", "matplotlib")
 COMMANDS = {("axes",), ("simulate",), ("predict",), ("identify",), ("discover",), ("validate",),
             ("uncertainty",), ("plan",), ("demo",), ("view",), ("acquire",), ("fake-devices",),
             ("iso10360", "spat"), ("iso10360", "sphere"), ("iso10360", "ldia"),
@@ -118,6 +118,41 @@ def test_building_the_parser_imports_no_heavy_module():
     assert version == aacmm_pin.__version__
     assert [m for m in HEAVY if m in modules] == []
     assert "aacmm_pin" in modules
+
+
+BLAS_PROBE = (
+    "import json, os, sys\n"
+    "from aacmm_pin.cli import one_blas_thread_at_start\n"
+    "did = one_blas_thread_at_start()\n"
+    "import numpy, scipy.linalg\n"
+    "from threadpoolctl import threadpool_info\n"
+    "print(json.dumps([did, sorted({i['num_threads'] for i in threadpool_info()\n"
+    "                               if i['internal_api'] == 'openblas'})]))\n")
+
+
+@pytest.mark.parametrize("user, did, threads", [
+    ({}, True, {1}),  # nothing set: numpy's and scipy's OpenBLAS start with one thread each
+    ({"OPENBLAS_NUM_THREADS": "2"}, False, {2}),  # the user's setting stands
+    ({"OMP_NUM_THREADS": "2"}, False, {2}),
+])
+def test_the_program_starts_openblas_with_one_thread_unless_the_user_set_threads(user, did, threads):
+    """Before numpy is imported, the command line starts OpenBLAS with one thread; a user's
+    thread setting stands (the machine has 2 cores: 2 threads show it was not overridden)."""
+    env = {k: v for k, v in ENV.items() if k not in cli.BLAS_THREAD_VARIABLES} | user
+    out = subprocess.run([sys.executable, "-c", BLAS_PROBE], capture_output=True, text=True,
+                         env=env, check=True, timeout=120).stdout
+    got_did, got_threads = json.loads(out)
+    assert got_did is did
+    if (os.cpu_count() or 1) >= 2 or did:
+        assert set(got_threads) == threads
+
+
+def test_blas_threads_are_left_alone_once_numpy_is_loaded(monkeypatch):
+    """In a process that imported numpy already (the Python API, tests), nothing is changed."""
+    for name in cli.BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert cli.one_blas_thread_at_start() is False
+    assert not any(name in os.environ for name in cli.BLAS_THREAD_VARIABLES)
 
 
 def test_python_m_runs_the_command():

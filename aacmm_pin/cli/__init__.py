@@ -70,6 +70,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                         "BLIS_NUM_THREADS")
+"""Environment variables that set a BLAS library's threads: a user's setting of any of them stands."""
+
+
+def one_blas_thread_at_start() -> bool:
+    """Start OpenBLAS with one thread here and in the processes started; return whether it did.
+
+    Every computation of aacmm_pin runs with one BLAS thread (products of a few hundred columns:
+    :func:`aacmm_pin._blas.single_threaded_blas`), but OpenBLAS starts a pool of threads when it
+    is loaded, once in numpy and once in scipy: on 2 cores that costs ~0.2 s of CPU per command
+    (`aacmm-pin identify` of a paper-sized campaign: 0.92 -> 0.70 s; ``benchmarks/cli.py``). Only
+    at the start of the program, before numpy is imported, and only when the user set none of
+    :data:`BLAS_THREAD_VARIABLES`.
+    """
+    if "numpy" in sys.modules or any(v in os.environ for v in BLAS_THREAD_VARIABLES):
+        return False
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    return True
+
+
 QUIET_COMMANDS = ("acquire", "fake-devices")
 """Commands without a heartbeat: they run until stopped and print their own status."""
 
@@ -79,6 +100,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from aacmm_pin.progress import Heartbeat
 
     args = build_parser().parse_args(argv)
+    one_blas_thread_at_start()
     # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
     beat = args.command not in QUIET_COMMANDS
     try:
