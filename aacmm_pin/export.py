@@ -59,7 +59,8 @@ def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: boo
 def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
     """Write the files of a calibration folder into an existing ``folder`` (not atomically)."""
     params = cal.parameters
-    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)))
+    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
+                                          encoding="utf-8")
     if sizes_path(arm.source).is_file():
         write_sizes(arm.sizes, sizes_path(folder / "calibrated.urdf"))
     write_parameters(params.replace(arm="calibrated.urdf"), folder / "parameters.json")

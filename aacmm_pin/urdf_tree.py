@@ -223,8 +223,10 @@ class UrdfTree:
 
     def xml(self) -> str:
         """Return the URDF text (the document's comments and every element kept)."""
-        text: bytes = etree.tostring(self._tree, xml_declaration=True, encoding="UTF-8")
-        return text.decode("utf-8") + "\n"
+        root = self.root
+        nodes = [*reversed(list(root.itersiblings(preceding=True))), root, *root.itersiblings()]
+        return "<?xml version='1.0' encoding='UTF-8'?>\n" + "".join(
+            etree.tostring(node, encoding="unicode", with_tail=False) + "\n" for node in nodes)
 
 
 def read_urdf(path: str | Path) -> UrdfTree:
