@@ -17,6 +17,16 @@ stated rule, and every one is listed in the report:
    singular value is below ``2 sigma`` (sigma: the R-Test noise) is *not determined*; its
    component is held at the start value by a constraint row (truncated SVD). A parameter or node
    is *identifiable* when more than half of its scaled unit vector lies in the determined subspace.
+
+Where the Jacobian is taken: :func:`aacmm_pin.identify` decides all three at the start values,
+then checks the held directions where one Gauss-Newton step of that constrained problem lands
+(the residual is nearly linear in the errors: near the solution) and again at the solution. A
+check that holds another number of directions (:func:`held_count`) decides them again there; one
+that holds as many keeps the start's. So a direction that only the start makes degenerate is
+judged as at the solution before the solve: the nominal tool sits on the A7 axis, where a
+direction mixing dth60 with dx76 and one mixing a76 with dy76 move nothing, while with the
+identified tool 75 um off the axis 160,000 samples determine them (3.2 and 3.3 sigma where the
+step lands and at the solution).
 """
 
 from __future__ import annotations

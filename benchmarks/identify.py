@@ -237,21 +237,27 @@ peak was higher):
 {scaling}
 
 From 16,000 to 160,000 samples the CPU time per sample changes by a factor {growth:.2f}. One
-evaluation (residuals and Jacobian) costs less than linearly more; the factor comes from the number
-of evaluations. `identify` decides which directions the data determine (singular value of a
-plausible change >= 2 sigma, an absolute threshold) at the start values, solves, and checks the
-decision at the solution; a second solve follows only when the check holds a different number of
-directions. At 160,000 samples it does: two directions, one mixing dth60 with dx76 and one a76
-with dy76, have singular values below 0.5 sigma at the start values and 3.2 and 3.3 sigma at the
-solution, so they are held in the first solve and determined in the second. They tell apart
-only through a stylus off the A7 axis: the nominal tool sits on it, the identified one is 75 um
-off. With 16,000 samples they are at 1.0 sigma at the solution (held either way, one solve). The
-singular values grow as the square root of the number of samples, so this is the data determining
-more, not a numerical effect: the second solve is needed for the same result. Both solves, the
-checks and
-the covariance share their Jacobians (the solver's last one, at the solution, is not computed
-again), and which map constants are gauges is decided by a blocked QR of the dense block and the
-map constants (R only) instead of an SVD of the tall dense block."""
+evaluation (residuals and Jacobian) costs less than linearly more; the rest comes from the number
+of evaluations (they include the two residuals of the Gauss-Newton step below; the count varies by
+a few with the noise draw, since a solve ends where a step's gain falls to the cost's rounding).
+`identify` decides which directions the data determine (singular value of a plausible change >= 2
+sigma, an absolute threshold) at the start values, takes one Gauss-Newton step of that constrained
+problem and checks the decision where it lands, before the solve, then again at the solution; a
+check that holds a different number of directions decides them again at its point (at the solution
+that costs another solve). The residual is nearly linear in the errors, so the step lands near the
+solution, and how many directions are held does not depend on the start values: two directions, one
+mixing dth60 with dx76 and one a76 with dy76, have singular values below 0.5 sigma at the start
+values (the nominal tool sits on the A7 axis, and only a stylus off the axis tells them apart) but
+3.2 and 3.3 sigma with 160,000 samples where the step lands and at the solution (the identified
+tool is 75 um off the axis): they are determined from the first solve on, one solve. Decided at the
+start values and checked only at the solution, they were held in a first solve and freed in a
+second. With 16,000 samples they are at 1.0 sigma (held either way). The singular values grow as
+the square root of the number of samples, so this is the data determining more, not a numerical
+effect. The step's Jacobian is the decision's at the start, the one where the step lands serves the
+check there and the solve's first step, the solver's last one (at the solution) the check there and
+the covariance: no Jacobian is computed twice. Which map constants are gauges is decided by a
+blocked QR of the dense block and the map constants (R only) instead of an SVD of the tall dense
+block."""
     write_section("identify", body)
 
 

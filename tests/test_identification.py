@@ -316,3 +316,27 @@ def test_implausible_fit_rms_is_not_success(arm, small_sim):
     assert not cal.success and cal.fit_rms > 200e-6
     assert "inputs disagree" in cal.message and "locations.csv" in cal.message
     assert identify(small_sim.campaign, arm, model="dh").success  # 27 um: a DH model's error
+
+
+@pytest.mark.parametrize("robust", [False, True])
+def test_every_residual_evaluation_is_counted_and_reported(arm, small_sim, monkeypatch, robust):
+    """``nfev`` and the progress callback see every residual evaluation: the solves' and the
+    Gauss-Newton step's that decides the held directions."""
+    from aacmm_pin.progress import Progress
+    from aacmm_pin.solver import Problem
+
+    seen = {"fun": 0, "progress": 0}
+    fun, update = Problem.fun, Progress.update
+
+    def counted(self, z):
+        seen["fun"] += 1
+        return fun(self, z)
+
+    def reported(self, n=1, **state):
+        seen["progress"] += n
+        return update(self, n, **state)
+
+    monkeypatch.setattr(Problem, "fun", counted)
+    monkeypatch.setattr(Progress, "update", reported)
+    cal = identify(small_sim.campaign, arm, nests="estimate", robust=robust)
+    assert cal.nfev == seen["fun"] == seen["progress"] > 0
