@@ -840,7 +840,8 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
         return decide(jac_x, x)
 
     now = decide(jac_now, x_start)
-    z_now, nfev = _decision_point(now.problem, jac_now if same else None, on_evaluation)
+    z_now, f_at, nfev = _decision_point(now.problem, jac_now if same else None, on_evaluation)
+    f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
     x_now = now.problem.x(z_now)
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
@@ -849,7 +850,7 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
         if again is not None:
             # the solve starts at x_now put on the new constraints (held at the start's values),
             # a held component away from it: x_now's Jacobian still serves the first step
-            now, z_now = again, again.problem.z(x_now)
+            now, z_now, f_now = again, again.problem.z(x_now), None
     last: BlockJacobian | None = None  # the solver's last, taken at its solution: jacobian(x_now)
     at_solution: BlockJacobian | None = None  # the data Jacobian at the final x, for the covariance
     for _round in range(3):  # checked at the solution
@@ -860,13 +861,15 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
             if again is None:
                 at_solution = jac_now  # the same number held: the decision stands
                 break
-            now, z_now = again, again.problem.z(x_now)
+            now, z_now, f_now = again, again.problem.z(x_now), None
         # the solve's first Jacobian is this one (handed over, not kept here: a campaign's
         # Jacobian can weigh hundreds of MB)
         handed = [jac_now] if same else []
         del jac_now
         res = now.problem.solve(z_now, settings, jac, on_evaluation=on_evaluation,
-                                keep_jacobian=same, jac0=handed.pop() if handed else None)
+                                keep_jacobian=same, jac0=handed.pop() if handed else None,
+                                f0=f_now)
+        f_now = None
         last = now.problem.take_jacobian(res.x)
         nfev += res.nfev
         z_now = res.x
@@ -888,8 +891,9 @@ class _Decision(NamedTuple):
 
 
 def _decision_point(problem: Problem, jac0: BlockJacobian | None,
-                    on_evaluation: Callable[[float], None]) -> tuple[np.ndarray, int]:
-    """Return where the held directions are checked before the solve, and the evaluations (2).
+                    on_evaluation: Callable[[float], None]
+                    ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Return where the held directions are checked before the solve, its residual, evaluations.
 
     One Gauss-Newton step of ``problem`` (constrained by the directions held at the start, its
     ``x_ref``, and preconditioned there) from the start: the ``dz`` minimising
@@ -908,14 +912,15 @@ def _decision_point(problem: Problem, jac0: BlockJacobian | None,
 
     Returns:
         The reduced coordinates after the step, shape (n_z,), if the step lowered the sum of
-        squared residuals, else the start's (zeros); and the residual evaluations taken (2).
+        squared residuals, else the start's (zeros); :meth:`Problem.fun` there (the solve from
+        that point does not evaluate it again); and the residual evaluations taken (2).
     """
     z0 = np.zeros(problem.p.shape[1])
     f0 = problem.fun_reported(z0, on_evaluation)
     z1 = problem.newton_step(z0, f0, jac0)
     del jac0
     f1 = problem.fun_reported(z1, on_evaluation)
-    return (z1 if f1 @ f1 < f0 @ f0 else z0), 2
+    return (z1, f1, 2) if f1 @ f1 < f0 @ f0 else (z0, f0, 2)
 
 
 def _robust(first: _Fit, fit: Callable[[np.ndarray | None], _Fit],

@@ -238,8 +238,12 @@ peak was higher):
 
 From 16,000 to 160,000 samples the CPU time per sample changes by a factor {growth:.2f}. One
 evaluation (residuals and Jacobian) costs less than linearly more; the rest comes from the number
-of evaluations (they include the two residuals of the Gauss-Newton step below; the count varies by
-a few with the noise draw, since a solve ends where a step's gain falls to the cost's rounding).
+of evaluations (they include the two residuals of the Gauss-Newton step below). A solve ends at an
+accepted point when the first step tried from it is shorter than 1e-4 standard deviations
+(`solver.STEP_TOL`; as strict as scipy's `ftol` of 1e-12 here, which it replaced as the ending:
+below such a step the cost's change is its rounding, and the trust region rejected steps at random
+until the step's tolerance stopped it, 5 to 13 evaluations at every size depending on the noise
+draw). The residual at the step's point is handed to the solve that starts there.
 `identify` decides which directions the data determine (singular value of a plausible change >= 2
 sigma, an absolute threshold) at the start values, takes one Gauss-Newton step of that constrained
 problem and checks the decision where it lands, before the solve, then again at the solution; a
@@ -249,7 +253,9 @@ solution, and how many directions are held does not depend on the start values: 
 mixing dth60 with dx76 and one a76 with dy76, have singular values below 0.5 sigma at the start
 values (the nominal tool sits on the A7 axis, and only a stylus off the axis tells them apart) but
 3.2 and 3.3 sigma with 160,000 samples where the step lands and at the solution (the identified
-tool is 75 um off the axis): they are determined from the first solve on, one solve. Decided at the
+tool is 75 um off the axis): they are determined from the first solve on, one solve (which takes
+one step more than at 16,000 samples: the freed directions start where the first decision held
+them). Decided at the
 start values and checked only at the solution, they were held in a first solve and freed in a
 second. With 16,000 samples they are at 1.0 sigma (held either way). The singular values grow as
 the square root of the number of samples, so this is the data determining more, not a numerical
