@@ -401,7 +401,10 @@ class Arm:
 
     def urdf_robot(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
                    tools: dict[str, np.ndarray] | None = None) -> yourdfpy.Robot:
-        """Return yourdfpy's description of :meth:`urdf_string` (for its scene graph and meshes).
+        """Return yourdfpy's description of :meth:`urdf_string` (links, joints, visuals as written).
+
+        Read without a base folder, scene graph or meshes: to load meshes, write the text next to
+        them and load it with yourdfpy.
 
         Raises:
             FrameNotFound: if ``dh`` or ``tools`` names a parameter the arm does not have.

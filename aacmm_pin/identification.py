@@ -868,7 +868,7 @@ def _fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np
         del jac_now
         res = now.problem.solve(z_now, settings, jac, on_evaluation=on_evaluation,
                                 keep_jacobian=same, jac0=handed.pop() if handed else None,
-                                f0=f_now)
+                                f0=f_now, jac0_at=x_now)
         f_now = None
         last = now.problem.take_jacobian(res.x)
         nfev += res.nfev
@@ -920,6 +920,8 @@ def _decision_point(problem: Problem, jac0: BlockJacobian | None,
     z1 = problem.newton_step(z0, f0, jac0)
     del jac0
     f1 = problem.fun_reported(z1, on_evaluation)
+    # the plain sum of squares even for a robust loss: the point only decides the held directions
+    # and starts the solve, which minimises the loss from there
     return (z1, f1, 2) if f1 @ f1 < f0 @ f0 else (z0, f0, 2)
 
 

@@ -38,69 +38,16 @@ DENSE_LIMIT = 2e7
 """Up to this many Jacobian entries (residuals x unknowns) a refit factors the dense Jacobian once
 (Gauss-Newton steps, :func:`aacmm_pin.identification.refit`); above, it solves with LSMR."""
 STEP_TOL = 1e-4
-"""A solve (analytic Jacobian) ends at an accepted point when the first step the solver tries from
-it is shorter than this many standard deviations (its norm in reduced coordinates, so every
-combination of the unknowns would move less): the columns of ``J P`` are nearly orthonormal and
-every row's noise is the solve's sigma, so each reduced coordinate's standard deviation is about
-sigma, and the first trial from a point is the Gauss-Newton step when it fits the trust region.
-It is as strict as scipy's ``ftol`` of 1e-12 on these problems (a cost change of 1e-12 is a step
-of 0.7e-4 to 7e-4 sigma for 1,600 to 160,000 samples), but it does not wait for the cost: below
-such a step the cost's change is its rounding, and the trust region rejected steps at random
-until the step's tolerance stopped it (5 to 13 evaluations at every size, depending on the
-noise, the last ones moving nothing)."""
-SETTLED = 5
-"""``status`` of a solve that ended on :data:`STEP_TOL` (scipy's are -1 to 4)."""
-
-
-class _Settled(Exception):
-    """Raised by a watched residual function: the step from the last accepted point is negligible."""
-
-
-class _Watch:
-    """Watches one scipy solve and ends it when converged.
-
-    Evaluates its residuals, serves the caller's residual at the start, keeps the last accepted
-    point (scipy's callback) and ends the solve (:class:`_Settled`) when the first step tried from
-    it is below ``small`` (m of weighted residual per unit of z; 0: never).
-    """
-
-    def __init__(self, z0: np.ndarray, f0: np.ndarray | None, small: float,
-                 evaluate: Callable[[np.ndarray], np.ndarray]):
-        self.base = np.array(z0, dtype=float)
-        """The last accepted point (at first the start), reduced coordinates, shape (n_z,)."""
-        self.base_f: np.ndarray | None = None
-        """The residual at ``base``, once evaluated."""
-        self._served, self._small, self._evaluate = f0, small, evaluate
-        self._trial: tuple[np.ndarray, np.ndarray] | None = None
-        self._first = False  # the next call is the first step tried from ``base``
-        self.evaluations = 0
-        """Residual evaluations made (a served one is not one)."""
-
-    def fun(self, z: np.ndarray) -> np.ndarray:
-        """Return the residual at z (the solve's residual function)."""
-        if self._first:
-            self._first = False
-            if self._small > 0 and float(np.linalg.norm(z - self.base)) < self._small:
-                raise _Settled
-        at_start = self.base_f is None and np.array_equal(z, self.base)
-        if at_start and self._served is not None:
-            out, self._served = self._served, None
-        else:
-            out = self._evaluate(z)
-            self.evaluations += 1
-        if at_start:
-            self.base_f, self._first = out, True
-        self._trial = (np.array(z, dtype=float), out)
-        return out
-
-    def accepted(self, intermediate_result: OptimizeResult) -> None:
-        """Take the point of an accepted step (scipy's callback; it passes the iterate by name)."""
-        z = np.asarray(intermediate_result.x, dtype=float)
-        if self._trial is None or not np.array_equal(self._trial[0], z):
-            self._trial = (z.copy(), self._evaluate(z))  # not reached: scipy accepts its last trial
-            self.evaluations += 1
-        self.base, self.base_f = self._trial
-        self._first = True
+"""A solve ends at an accepted point when no reduced coordinate's Gauss-Newton step from it exceeds
+this many standard deviations: scipy's ``gtol`` (on the largest entry of the gradient
+``(J P)^T f``) set to ``STEP_TOL`` x the solve's sigma. The columns of ``J P`` are nearly
+orthonormal and every row's noise is the solve's sigma, so the gradient is about minus the
+Gauss-Newton step and each reduced coordinate's standard deviation is about sigma. It is as strict
+as scipy's ``ftol`` of 1e-12 on these problems (a cost change of 1e-12 is a step of 0.7e-4 to 7e-4
+sigma for 1,600 to 160,000 samples), but it does not wait for the cost: below such a step the
+cost's change is its rounding, and the trust region rejected steps at random until the step's
+tolerance stopped it (5 to 13 evaluations at every size, depending on the noise, the last ones
+moving nothing)."""
 RANK_TOL = 1e-10
 """Relative singular value below which a constraint row adds no rank."""
 FRAME_ANGLE = 1e-2
@@ -527,7 +474,7 @@ class Problem:
     def solve(self, z0: np.ndarray, settings: SolverSettings, jac: str = "analytic",
               on_evaluation: Callable[[float], None] | None = None,
               keep_jacobian: bool = False, jac0: BlockJacobian | None = None,
-              f0: np.ndarray | None = None) -> OptimizeResult:
+              f0: np.ndarray | None = None, jac0_at: np.ndarray | None = None) -> OptimizeResult:
         """Minimise from z0 with scipy's trust-region reflective solver (LSMR steps).
 
         Args:
@@ -543,11 +490,14 @@ class Problem:
                 built from it instead of computed again. Released after that first call (a caller
                 that wants its memory back keeps no reference).
             f0: :meth:`fun` at z0 when the caller has it (not evaluated again).
+            jac0_at: the full vector where ``jac0`` was taken when it is not ``x(z0)`` exactly
+                (a point a held component away): then it serves scipy's first step only and is
+                never kept as the Jacobian at the solution.
 
         Returns:
-            scipy's result (``nfev``: the residual evaluations made); with the analytic Jacobian
-            without ``jac`` (the last Jacobian's memory is released: :meth:`jac_operator` gives
-            it again). A solve that ended on :data:`STEP_TOL` has ``status`` :data:`SETTLED`.
+            scipy's result (``nfev``: the residual evaluations made; ``status`` 1 when it ended on
+            :data:`STEP_TOL`); with the analytic Jacobian without ``jac`` (the last Jacobian's
+            memory is released: :meth:`jac_operator` gives it again).
         """
         self._last = None
         # The analytic Jacobian goes to LSMR as an operator at every size: in the preconditioned
@@ -556,12 +506,15 @@ class Problem:
         # solution to 1e-4 of its standard deviations, tests/test_identification.py)
         dense = jac != "analytic"
 
-        def evaluate(z: np.ndarray) -> np.ndarray:
-            return self.fun_reported(z, on_evaluation)
+        served = [] if f0 is None else [(np.array(z0, dtype=float), f0)]
+        evaluations = [0]
 
-        # finite differences call the residual at nearby points: no step test there
-        watch = _Watch(z0, f0, 0.0 if dense else STEP_TOL * self.sigma_class, evaluate)
-        njev = [0]
+        def fun(z: np.ndarray) -> np.ndarray:
+            given = served.pop() if served else None  # the caller's residual at z0, first call
+            if given is not None and np.array_equal(given[0], z):
+                return given[1]
+            evaluations[0] += 1
+            return self.fun_reported(z, on_evaluation)
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
         previous: list[list[BlockJacobian]] = []
 
@@ -569,6 +522,8 @@ class Problem:
         # the caller's Jacobian at z0, for scipy's first call only
         first = [] if jac0 is None or jac != "analytic" else [(np.array(z0, dtype=float), jac0)]
         del jac0
+        exact = jac0_at is None or np.array_equal(jac0_at, self.x(z0))
+        used_given = [False]  # the current operator holds the caller's (maybe inexact) Jacobian
 
         def operator(z: np.ndarray) -> LinearOperator:
             # scipy keeps the first Jacobian and the current one while it builds the next: only
@@ -577,32 +532,25 @@ class Problem:
             while previous:
                 previous.pop().clear()
             given = first.pop() if first else None
-            op, held = self._operator(z, given[1] if given is not None
-                                      and np.array_equal(given[0], z) else None)
+            use = given is not None and np.array_equal(given[0], z)
+            op, held = self._operator(z, given[1] if use and given is not None else None)
+            used_given[0] = use
             del given
-            njev[0] += 1
             previous.append(held)
             at[:] = [np.array(z, dtype=float)]
             return op
 
         if jac == "analytic":
             jac_fun = self.jac if dense else operator
-        try:
-            out = least_squares(watch.fun, z0, jac=jac_fun, method="trf",
-                                tr_solver="exact" if dense else "lsmr", loss=settings.loss,
-                                f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
-                                xtol=1e-12, gtol=1e-12, callback=watch.accepted)
-        except _Settled:  # converged at the last accepted point
-            assert watch.base_f is not None
-            out = OptimizeResult(
-                x=watch.base, fun=watch.base_f, cost=0.5 * float(watch.base_f @ watch.base_f),
-                njev=njev[0], status=SETTLED, success=True,
-                message=f"the next step would move the solution by less than {STEP_TOL:g} of "
-                        "its standard deviation")
-        out.nfev = watch.evaluations
+        out = least_squares(fun, z0, jac=jac_fun, method="trf",
+                            tr_solver="exact" if dense else "lsmr", loss=settings.loss,
+                            f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
+                            xtol=1e-12, gtol=STEP_TOL * self.sigma_class)
+        out.nfev = evaluations[0]
         if previous:  # the last operator's Jacobian is not kept with the result
             held = previous.pop()
-            if keep_jacobian and held and np.array_equal(at[0], out.x):
+            if (keep_jacobian and held and np.array_equal(at[0], out.x)
+                    and (exact or not used_given[0])):
                 self._last = (at[0], held[0])
             held.clear()
             out.pop("jac", None)

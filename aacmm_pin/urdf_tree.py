@@ -2,8 +2,9 @@ r"""A URDF as its XML tree: the joints aacmm_pin reads from it and the edits it 
 
 The arm's models and the exported ``calibrated.urdf`` are the user's own URDF with a few joints
 edited (an error frame's or a tool's origin set, joints made fixed or 1-DOF, joints and links
-added), so everything else in the file is kept as written: visuals, meshes, materials, inertias,
-``<transmission>``, ``<gazebo>``, ``<ros2_control>``, comments. lxml parses strictly (no recovery
+added), so every other element and comment in the file is kept: visuals, meshes, materials,
+inertias, ``<transmission>``, ``<gazebo>``, ``<ros2_control>`` (lxml writes them back: a DOCTYPE
+is dropped, CDATA and character references come back as plain text). lxml parses strictly (no recovery
 from broken XML, no entities, no network) and remembers each element's line, so that a bad joint
 is named with its file and line. Pinocchio builds the models from the edited text; it is the
 reference for the kinematics, this module only reads the joints' names, links, origins, axes and
@@ -15,6 +16,7 @@ Units as in URDF: m and rad.
 from __future__ import annotations
 
 import copy
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,15 +53,19 @@ class Joint:
     """Line of the ``<joint>`` element in its file (None for a joint built in memory)."""
 
 
+NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+"""A number as URDF parsers read it (not Python's ``float``: ``1_0``, ``inf``, other digits)."""
+
+
 def _numbers(text: str | None, count: int, what: str, where: str, path: Path | str
              ) -> np.ndarray:
-    """Parse ``count`` finite numbers separated by white space (None: zeros)."""
+    """Parse ``count`` finite numbers separated by spaces (None: zeros)."""
     if text is None:
         return np.zeros(count)
-    try:
-        values = np.array([float(v) for v in text.split()])
-    except ValueError:
-        values = np.zeros(0)
+    parts = text.split(" ")
+    parts = [p for p in parts if p]
+    good = all(NUMBER.fullmatch(p) for p in parts)
+    values = np.array([float(p) for p in parts]) if good else np.zeros(0)
     if values.size != count or not np.all(np.isfinite(values)):
         raise ArmModelError(path, f"{where}: {what}: {count} finite numbers expected, got {text!r}")
     return values

@@ -239,8 +239,9 @@ peak was higher):
 From 16,000 to 160,000 samples the CPU time per sample changes by a factor {growth:.2f}. One
 evaluation (residuals and Jacobian) costs less than linearly more; the rest comes from the number
 of evaluations (they include the two residuals of the Gauss-Newton step below). A solve ends at an
-accepted point when the first step tried from it is shorter than 1e-4 standard deviations
-(`solver.STEP_TOL`; as strict as scipy's `ftol` of 1e-12 here, which it replaced as the ending:
+accepted point when no reduced coordinate's Gauss-Newton step from it exceeds 1e-4 standard
+deviations (`solver.STEP_TOL` as scipy's `gtol`; as strict as its `ftol` of 1e-12 here, which it
+replaced as the ending:
 below such a step the cost's change is its rounding, and the trust region rejected steps at random
 until the step's tolerance stopped it, 5 to 13 evaluations at every size depending on the noise
 draw). The residual at the step's point is handed to the solve that starts there.

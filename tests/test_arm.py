@@ -159,6 +159,8 @@ def test_unknown_parameter_name_lists_choices(arm):
      r"line 7: joint 'H': origin xyz: 3 finite numbers expected, got '0 0 0,3'"),
     (lambda s: s.replace('<origin xyz="0 0 0.3"/>', '<origin xyz="0 0 nan"/>'),
      "line 7: joint 'H': origin xyz"),
+    (lambda s: s.replace('<origin xyz="0 0 0.3"/>', '<origin xyz="0 0 0_3"/>'),
+     "line 7: joint 'H': origin xyz"),  # Python reads 0_3 as 3, URDF parsers refuse it
     (lambda s: s.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>'),
      "joint 'J2': axis xyz is zero"),
     (lambda s: s.replace('type="revolute"><parent link="base"/>', 'type="hinge"><parent link="base"/>'),

@@ -70,20 +70,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
-                         "BLIS_NUM_THREADS")
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS",
+                         "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
 """Environment variables that set a BLAS library's threads: a user's setting of any of them stands."""
 
 
 def one_blas_thread_at_start() -> bool:
     """Start OpenBLAS with one thread here and in the processes started; return whether it did.
 
-    Every computation of aacmm_pin runs with one BLAS thread (products of a few hundred columns:
-    :func:`aacmm_pin._blas.single_threaded_blas`), but OpenBLAS starts a pool of threads when it
-    is loaded, once in numpy and once in scipy: on 2 cores that costs ~0.2 s of CPU per command
-    (`aacmm-pin identify` of a paper-sized campaign: 0.92 -> 0.70 s; ``benchmarks/cli.py``). Only
-    at the start of the program, before numpy is imported, and only when the user set none of
-    :data:`BLAS_THREAD_VARIABLES`.
+    identify, discover and uncertainty run with one BLAS thread anyway (products of a few hundred
+    columns: :func:`aacmm_pin._blas.single_threaded_blas`), and the other commands gain little
+    from more (2 cores, paper-sized campaign, CPU / wall s with one thread vs two: plan 17.2 / 17.2
+    vs 24.9 / 16.4, validate 0.38 / 0.40 vs 0.59 / 0.38, simulate 5.7 / 5.7 vs 5.2 / 5.1), but
+    OpenBLAS starts a pool of threads when it is loaded, once in numpy and once in scipy: ~0.2 s
+    of CPU per command (`aacmm-pin identify` of a paper-sized campaign: 0.92 -> 0.70 s;
+    ``benchmarks/cli.py``). Only at the start of the program, before numpy is imported, and only
+    when the user set none of :data:`BLAS_THREAD_VARIABLES` (a user's setting stands).
     """
     if "numpy" in sys.modules or any(v in os.environ for v in BLAS_THREAD_VARIABLES):
         return False
