@@ -30,6 +30,7 @@ spec = importlib.util.spec_from_file_location("example03",
                                               ROOT / "examples" / "03_laser_tracker_ur5_wam.py")
 assert spec is not None and spec.loader is not None
 example = importlib.util.module_from_spec(spec)
+sys.modules[spec.name] = example  # its dataclasses look their module up while it runs
 spec.loader.exec_module(example)
 
 
