@@ -24,7 +24,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -33,6 +33,8 @@ from scipy.optimize import OptimizeResult, least_squares
 from scipy.sparse.linalg import LinearOperator, lsmr
 
 from aacmm_pin.unknowns import BlockJacobian, Unknowns
+
+T = TypeVar("T")
 
 DENSE_LIMIT = 2e7
 """Up to this many Jacobian entries (residuals x unknowns) a refit factors the dense Jacobian once
@@ -110,6 +112,21 @@ class Nuisance:
     def n_frames(self) -> int:
         """Number of instrument frames besides the main one."""
         return int(self.frame_start.shape[0])
+
+
+def _handed(z0: np.ndarray, value: T | None) -> Callable[[np.ndarray], T | None]:
+    """Return ``take(z)``: ``value`` on the first call if z is z0 exactly, else (and later) None.
+
+    What a caller has at a solve's start (its residual, its Jacobian) serves scipy's first call
+    there instead of being computed again, and is released after it.
+    """
+    held = [] if value is None else [(np.array(z0, dtype=float), value)]
+
+    def take(z: np.ndarray) -> T | None:
+        given = held.pop() if held else None
+        return given[1] if given is not None and np.array_equal(given[0], z) else None
+
+    return take
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -506,21 +523,21 @@ class Problem:
         # solution to 1e-4 of its standard deviations, tests/test_identification.py)
         dense = jac != "analytic"
 
-        served = [] if f0 is None else [(np.array(z0, dtype=float), f0)]
+        residual_at_start = _handed(z0, f0)
         evaluations = [0]
 
         def fun(z: np.ndarray) -> np.ndarray:
-            given = served.pop() if served else None  # the caller's residual at z0, first call
-            if given is not None and np.array_equal(given[0], z):
-                return given[1]
+            given = residual_at_start(z)
+            if given is not None:
+                return given
             evaluations[0] += 1
             return self.fun_reported(z, on_evaluation)
+
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
         previous: list[list[BlockJacobian]] = []
 
         at: list[np.ndarray] = []
-        # the caller's Jacobian at z0, for scipy's first call only
-        first = [] if jac0 is None or jac != "analytic" else [(np.array(z0, dtype=float), jac0)]
+        jacobian_at_start = _handed(z0, None if dense else jac0)
         del jac0
         exact = jac0_at is None or np.array_equal(jac0_at, self.x(z0))
         used_given = [False]  # the current operator holds the caller's (maybe inexact) Jacobian
@@ -531,10 +548,9 @@ class Problem:
             # is released first
             while previous:
                 previous.pop().clear()
-            given = first.pop() if first else None
-            use = given is not None and np.array_equal(given[0], z)
-            op, held = self._operator(z, given[1] if use and given is not None else None)
-            used_given[0] = use
+            given = jacobian_at_start(z)
+            op, held = self._operator(z, given)
+            used_given[0] = given is not None
             del given
             previous.append(held)
             at[:] = [np.array(z, dtype=float)]
