@@ -14,6 +14,8 @@ import sys
 import numpy as np
 from _report import compile_package, machine, write_section
 
+from aacmm_pin.cli import BLAS_THREAD_VARIABLES
+
 RUNS = 5
 ONE = {"OPENBLAS_NUM_THREADS": "1"}
 CASES: list[tuple[str, list[str], dict[str, str]]] = [
@@ -36,8 +38,7 @@ def cpu_of(cmd: list[str], extra: dict[str, str]) -> float:
 
     The environment is this one without BLAS thread variables, plus ``extra``.
     """
-    blas = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
-    env = {k: v for k, v in os.environ.items() if k not in blas} | extra
+    env = {k: v for k, v in os.environ.items() if k not in BLAS_THREAD_VARIABLES} | extra
     times = []
     for _ in range(RUNS):
         before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -7,12 +7,17 @@ about X, Y, Z), multiplied left to right.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 SAMPLE = SHARED / "sample-campaign"
+ROOT = Path(__file__).resolve().parents[1]
+"""The project's folder."""
+ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+"""Environment of a subprocess that imports this checkout's aacmm_pin."""
 
 # Nominal link lengths of the default arm (issue text), m.
 L2Z, L3X, L3Z, L5X, L5Z, L7X = 0.200, 0.600, 0.050, 0.050, 0.550, 0.100

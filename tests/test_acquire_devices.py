@@ -25,9 +25,8 @@ import pytest
 
 from aacmm_pin.campaign import read_campaign
 from aacmm_pin.cli.acquisition import add_parsers
+from tests.helpers import ENV, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 CLI = [sys.executable, "-m", "aacmm_pin"]
 FAULTS = ["--garbage", "0.01", "--checksum-errors", "0.01", "--out-of-range", "0.005",
           "--timeouts", "1", "--silence-s", "0.15"]

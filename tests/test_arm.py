@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -16,7 +14,7 @@ from aacmm_pin import kinematics
 from aacmm_pin.arm import load_arm
 from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.parameters import Parameters
-from tests.helpers import DH_NAMES, d_a, d_b, d_c, d_x, d_z
+from tests.helpers import DH_NAMES, ENV, d_a, d_b, d_c, d_x, d_z
 
 TWO_AXIS = """<?xml version="1.0"?>
 <robot name="two_axis">
@@ -135,9 +133,7 @@ def test_loading_an_arm_does_not_import_yourdfpy():
     code = ("import sys\nfrom aacmm_pin import load_arm\narm = load_arm()\n"
             "arm.identification; arm.runtime_model(); arm.urdf_string()\n"
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'yourdfpy', 'trimesh'}))\n")
-    root = Path(__file__).resolve().parents[1]
-    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV,
                          check=True, timeout=120).stdout
     assert out.strip() == "[]"
 

@@ -11,15 +11,13 @@ import os
 import subprocess
 import sys
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
 import aacmm_pin
 from aacmm_pin import cli
+from tests.helpers import ENV, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 HEAVY = ("numpy", "pinocchio", "yourdfpy", "scipy", "matplotlib")
 COMMANDS = {("axes",), ("simulate",), ("predict",), ("identify",), ("discover",), ("validate",),
             ("uncertainty",), ("plan",), ("demo",), ("view",), ("acquire",), ("fake-devices",),

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import filecmp
 import json
-import os
 import re
 import subprocess
 import sys
@@ -13,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import ENV, ROOT
+
 EXAMPLES = ROOT / "examples"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 FIGURES = ("fig5_rtest_displacement.png", "fig6_encoder_maps.png", "fig9_length_errors.png")
 LABELS = ("DH only, R-Test", "proposed, no R-Test", "proposed, R-Test")
 NUMBER = r"-?\d+\.\d+"

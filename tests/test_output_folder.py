@@ -20,9 +20,7 @@ from aacmm_pin.arm import resolve_arm_path
 from aacmm_pin.cli import main
 from aacmm_pin.errors import ArmModelError, FileFormatError
 from aacmm_pin.output_folder import OutputExistsError, output_folder
-
-ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+from tests.helpers import ENV
 
 
 def run_cli(argv: list[str]) -> tuple[int, str]:
