@@ -6,7 +6,7 @@ a few micrometres, linearly in time, while each location is measured: an effect 
 not have. :func:`aacmm_pin.discover` names nothing, but its residual scan reports the final residual
 as *unexplained* (larger than the stated 2 um R-Test noise and following time). The script then
 registers a small user effect with :func:`aacmm_pin.effects.register_effect`: one
-``measurement`` term whose basis is the time since the location's first sample, per coordinate
+:class:`~aacmm_pin.effects.MeasurementTerm` whose basis is the time since the location's first sample, per coordinate
 (the fixture's creep rate), reruns discovery, which names it, and prints the held-out gap before
 and after. Writes both runs' ``discovery.json`` and figures (``discovery_unexplained.png``: the
 residual against time) in ``--out``. Exits with status 1 if the creep is not reported first, not
@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin import SimulationConfig, discover, load_arm, simulate_campaign, write_discovery
-from aacmm_pin.effects import Effect, Kind, Term, register_effect, register_term
-from aacmm_pin.samples import Samples
+from aacmm_pin.effects import Effect, MeasurementTerm, Term, register_effect
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.samples import Samples
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="unexplained-example", help="output folder")
@@ -74,15 +75,28 @@ def creep_variable(samples: Samples) -> tuple[str, np.ndarray]:
 
 def fixture_creep() -> Term:
     """The fixture creeps at a constant rate per coordinate while a location is measured."""
-    return Term("fixture_creep", "fixture_creep", Kind.MEASUREMENT,
-                ("fixture_creep.vx", "fixture_creep.vy", "fixture_creep.vz"), (2e-8,) * 3,
-                "the R-Test fixture creeps at a constant rate while each location is measured",
-                creep_basis, creep_variable)
+    return MeasurementTerm("fixture_creep", "fixture_creep",
+                           ("fixture_creep.vx", "fixture_creep.vy", "fixture_creep.vz"), (2e-8,) * 3,
+                           "the R-Test fixture creeps at a constant rate while each location is "
+                           "measured", follows=("time within each location",),
+                           basis_of=creep_basis, variable_of=creep_variable)
 
 
-register_effect(Effect("fixture_creep", "the R-Test fixture creeps in time within each location",
-                       lambda arm, samples: [fixture_creep()] if samples.t is not None else []))
-register_term(lambda key: fixture_creep() if key == "fixture_creep" else None, "fixture_creep")
+class FixtureCreep(Effect):
+    """The R-Test fixture creeps in time within each location."""
+
+    name = "fixture_creep"
+    description = "the R-Test fixture creeps in time within each location"
+    reads = ("t_s",)
+
+    def candidates(self, arm: Arm, samples: Samples) -> list[Term]:
+        return [fixture_creep()] if samples.t is not None else []
+
+    def term(self, key: str) -> Term | None:
+        return fixture_creep() if key == "fixture_creep" else None
+
+
+register_effect(FixtureCreep)
 
 # 4. rerun: discovery names the creep and the held-out gap shrinks
 second = discover(campaign, arm, start="proposed")

@@ -9,10 +9,11 @@ import pinocchio as pin
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin import kinematics
-from aacmm_pin._chain import CHUNK, BatchedChain
-from aacmm_pin.encoder_map import EncoderMap, correct_readouts
-from aacmm_pin.samples import Samples
+from aacmm_pin.effects import calibrated as kinematics
+from aacmm_pin.model import kinematics as model_kinematics
+from aacmm_pin.model._chain import CHUNK, BatchedChain
+from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts
+from aacmm_pin.model.samples import Samples
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = ["aacmm7", "ur5", "wam7", str(ROOT / "urdf" / "torso.urdf")]
@@ -131,12 +132,14 @@ def _off_nominal(arm: ap.Arm, seed: int) -> tuple[ap.Parameters, Samples]:
 
 
 def _reference_jacobians(arm: ap.Arm, params: ap.Parameters, samples: Samples, frame: str
-                         ) -> kinematics.StylusJacobians:
+                         ) -> model_kinematics.StylusJacobians:
     """The public Jacobians computed sample by sample with Pinocchio's computeFrameJacobian."""
     ident = arm.identification
     q_read = samples.q
-    offsets, scale = kinematics.extension_effects(arm, params, q_read, samples)
-    q = kinematics.identification_configuration(arm, params, q_read, frame, offsets)
+    change = kinematics.extension_adjustment(arm, params, q_read, samples)
+    assert change is not None
+    offsets, scale = change.offsets, change.scale
+    q = model_kinematics.identification_configuration(arm, params, q_read, frame, offsets)
     pos, jac = _pinocchio(ident.model, q, np.asarray(ident.tool_frames)[samples.tool])
     origin = params.translation if frame == "mt" else np.zeros(3)
     pos = origin + scale[:, None] * (pos - origin)
@@ -145,7 +148,7 @@ def _reference_jacobians(arm: ap.Arm, params: ap.Parameters, samples: Samples, f
     angles = jac[:, :, ident.axis_idx]
     slope = 1.0 + np.column_stack([params.encoder_maps[a].slope(q_read[:, a - 1])
                                    for a in range(1, arm.n_axes + 1)])
-    return kinematics.StylusJacobians(
+    return model_kinematics.StylusJacobians(
         position=pos, readouts=angles * slope[:, None, :], angles=angles,
         dh=jac[:, :, ident.error_idx], tool=jac[:, :, ident.tool_idx],
         rotation=jac[:, :, ident.base_idx[[4, 3, 5]]], translation=jac[:, :, ident.base_idx[:3]],
@@ -158,7 +161,7 @@ def test_public_kinematics_match_pinocchio_off_nominal(any_arm, frame):
     params, samples = _off_nominal(any_arm, 6)
     ref = _reference_jacobians(any_arm, params, samples, frame)
     got = kinematics.stylus_jacobians(any_arm, params, samples.q, frame, samples)
-    for name in ref._fields:
+    for name in (f for f in ref._fields if f != "tilts"):
         np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=TOL,
                                    err_msg=name)
     np.testing.assert_allclose(kinematics.stylus_positions(any_arm, params, samples.q, frame,
@@ -169,7 +172,9 @@ def test_predict_matches_pinocchio_runtime_model(any_arm):
     """predict equals Pinocchio's forward kinematics of the calibrated runtime model per sample."""
     params, samples = _off_nominal(any_arm, 7)
     model = any_arm.runtime_model(params.dh, tools=params.tool_vectors(any_arm))
-    offsets, scale = kinematics.extension_effects(any_arm, params, samples.q, samples)
+    change = kinematics.extension_adjustment(any_arm, params, samples.q, samples)
+    assert change is not None
+    offsets, scale = change.offsets, change.scale
     q = correct_readouts(samples.q, params.encoder_maps) + offsets
     fids = np.array([model.getFrameId(link) for link in any_arm.tool_links])[samples.tool]
     ref = _pinocchio(model, q, fids)[0] * scale[:, None]

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.campaign import PointLog
+from aacmm_pin.analyses.linear_scorer import LinearScorer, size_factors
+from aacmm_pin.data.campaign import PointLog
 from aacmm_pin.effects import backlash, compliance, crosstalk, encoder_harmonic, thermal
-from aacmm_pin.identifiability import plausible_sizes
-from aacmm_pin.identification import measurements
-from aacmm_pin.linear_scorer import LinearScorer, size_factors
-from aacmm_pin.samples import Samples
-from aacmm_pin.sizes import DEFAULT, Sizes, read_sizes, sizes_path, write_sizes
+from aacmm_pin.fit.identifiability import plausible_sizes
+from aacmm_pin.fit.identification import measurements
+from aacmm_pin.fit.unknowns import Unknowns
+from aacmm_pin.model.samples import Samples
+from aacmm_pin.model.sizes import DEFAULT, Sizes, read_sizes, sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC
-from aacmm_pin.unknowns import Unknowns
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"
@@ -31,8 +31,8 @@ def test_defaults_are_the_aacmm_constants():
             DEFAULT.x0_angle, DEFAULT.x0_translation) == (3.5e-4, 1e-4, 1e-4, 1e-4, 1e-2, 1e-2)
     assert ap.load_arm().sizes == DEFAULT
     for term in (compliance(2), backlash(3), crosstalk(2, 3), encoder_harmonic(4), thermal()):
-        np.testing.assert_array_equal(DEFAULT.term(term), np.asarray(term.plausible))
-    assert DEFAULT.term(compliance(1))[0] == 1e-5 and DEFAULT.term(backlash(1))[0] == 10 * ARCSEC
+        np.testing.assert_array_equal(term.sizes(DEFAULT), np.asarray(term.plausible))
+    assert compliance(1).sizes(DEFAULT)[0] == 1e-5 and backlash(1).sizes(DEFAULT)[0] == 10 * ARCSEC
 
 
 def test_embedded_robots_have_their_own_sizes():
@@ -41,7 +41,7 @@ def test_embedded_robots_have_their_own_sizes():
     assert wam.sizes.effects["compliance"] > ur5.sizes.effects["compliance"] > 1e-5
     assert wam.sizes.dh_length > ur5.sizes.dh_length > DEFAULT.dh_length
     assert "not fitted" in wam.sizes.source and "not fitted" in ur5.sizes.source
-    np.testing.assert_array_equal(wam.sizes.term(thermal()), [2.3e-5])
+    np.testing.assert_array_equal(thermal().sizes(wam.sizes), [2.3e-5])
     unknowns = Unknowns.full(wam, ap.Parameters.nominal(wam), (), (compliance(2), backlash(1)),
                              Samples(wam, np.zeros((2, 7))))
     sizes = plausible_sizes(unknowns)
@@ -95,7 +95,7 @@ def test_arm_reads_the_sizes_file_beside_its_urdf(tmp_path):
 def test_embedded_sizes_files_ship_in_the_wheel():
     """Every embedded arm's sizes file is force-included next to its URDF in the wheel."""
     text = (ROOT / "pyproject.toml").read_text()
-    for name in ap.arm.EMBEDDED:
+    for name in ap.model.arm.EMBEDDED:
         if sizes_path(ROOT / "urdf" / f"{name}.urdf").is_file():
             assert f'"urdf/{name}.sizes.json" = "aacmm_pin/urdf/{name}.sizes.json"' in text
 

@@ -1,0 +1,3 @@
+"""Analyses of a calibration: validation, uncertainty, planning, discovery, the residual scan,
+simulation and ISO 10360.
+"""

@@ -1,0 +1,62 @@
+r"""The effect library: named extensions of the arm model, for :func:`aacmm_pin.discover`.
+
+An effect (:class:`Effect`) is a physical cause of measurement error; it proposes terms
+(:class:`Term`), each a few parameters that the model is linear in, acting in one of a few ways
+(one subclass each: :class:`AngleTerm`, :class:`ScaleTerm`, :class:`TiltTerm`,
+:class:`MeasurementTerm`, :class:`MapTerm`; see :mod:`aacmm_pin.effects.base`).
+
+Built-in effects (one module each): ``encoder`` (map or low-order harmonics), ``compliance``
+(gravity torque about the joint axis, from the URDF inertias), ``lateral_compliance`` (gravity
+torque about the two axes perpendicular to a joint's), ``thermal`` (``temp_c``), ``backlash``
+(direction of motion), ``crosstalk`` (angle of a neighbouring axis), ``rtest`` (the sphere moving
+in its seat) and ``tool`` (in every start model). Add your own with :func:`register_effect`, from
+an installed package's ``aacmm_pin.effects`` entry point, or from a file
+(:func:`load_effect_file`, ``--effects-file`` on the command line); see
+:mod:`aacmm_pin.effects.registry`.
+
+Calibrated values of the terms live in ``Parameters.extensions`` (``parameters.json``
+``"extensions": {"compliance[A2]": [k], ...}``, SI units) and are applied by
+:func:`aacmm_pin.stylus_positions` and :func:`aacmm_pin.predict`.
+"""
+
+from aacmm_pin.effects.backlash import backlash
+from aacmm_pin.effects.base import (
+    Adjustment,
+    AngleTerm,
+    BasisTerm,
+    Effect,
+    MapTerm,
+    MeasurementTerm,
+    ModelSpec,
+    ScaleTerm,
+    StylusDerivatives,
+    Term,
+    TiltTerm,
+    Variable,
+)
+from aacmm_pin.effects.compliance import compliance
+from aacmm_pin.effects.crosstalk import crosstalk
+from aacmm_pin.effects.encoder import encoder_harmonic, encoder_map
+from aacmm_pin.effects.registry import (
+    LIBRARY,
+    EffectNotFound,
+    check_extensions,
+    effect_names,
+    library,
+    load_effect_file,
+    load_plugins,
+    measurement_shift,
+    register_effect,
+    term_from_key,
+    terms_of,
+)
+from aacmm_pin.effects.rtest import rtest
+from aacmm_pin.effects.thermal import thermal
+
+__all__ = [
+    "LIBRARY", "Adjustment", "AngleTerm", "BasisTerm", "Effect", "EffectNotFound", "MapTerm",
+    "MeasurementTerm", "ModelSpec", "ScaleTerm", "StylusDerivatives", "Term", "TiltTerm", "Variable",
+    "backlash", "check_extensions", "compliance", "crosstalk", "effect_names", "encoder_harmonic",
+    "encoder_map", "library", "load_effect_file", "load_plugins", "measurement_shift",
+    "register_effect", "rtest", "term_from_key", "terms_of", "thermal",
+]

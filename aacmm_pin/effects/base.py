@@ -1,0 +1,443 @@
+r"""The extension point: what an effect is, and one small class per way a term acts on the model.
+
+An *effect* (:class:`Effect`) is a physical cause of measurement error with a plain-language
+description. On an arm and its samples it proposes *terms* (:class:`Term`), one per axis where the
+effect is per-axis, each with a few parameters that the model is linear in, their plausible sizes
+and how they move the modelled point. A term acts in one of these ways (one subclass each):
+
+* :class:`AngleTerm`: an error of the true angle of one axis,
+  :math:`\Delta\theta_n = B(\text{samples}) \, v` with a basis B of shape (N, k);
+* :class:`ScaleTerm`: a uniform scale of every length of the arm (r-CS positions times
+  :math:`1 + B v`);
+* :class:`TiltTerm`: a small rotation of one joint about the two axes perpendicular to its own
+  (lateral deflection), :math:`(\delta_x, \delta_y) = B(\text{samples}) \, v` with B of shape
+  (N, 2, k); the point moves by :math:`\delta_x \, u_x \times (p - o) + \delta_y \, u_y \times
+  (p - o)` about the joint's origin o and lateral axes u (first order in the tilt);
+* :class:`MeasurementTerm`: a change of the *measured* point (e.g. the R-Test's), not of the arm;
+* :class:`MapTerm`: the paper's encoder error map of one axis (its nodes are the parameters).
+
+An effect also declares the per-sample columns it reads (:attr:`Effect.reads`, e.g. ``temp_c``)
+and the per-sample variables it offers the residual scan (:meth:`Effect.variables`); each term
+names the variables it follows (:attr:`Term.follows`), so a residual that follows a variable
+points at the terms on it. Register an effect with :func:`aacmm_pin.effects.register_effect`;
+installed packages offer theirs through the ``aacmm_pin.effects`` entry-point group.
+"""
+
+from __future__ import annotations
+
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple, Protocol
+
+import numpy as np
+
+from aacmm_pin.model.kinematics import Adjustment as Adjustment  # re-exported: terms fill it
+
+if TYPE_CHECKING:
+    from aacmm_pin.model.arm import Arm
+    from aacmm_pin.model.parameters import Parameters
+    from aacmm_pin.model.samples import Samples
+    from aacmm_pin.model.sizes import Sizes
+
+
+class StylusDerivatives(Protocol):
+    """What a term's columns need of :class:`aacmm_pin.model.kinematics.StylusJacobians`."""
+
+    @property
+    def position(self) -> np.ndarray:
+        """Stylus centres, shape (N, 3), m."""
+
+    @property
+    def angles(self) -> np.ndarray:
+        """d(position)/d(true joint angle), shape (N, 3, n_axes), m/rad."""
+
+    @property
+    def tilts(self) -> np.ndarray | None:
+        """d(position)/d(lateral tilt of each axis about its two lateral axes), shape
+        (N, 3, n_axes, 2), m/rad, or None where not computed.
+        """
+
+
+class Variable(NamedTuple):
+    """A per-sample variable the residual scan tests the residual against."""
+
+    name: str
+    """What it is, in words: ``the gravity torque on A2`` (unique; terms name it)."""
+    where: str
+    """Where it acts: an axis (``A2``), ``all``, a coordinate, ``stylus``."""
+    label: str
+    """Axis label with unit, for figures: ``gravity torque on A2 (N m)``."""
+    values: np.ndarray
+    """Its value at every sample, shape (N,), in the label's unit."""
+    kind: str = "global"
+    """How the scan fits it: ``global`` (over all samples), ``within`` (within each location),
+    ``levels`` (a few discrete values) or ``own`` (a measured displacement, tested on the other
+    coordinates' residual only)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Term(ABC):
+    """One extension of the model: a few parameters, linear in their effect (see module doc).
+
+    Terms are equal when their keys are. ``basis_of`` and ``variable_of`` (in the subclasses that
+    take them) should be module-level functions or ``functools.partial`` of them, so that
+    calibrations pickle.
+    """
+
+    key: str
+    """Unique name, e.g. ``compliance[A2]`` (the key in ``parameters.json``)."""
+    effect: str
+    """Name of the effect this term belongs to."""
+    names: tuple[str, ...]
+    """Names of the parameters, e.g. ``compliance[A2].k``."""
+    plausible: tuple[float, ...]
+    """Plausible size of every parameter on the default arm (SI): the scale of its prior, unless
+    the arm's sizes name the term's effect (:meth:`aacmm_pin.model.sizes.Sizes.size_of`)."""
+    description: str
+    """Plain-language description."""
+    axes: tuple[int, ...] = ()
+    """Axes the term acts on (empty for arm-wide terms); an angle term changes ``axes[0]``."""
+    follows: tuple[str, ...] = ()
+    """The :attr:`Variable.name` of each per-sample variable the term follows (residual scan)."""
+    slot: str = ""
+    """Terms of one slot describe the same thing and replace each other (default: the key)."""
+
+    def __post_init__(self) -> None:
+        if not self.slot:
+            object.__setattr__(self, "slot", self.key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Term) and other.key == self.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    @property
+    def axis(self) -> int:
+        """The axis the term changes (1-based): ``axes[0]``."""
+        return self.axes[0]
+
+    @property
+    def form(self) -> str:
+        """How the term describes its effect, in one word (``map``, ``harmonic``, ``gain``)."""
+        return "term"
+
+    @property
+    def is_extension(self) -> bool:
+        """Whether its values live in ``Parameters.extensions`` (maps live in the maps)."""
+        return True
+
+    def describe(self) -> str:
+        """Return the plain-language description."""
+        return self.description
+
+    def sizes(self, sizes: Sizes) -> np.ndarray:
+        """Return the plausible size of every parameter, shape (k,), SI (the prior's scale).
+
+        The arm's size of the term's effect where it has one, else the term's own ``plausible``.
+        """
+        own = np.asarray(self.plausible, dtype=float)
+        size = sizes.effects.get(self.effect)
+        return own if size is None else np.full(own.shape, float(size))
+
+    @property
+    def size_key(self) -> str:
+        """The sizes-file key whose factor scales this term's prior (``effects.<name>``)."""
+        return f"effects.{self.effect}"
+
+    def adjust(self, values: np.ndarray, samples: Samples, out: Adjustment) -> None:
+        """Add the term's change of the arm, with parameter values ``values`` (k,), to ``out``.
+
+        Terms that change the measured point, not the arm, add nothing (the default).
+        """
+
+    def shift(self, values: np.ndarray, samples: Samples) -> np.ndarray | None:
+        """Return the term's change of the *measured* point, shape (N, 3), m; None: it has none."""
+        return None
+
+    @abstractmethod
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """Return d(model point)/d(term parameters), shape (N, 3, k), at ``params``.
+
+        Args:
+            samples: the samples' readouts and per-sample columns (N).
+            stylus: stylus Jacobians in the output frame at ``params``.
+            params: the parameters (translation, the term's current value, the maps' grids).
+            touched: for a map term, the nodes that are its parameters, shape (n_axes, n_nodes).
+        """
+
+    @abstractmethod
+    def variable(self, samples: Samples) -> tuple[str, np.ndarray]:
+        """Return the label (with unit) and per-sample values of the term's variable (figures)."""
+
+    @abstractmethod
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """Return a label and every sample's residual seen along the term's direction (figures).
+
+        Args:
+            residuals: model - measured, shape (N, 3), m.
+            samples: the samples (N).
+            stylus: stylus Jacobians at the samples, in the residuals' frame.
+            origin: r-CS origin in that frame, shape (3,), m.
+        """
+
+    # ------------------------------------------------------------ discovery's model state
+    def in_model(self, model: ModelSpec) -> bool:
+        """Whether the model already holds this term (or one that describes the same thing)."""
+        return any(t.slot == self.slot for t in model.terms)
+
+    def added_to(self, model: ModelSpec) -> ModelSpec:
+        """Return the model with this term added (replacing a term of its slot)."""
+        return ModelSpec(tuple(t for t in model.terms if t.slot != self.slot) + (self,),
+                         model.map_axes, model.use_rtest)
+
+    def replaces(self, other: Term) -> bool:
+        """Whether this term may replace ``other`` (same axes) in one discovery step."""
+        return False
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What a model holds beyond DH, tool and X0: extension terms, encoder maps, the R-Test."""
+
+    terms: tuple[Term, ...] = ()
+    """Extension terms (values in ``Parameters.extensions``)."""
+    map_axes: tuple[int, ...] = ()
+    """Axes with an encoder map."""
+    use_rtest: bool = True
+    """Whether the measured R-Test displacement is added to the nest positions."""
+
+
+def _angle_along(axis: int, residuals: np.ndarray, stylus: StylusDerivatives
+                 ) -> tuple[str, np.ndarray]:
+    j = stylus.angles[:, :, axis - 1]
+    angle = np.sum(j * residuals, axis=1) / np.maximum(np.sum(j * j, axis=1), 1e-30)
+    return f"A{axis} angle residual (arcsec)", np.degrees(angle) * 3600
+
+
+Basis = Callable[["Samples"], np.ndarray]
+VariableOf = Callable[["Samples"], "tuple[str, np.ndarray]"]
+
+
+@dataclass(frozen=True, eq=False)
+class BasisTerm(Term):
+    """A term whose parameters multiply a per-sample basis (every way of acting but the map)."""
+
+    basis_of: Basis = field(default=lambda s: np.zeros((s.n, 0)), repr=False)
+    """Samples -> basis: (N, k) for angle and scale terms, (N, 2, k) for tilt terms, (N, 3, k)
+    for measurement terms."""
+    variable_of: VariableOf = field(default=lambda s: ("", np.zeros(s.n)), repr=False)
+    """Samples -> (label with unit, per-sample values) of the term's variable (figures)."""
+
+    def basis(self, samples: Samples) -> np.ndarray:
+        """Return the basis on these samples (see :attr:`basis_of`)."""
+        return self.basis_of(samples)
+
+    def variable(self, samples: Samples) -> tuple[str, np.ndarray]:
+        """Return the label and per-sample values of the term's variable."""
+        return self.variable_of(samples)
+
+
+@dataclass(frozen=True, eq=False)
+class AngleTerm(BasisTerm):
+    """An error of the true angle of axis ``axes[0]``: basis (N, k) times the values, rad."""
+
+    def adjust(self, values: np.ndarray, samples: Samples, out: Adjustment) -> None:
+        """Add the angle error to the axis' offsets."""
+        out.offsets[:, self.axis - 1] += self.basis(samples) @ values
+
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """d(point)/d(values): the axis' angle column times the basis, (N, 3, k)."""
+        cols: np.ndarray = stylus.angles[:, :, self.axis - 1, None] * self.basis(samples)[:, None, :]
+        return cols
+
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """The residual as an angle error of the axis (arcsec, least squares on its column)."""
+        return _angle_along(self.axis, residuals, stylus)
+
+
+@dataclass(frozen=True, eq=False)
+class ScaleTerm(BasisTerm):
+    """A uniform scale of every length of the arm: ``1 + basis @ values``."""
+
+    def adjust(self, values: np.ndarray, samples: Samples, out: Adjustment) -> None:
+        """Add to the length scale."""
+        out.scale += self.basis(samples) @ values
+
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """d(point)/d(values): the unscaled radius from the r-CS origin times the basis."""
+        basis = self.basis(samples)
+        scale = 1.0 + basis @ params.extensions.get(self.key, np.zeros(basis.shape[1]))
+        radial = (stylus.position - params.translation) / scale[:, None]
+        cols: np.ndarray = radial[:, :, None] * basis[:, None, :]
+        return cols
+
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """The residual along the radius from ``origin`` (um)."""
+        radial = stylus.position - origin
+        radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+        return "radial residual (um)", np.sum(residuals * radial, axis=1) * 1e6
+
+
+def _tilt_columns(stylus: StylusDerivatives, axis: int) -> np.ndarray:
+    if stylus.tilts is None:
+        raise ValueError("a tilt term needs the stylus Jacobians' tilt columns: "
+                         "stylus_jacobians(..., tilts=True)")
+    return stylus.tilts[:, :, axis - 1, :]
+
+
+@dataclass(frozen=True, eq=False)
+class TiltTerm(BasisTerm):
+    """A lateral tilt of joint ``axes[0]`` about its two lateral axes: basis (N, 2, k), rad."""
+
+    def adjust(self, values: np.ndarray, samples: Samples, out: Adjustment) -> None:
+        """Add the tilt to the joint's lateral tilts."""
+        out.tilts[:, self.axis - 1] += self.basis(samples) @ values
+
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """d(point)/d(values): the joint's two tilt columns times the basis, (N, 3, k)."""
+        tilt = _tilt_columns(stylus, self.axis)  # (N, 3, 2)
+        cols: np.ndarray = np.einsum("nij,njk->nik", tilt, self.basis(samples))
+        return cols
+
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """The residual as a lateral tilt of the joint (arcsec, least squares, its magnitude)."""
+        tilt = _tilt_columns(stylus, self.axis)
+        gram = np.einsum("nij,nik->njk", tilt, tilt) + 1e-30 * np.eye(2)
+        rhs = np.einsum("nij,ni->nj", tilt, residuals)
+        angle = np.linalg.solve(gram, rhs[:, :, None])[:, :, 0]
+        return f"A{self.axis} lateral tilt residual (arcsec)", np.degrees(
+            np.linalg.norm(angle, axis=1)) * 3600
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementTerm(BasisTerm):
+    """A change of the measured point, not of the arm: basis (N, 3, k) times the values, m."""
+
+    def shift(self, values: np.ndarray, samples: Samples) -> np.ndarray | None:
+        """Return the change of the measured point, (N, 3), m."""
+        shifted: np.ndarray = self.basis(samples) @ values
+        return shifted
+
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """d(point)/d(values): the basis itself."""
+        return self.basis(samples)
+
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """The residual along the R-Test displacement (um)."""
+        disp = samples.displacement
+        unit = np.zeros_like(residuals) if disp is None else disp / np.maximum(
+            np.linalg.norm(disp, axis=1, keepdims=True), 1e-12)
+        return "residual along the displacement (um)", np.sum(residuals * unit, axis=1) * 1e6
+
+
+@dataclass(frozen=True, eq=False)
+class MapTerm(Term):
+    """The encoder error map of axis ``axes[0]``: its nodes are the parameters (in the maps)."""
+
+    @property
+    def form(self) -> str:
+        """``map``."""
+        return "map"
+
+    @property
+    def is_extension(self) -> bool:
+        """No: a map's values live in ``Parameters.encoder_maps``."""
+        return False
+
+    def sizes(self, sizes: Sizes) -> np.ndarray:
+        """Every node's plausible size, the arm's ``map_node`` (a 0-d array: one for all nodes)."""
+        return np.asarray(sizes.map_node)
+
+    @property
+    def size_key(self) -> str:
+        """``map_node``."""
+        return "map_node"
+
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """d(point)/d(nodes): the axis' angle column times the interpolation weights."""
+        cols = params.map(self.axis).node_columns(samples.q[:, self.axis - 1],
+                                                  stylus.angles[:, :, self.axis - 1],
+                                                  None if touched is None else touched[self.axis - 1])
+        dense: np.ndarray = cols.toarray().reshape(samples.n, 3, -1)
+        return dense
+
+    def variable(self, samples: Samples) -> tuple[str, np.ndarray]:
+        """The axis' readout (deg)."""
+        return f"A{self.axis} readout (deg)", np.degrees(samples.q[:, self.axis - 1])
+
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """The residual as an angle error of the axis (arcsec)."""
+        return _angle_along(self.axis, residuals, stylus)
+
+    def in_model(self, model: ModelSpec) -> bool:
+        """Whether the axis has a map."""
+        return self.axis in model.map_axes
+
+    def added_to(self, model: ModelSpec) -> ModelSpec:
+        """The axis gets a map, which replaces the other terms of its slot."""
+        return ModelSpec(tuple(t for t in model.terms if t.slot != self.slot),
+                         model.map_axes + (self.axis,), model.use_rtest)
+
+    def replaces(self, other: Term) -> bool:
+        """A map replaces any other term of its slot (it holds every harmonic its nodes resolve)."""
+        return other.slot == self.slot and not isinstance(other, MapTerm)
+
+
+class Effect(ABC):
+    """A named physical effect: which terms it proposes, and what it reads and offers the scan.
+
+    Subclass it (one small class per effect, see the built-ins in :mod:`aacmm_pin.effects`) and
+    register an instance with :func:`aacmm_pin.effects.register_effect`.
+    """
+
+    name: str = ""
+    """Name, e.g. ``"compliance"`` (the key of its size in the sizes file)."""
+    description: str = ""
+    """Plain-language description."""
+    reads: tuple[str, ...] = ()
+    """Per-sample columns of the campaign files it reads (e.g. ``("temp_c",)``)."""
+    in_start: bool = False
+    """Whether every start model already has it (e.g. the tool vector)."""
+
+    @abstractmethod
+    def candidates(self, arm: Arm, samples: Samples) -> list[Term]:
+        """Return the terms worth trying on these samples (one per axis for per-axis effects)."""
+
+    @abstractmethod
+    def term(self, key: str) -> Term | None:
+        """Return the term a ``parameters.json`` extensions key names, or None if not its key."""
+
+    def variables(self, arm: Arm, samples: Samples) -> list[Variable]:
+        """Return the per-sample variables this effect follows, worth a residual test here."""
+        return []
+
+
+def varies(values: np.ndarray, tol: float) -> bool:
+    """Return whether ``values`` span more than ``tol`` (peak to peak)."""
+    return bool(values.size and np.ptp(values) > tol)
+
+
+def axis_key(prefix: str, key: str) -> int | None:
+    """Return n of a ``<prefix>[A<n>]`` key, else None."""
+    match = re.fullmatch(rf"{re.escape(prefix)}\[A(\d+)\]", key)
+    return int(match.group(1)) if match else None
+
+
+def per_axis(arm: Arm) -> Sequence[int]:
+    """Return the arm's axis numbers, 1-based."""
+    return range(1, arm.n_axes + 1)

@@ -1,0 +1,3 @@
+"""The fit: measurements and noise policy, unknowns, the solver, identifiability, identification,
+robust fitting.
+"""
