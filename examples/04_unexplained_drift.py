@@ -6,7 +6,8 @@ a few micrometres, linearly in time, while each location is measured: an effect 
 not have. :func:`aacmm_pin.discover` names nothing, but its residual scan reports the final residual
 as *unexplained* (larger than the stated 2 um R-Test noise and following time). The script then
 registers a small user effect with :func:`aacmm_pin.effects.register_effect`: one
-:class:`~aacmm_pin.effects.MeasurementTerm` whose basis is the time since the location's first sample, per coordinate
+:class:`~aacmm_pin.effects.MeasurementTerm` whose basis is the time since the location's first
+sample, per coordinate
 (the fixture's creep rate), reruns discovery, which names it, and prints the held-out gap before
 and after. Writes both runs' ``discovery.json`` and figures (``discovery_unexplained.png``: the
 residual against time) in ``--out``. Exits with status 1 if the creep is not reported first, not

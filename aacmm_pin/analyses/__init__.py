@@ -1,3 +1,1 @@
-"""Analyses of a calibration: validation, uncertainty, planning, discovery, the residual scan,
-simulation and ISO 10360.
-"""
+"""Analyses of a calibration: validation, uncertainty, planning, discovery, simulation, ISO 10360."""

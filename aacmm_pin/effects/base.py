@@ -55,9 +55,7 @@ class StylusDerivatives(Protocol):
 
     @property
     def tilts(self) -> np.ndarray | None:
-        """d(position)/d(lateral tilt of each axis about its two lateral axes), shape
-        (N, 3, n_axes, 2), m/rad, or None where not computed.
-        """
+        """d(position)/d(lateral tilts), shape (N, 3, n_axes, 2), m/rad, or None."""
 
 
 class Variable(NamedTuple):
