@@ -46,6 +46,7 @@ from aacmm_pin.effects.registry import library
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identification import Calibration, Measurements, identify, measurements
 from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.model.samples import Samples
 from aacmm_pin.progress import Progress
 
 STARTS = ("dh", "proposed")
@@ -183,28 +184,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         new_cal = fit()
         new_bar = _linear_bar(arm, new_cal, campaign)
         new_lin = LinearScorer(new_cal, samples, new_bar)
-        views = []
-        for t in sorted(new_terms, key=lambda t: t.axes):
-            label, values = t.variable(samples)
-            res_label, before = lin.view(t)
-            views.append({"term": t.key, "variable": label, "x": values, "residual": res_label,
-                          "before": before, "after": new_lin.view(t)[1]})
-        effect = good[0].term.effect
-        step = Step(
-            effect=effect, terms=new_terms,
-            description="; ".join(t.describe() for t in new_terms),
-            fit_rms_before=cal.fit_rms, fit_rms_after=new_cal.fit_rms,
-            heldout_rms_before=lin.heldout_rms, heldout_rms_after=new_lin.heldout_rms,
-            bar_rms_before=None if bar_now is None else bar_now.rms,
-            bar_rms_after=None if new_bar is None else new_bar.rms,
-            score=good[0], runners_up=[s for s in scores if s.term.effect != effect][:5],
-            values={n: float(v) for t in new_terms if t.key in new_cal.parameters.extensions
-                    for n, v in zip(t.names, new_cal.parameters.extensions[t.key])},
-            views=views,
-            bar_covered_rms_before=None if bar_now is None else bar_now.covered_rms,
-            bar_covered_rms_after=None if new_bar is None else new_bar.covered_rms,
-            bar_normalised_before=None if bar_now is None else lin.bar_normalised(bar_now.errors),
-            bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors))
+        step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
+                     samples)
         steps.append(step)
         cal, lin, bar_now = new_cal, new_lin, new_bar
         held.append(lin.heldout_rms)
@@ -237,6 +218,35 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      noise=cal.sigma, n_candidates=n_candidates,
                      runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
                      stated_noise=noise)
+
+
+def _step(new_terms: list[Term], best: Score, scores: list[Score],
+          before: tuple[Calibration, LinearScorer, LinearBar | None],
+          after: tuple[Calibration, LinearScorer, LinearBar | None], samples: Samples) -> Step:
+    """Return the record of one step: what was added, and the model before and after it."""
+    (cal, lin, bar_now), (new_cal, new_lin, new_bar) = before, after
+    views = []
+    for t in sorted(new_terms, key=lambda t: t.axes):
+        label, values = t.variable(samples)
+        res_label, residual = lin.view(t)
+        views.append({"term": t.key, "variable": label, "x": values, "residual": res_label,
+                      "before": residual, "after": new_lin.view(t)[1]})
+    effect = best.term.effect
+    return Step(
+        effect=effect, terms=new_terms,
+        description="; ".join(t.describe() for t in new_terms),
+        fit_rms_before=cal.fit_rms, fit_rms_after=new_cal.fit_rms,
+        heldout_rms_before=lin.heldout_rms, heldout_rms_after=new_lin.heldout_rms,
+        bar_rms_before=None if bar_now is None else bar_now.rms,
+        bar_rms_after=None if new_bar is None else new_bar.rms,
+        score=best, runners_up=[s for s in scores if s.term.effect != effect][:5],
+        values={n: float(v) for t in new_terms if t.key in new_cal.parameters.extensions
+                for n, v in zip(t.names, new_cal.parameters.extensions[t.key])},
+        views=views,
+        bar_covered_rms_before=None if bar_now is None else bar_now.covered_rms,
+        bar_covered_rms_after=None if new_bar is None else new_bar.covered_rms,
+        bar_normalised_before=None if bar_now is None else lin.bar_normalised(bar_now.errors),
+        bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors))
 
 
 def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float
