@@ -37,8 +37,10 @@ if TYPE_CHECKING:
         Problem,
     )
     from aacmm_pin.export import write_calibration
-    from aacmm_pin.identification import Calibration, IdentificationError, identify, measured_positions
+    from aacmm_pin.identification import identify
+    from aacmm_pin.identification_result import Calibration
     from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
+    from aacmm_pin.measurements import IdentificationError, measured_positions
     from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
     from aacmm_pin.planning import Plan, plan
     from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
@@ -76,8 +78,10 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "errors": ("AacmmError", "ArmModelError", "CampaignFormatError", "FileFormatError",
                "FrameNotFound", "Problem"),
     "export": ("write_calibration",),
-    "identification": ("Calibration", "IdentificationError", "identify", "measured_positions"),
+    "identification": ("identify",),
+    "identification_result": ("Calibration",),
     "kinematics": ("StylusJacobians", "predict", "stylus_jacobians", "stylus_positions"),
+    "measurements": ("IdentificationError", "measured_positions"),
     "parameters": ("Parameters", "read_parameters", "write_parameters"),
     "planning": ("Plan", "plan"),
     "sizes": ("Sizes", "read_sizes", "write_sizes"),

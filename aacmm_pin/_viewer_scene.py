@@ -23,8 +23,8 @@ from aacmm_pin.arm import Arm, load_arm
 from aacmm_pin.bar_scatter import read_report
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.encoder_map import correct_readouts
-from aacmm_pin.identification import measured_positions
 from aacmm_pin.kinematics import predict
+from aacmm_pin.measurements import measured_positions
 from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
 from aacmm_pin.samples import Samples
 from aacmm_pin.validation import ValidationResult, validate

@@ -32,7 +32,7 @@ from aacmm_pin.campaign import Campaign
 from aacmm_pin.effects import Kind, Term, term_columns
 from aacmm_pin.encoder_map import EncoderMap, node_count, touched_nodes
 from aacmm_pin.identifiability import plausible_sizes
-from aacmm_pin.identification import Calibration
+from aacmm_pin.identification_result import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.samples import Samples

@@ -6,7 +6,7 @@ the same arm: how far the model's stylus centre moves when only the posture chan
 readouts should scatter about their socket's mean point by about
 ``sqrt(accuracy**2 + sigma_socket**2)`` per coordinate: the accuracy the calibration claims (its
 fit's noise estimate ``sigma``, the fit RMS with the dof of its determined parameters removed, at
-least the fit RMS: :attr:`~aacmm_pin.identification.Calibration.accuracy`, ``report.json``) and
+least the fit RMS: :attr:`~aacmm_pin.identification_result.Calibration.accuracy`, ``report.json``) and
 the socket's seating repeatability (``campaign.json``'s ``socket``, else
 :data:`aacmm_pin.units.SIGMA_SOCKET`). A much larger scatter means the readouts and the calibration
 do not belong together: a unit error in a readout column (the stylus axis A7 in radians moves the
@@ -182,7 +182,7 @@ def read_accuracy(caldir: str | Path) -> float | None:
     """Return the accuracy per coordinate a calibration folder's ``report.json`` claims, m.
 
     The larger of its ``sigma_um`` (the fit's noise estimate) and ``fit_rms_um``, as
-    :attr:`~aacmm_pin.identification.Calibration.accuracy`; None without a report
+    :attr:`~aacmm_pin.identification_result.Calibration.accuracy`; None without a report
     (:func:`read_report`) or with neither as a positive finite number.
     """
     data = read_report(caldir) or {}

@@ -11,7 +11,7 @@ from typing import Any
 
 from aacmm_pin.campaign import StatedNoise
 from aacmm_pin.effects import LIBRARY, Kind, Term
-from aacmm_pin.identification import Calibration
+from aacmm_pin.identification_result import Calibration
 from aacmm_pin.residual_scan import Scan
 
 

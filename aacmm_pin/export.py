@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin.arm import Arm
-from aacmm_pin.identification import Calibration
+from aacmm_pin.identification_result import Calibration
 from aacmm_pin.output_folder import output_folder
 from aacmm_pin.parameters import write_parameters
 from aacmm_pin.sizes import sizes_path, write_sizes

@@ -21,7 +21,7 @@ from aacmm_pin.effects import Kind, Term, residual_along
 from aacmm_pin.encoder_map import touched_nodes
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.identifiability import plausible_groups, plausible_sizes
-from aacmm_pin.identification import Calibration
+from aacmm_pin.identification_result import Calibration
 from aacmm_pin.kinematics import StylusJacobians, stylus_jacobians
 from aacmm_pin.samples import Samples
 

@@ -20,7 +20,7 @@ import numpy as np
 from aacmm_pin.arm import Arm
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.identifiability import GAUGE_WEIGHT, plausible_sizes
-from aacmm_pin.identification import Calibration
+from aacmm_pin.identification_result import Calibration
 from aacmm_pin.kinematics import stylus_ik
 from aacmm_pin.parameters import Parameters
 from aacmm_pin.progress import Progress

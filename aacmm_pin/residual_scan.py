@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from aacmm_pin.identification import Calibration
+from aacmm_pin.identification_result import Calibration
 from aacmm_pin.samples import Samples
 
 DEGREES = (1, 3)

@@ -20,7 +20,9 @@ from typing import Any
 import numpy as np
 
 from aacmm_pin.campaign import Campaign
-from aacmm_pin.identification import Calibration, measured_positions, refit
+from aacmm_pin.identification import refit
+from aacmm_pin.identification_result import Calibration
+from aacmm_pin.measurements import measured_positions
 from aacmm_pin.solver import Factor
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
 from aacmm_pin.unknowns import NodeKey, UnknownKey

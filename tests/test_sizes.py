@@ -14,8 +14,8 @@ import aacmm_pin as ap
 from aacmm_pin.campaign import PointLog
 from aacmm_pin.effects import backlash, compliance, crosstalk, encoder_harmonic, thermal
 from aacmm_pin.identifiability import plausible_sizes
-from aacmm_pin.identification import measurements
 from aacmm_pin.linear_scorer import LinearScorer, size_factors
+from aacmm_pin.measurements import measurements
 from aacmm_pin.samples import Samples
 from aacmm_pin.sizes import DEFAULT, Sizes, read_sizes, sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC

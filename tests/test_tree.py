@@ -15,7 +15,7 @@ from aacmm_pin import cli, kinematics
 from aacmm_pin.campaign import PointLog, read_readout_columns
 from aacmm_pin.discovery import discover
 from aacmm_pin.effects import compliance
-from aacmm_pin.identification import check_points
+from aacmm_pin.measurements import check_points
 from aacmm_pin.parameters import check_against_arm, parameters_from_dict
 from aacmm_pin.samples import Samples
 

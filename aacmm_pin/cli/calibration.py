@@ -27,7 +27,7 @@ from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
 
 if TYPE_CHECKING:
-    from aacmm_pin.identification import Calibration
+    from aacmm_pin.identification_result import Calibration
 
 
 def _simulate(args: argparse.Namespace) -> int:
