@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from aacmm_pin.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
+    from aacmm_pin.calibration_folder import CalibrationFolder, read_calibration
     from aacmm_pin.campaign import (
         Campaign,
         LengthBarLog,
@@ -55,7 +56,7 @@ __all__ = [
     "Calibration", "Discovery", "discover", "write_discovery",
     "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
     "identify", "measured_positions", "monte_carlo", "plan", "View", "view",
-    "validate", "write_calibration",
+    "validate", "write_calibration", "CalibrationFolder", "read_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",
@@ -69,6 +70,7 @@ __all__ = [
 _PUBLIC: dict[str, tuple[str, ...]] = {
     # module -> the public names it defines (the same as the TYPE_CHECKING imports above)
     "arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
+    "calibration_folder": ("CalibrationFolder", "read_calibration"),
     "campaign": ("Campaign", "LengthBarLog", "SpatLog", "StatedNoise", "read_campaign",
                  "read_noise", "read_readouts", "write_campaign", "write_points"),
     "discovery": ("discover",),

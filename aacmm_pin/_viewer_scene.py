@@ -20,12 +20,12 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.arm import Arm, load_arm
-from aacmm_pin.bar_scatter import read_report
+from aacmm_pin.calibration_folder import read_calibration
 from aacmm_pin.campaign import Campaign
 from aacmm_pin.encoder_map import correct_readouts
 from aacmm_pin.kinematics import predict
 from aacmm_pin.measurements import measured_positions
-from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
+from aacmm_pin.parameters import Parameters, check_against_arm
 from aacmm_pin.samples import Samples
 from aacmm_pin.validation import ValidationResult, validate
 
@@ -107,11 +107,9 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
     if isinstance(source, Parameters):
         params, default_label = source, "model"
     else:
-        path = Path(source)
-        params = read_parameters(path)
-        folder = path if path.is_dir() else path.parent
-        default_label = folder.resolve().name or "model"
-        offsets = _nest_offsets(path)
+        cal = read_calibration(source)
+        params, offsets = cal.parameters, cal.nest_offsets_um
+        default_label = cal.folder.resolve().name or "model"
     arm = load_arm(params.arm)
     check_against_arm(params, arm)
     rot, trans = params.rotation(), params.translation
@@ -134,19 +132,6 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
             sockets[(int(k), str(s))] = points[(bar.placement == k) & (bar.socket == s)].mean(axis=0)
     name = re.sub(r"[^A-Za-z0-9_.+-]", "_", label or default_label)
     return ModelResiduals(name, params, arm, nest, predicted, measured, validation, sockets)
-
-
-def _nest_offsets(caldir: Path) -> dict[str, list[float]]:
-    """Return a calibration's estimated nest offsets (location -> um), {} if not recorded.
-
-    ``caldir``: the folder or its ``parameters.json`` (its ``report.json``, read as
-    :func:`aacmm_pin.bar_scatter.read_report` reads it: bounded, never a neighbour's).
-    """
-    offsets = (read_report(caldir) or {}).get("nest_offsets_um")
-    if not isinstance(offsets, dict):
-        return {}
-    return {str(k): [float(x) for x in v] for k, v in offsets.items()
-            if isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)}
 
 
 class ArmPoser:

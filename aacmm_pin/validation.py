@@ -216,8 +216,8 @@ def validate(arm: Arm, params: Parameters, campaign: Campaign,
         campaign: a campaign with length-bar data.
         accuracy: the accuracy per coordinate the calibration claims, m
             (:attr:`Calibration.accuracy <aacmm_pin.identification_result.Calibration.accuracy>`, or
-            :func:`aacmm_pin.bar_scatter.read_accuracy` of its folder): the readouts' scatter about
-            their sockets is compared with it (a warning beyond the limit of
+            :attr:`aacmm_pin.calibration_folder.CalibrationFolder.accuracy` of its folder): the
+            readouts' scatter about their sockets is compared with it (a warning beyond the limit of
             :mod:`aacmm_pin.bar_scatter`); None: the scatter is reported, not compared.
 
     Raises:

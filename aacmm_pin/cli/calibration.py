@@ -57,6 +57,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.arm import load_arm
+    from aacmm_pin.calibration_folder import read_calibration
     from aacmm_pin.campaign import (
         read_id_columns,
         read_readout_columns,
@@ -64,10 +65,10 @@ def _predict(args: argparse.Namespace) -> int:
         write_points,
     )
     from aacmm_pin.kinematics import predict
-    from aacmm_pin.parameters import check_against_arm, read_parameters
+    from aacmm_pin.parameters import check_against_arm
     from aacmm_pin.samples import Samples
 
-    params = read_parameters(args.params)
+    params = read_calibration(args.params).parameters
     arm = load_arm(args.arm or params.arm)
     check_against_arm(params, arm)
     q, temp, t = read_readout_columns(args.readouts, arm)
@@ -187,21 +188,22 @@ def _validate(args: argparse.Namespace) -> int:
     import json
 
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.bar_scatter import fitted_with_bar, read_accuracy
+    from aacmm_pin.calibration_folder import read_calibration
     from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.parameters import check_against_arm, read_parameters
+    from aacmm_pin.parameters import check_against_arm
     from aacmm_pin.validation import validate, validate_points
 
-    params = read_parameters(args.caldir)
+    cal = read_calibration(args.caldir)
+    params = cal.parameters
     arm = load_arm(params.arm)
     check_against_arm(params, arm)  # exactly as predict does
     campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
     if campaign.lengthbar is not None or campaign.points is None:
-        result = validate(arm, params, campaign, read_accuracy(args.caldir))
+        result = validate(arm, params, campaign, cal.accuracy)
         print(result.table())
         data = result.to_dict()
-        if fitted_with_bar(args.caldir):
+        if cal.fitted_with_bar:
             data["note"] = ("this calibration was fitted with a length bar (identify --use-bar): on "
                             "that bar's campaign these errors and the scatter check are not an "
                             "independent test")

@@ -22,10 +22,11 @@ from aacmm_pin.cli._options import (
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
     """Return (arm, parameters): from --params, else the nominal --arm."""
     from aacmm_pin.arm import load_arm
-    from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
+    from aacmm_pin.calibration_folder import read_calibration
+    from aacmm_pin.parameters import Parameters, check_against_arm
 
     if getattr(args, "params", None):
-        params = read_parameters(args.params)
+        params = read_calibration(args.params).parameters
         arm = load_arm(args.arm or params.arm)
         check_against_arm(params, arm)
         return arm, params
