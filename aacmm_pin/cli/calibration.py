@@ -336,7 +336,13 @@ def add_parsers(subparsers: Any) -> None:
             ``handler``, a function of the parsed arguments returning the exit status.
     """
     arm = arm_option()
+    _add_model_parsers(subparsers, arm)
+    _add_fit_parsers(subparsers, arm)
+    _add_analysis_parsers(subparsers, arm)
 
+
+def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
+    """Add axes, simulate and predict (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
                     "over its tree), their limits, its tools and its error frames")
     p.add_argument("arm", nargs="?", default="aacmm7", metavar="URDF",
@@ -367,6 +373,10 @@ def add_parsers(subparsers: Any) -> None:
                         "default: the readouts' tool column")
     p.set_defaults(handler=_predict)
 
+
+
+def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
+    """Add identify and discover (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
                     parents=[model_option(),
                              no_rtest_option("conventional SPAT: each location's mean "
@@ -415,6 +425,9 @@ def add_parsers(subparsers: Any) -> None:
                             f"residual is judged against (default: campaign.json, else {default})")
     p.set_defaults(handler=_discover)
 
+
+def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
+    """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
                     parents=[json_option("the errors")])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")
