@@ -136,7 +136,7 @@ class _Decision(NamedTuple):
     """Constrained by ``constraints``, preconditioned at the point of the decision."""
 
 
-def decision_point(problem: Problem, jac0: BlockJacobian | None,
+def decision_point(problem: Problem, jacobian: BlockJacobian | None,
                     on_evaluation: Callable[[float], None]
                     ) -> tuple[np.ndarray, np.ndarray, int]:
     """Return where the held directions are checked before the solve, its residual, evaluations.
@@ -152,7 +152,7 @@ def decision_point(problem: Problem, jac0: BlockJacobian | None,
 
     Args:
         problem: the problem decided at the start (z = 0 is its ``x_ref``, the start).
-        jac0: :meth:`Problem.data_jacobian` at the start when the caller has it,
+        jacobian: :meth:`Problem.data_jacobian` at the start when the caller has it,
             shape (3N, n_arm), m per unit.
         on_evaluation: progress, called with the RMS of each of the two residuals (m).
 
@@ -163,8 +163,8 @@ def decision_point(problem: Problem, jac0: BlockJacobian | None,
     """
     z0 = np.zeros(problem.p.shape[1])
     f0 = problem.fun_reported(z0, on_evaluation)
-    z1 = problem.newton_step(z0, f0, jac0)
-    del jac0
+    z1 = problem.newton_step(z0, f0, jacobian)
+    del jacobian
     f1 = problem.fun_reported(z1, on_evaluation)
     # the plain sum of squares even for a robust loss: the point only decides the held directions
     # and starts the solve, which minimises the loss from there

@@ -3,7 +3,8 @@ r"""The least-squares problem of an identification, in reduced and preconditione
 :class:`Problem` is the typed interface that the analyses above the solver use (uncertainty,
 discovery, the linearised length bar): residuals, Jacobians, coordinates, covariance and the solve
 itself. :func:`aacmm_pin.identify` builds one per round and keeps the last in
-:attr:`aacmm_pin.Calibration.problem`.
+:attr:`aacmm_pin.Calibration.problem`. :meth:`Problem.solve` starts from a
+:class:`~aacmm_pin.solver_values.WarmStart` and returns a :class:`~aacmm_pin.solver_values.Solution`.
 
 The full vector is ``[arm unknowns, nest offsets, instrument frames]`` (:class:`Nuisance`): every
 R-Test location's zero position has an unknown error (3 per location) with the stated prior
