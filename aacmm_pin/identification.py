@@ -204,6 +204,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              use_bar: bool = False, robust: bool = False, nests: str = "auto") -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
 
+    The keyword arguments are checked once into a :class:`FitOptions`, which every fit receives.
+
     Args:
         campaign: campaign with SPAT samples and R-Test zero positions, or (without SPAT) with
             absolute tool points (``points.csv``, one instrument frame identified as X0 and the
