@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.calibration_folder import read_calibration
+from aacmm_pin.outputs.calibration_folder import read_calibration
 
 
 def test_read_calibration_gives_back_what_write_calibration_wrote(arm: ap.Arm,

@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 
 import aacmm_pin as ap
-from aacmm_pin.campaign import PointLog, StatedNoise
-from aacmm_pin.measurements import measurements, stated_noise
+from aacmm_pin.data.campaign import PointLog, StatedNoise
+from aacmm_pin.fit.measurements import measurements, stated_noise
 from aacmm_pin.units import SIGMA_SOCKET
 
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.bar_scatter import CAUSES
-from aacmm_pin.calibration_folder import read_calibration
+from aacmm_pin.analyses.bar_scatter import CAUSES
+from aacmm_pin.outputs.calibration_folder import read_calibration
 from aacmm_pin.cli import main
 from tests import fuzz
 from tests.conftest import SMALL
