@@ -12,8 +12,12 @@ import importlib.util
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from aacmm_pin.model.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
-    from aacmm_pin.outputs.calibration_folder import CalibrationFolder, read_calibration
+    from aacmm_pin.analyses.discovery import discover
+    from aacmm_pin.analyses.discovery_results import Discovery
+    from aacmm_pin.analyses.planning import Plan, plan
+    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.analyses.uncertainty import MonteCarloResult, monte_carlo
+    from aacmm_pin.analyses.validation import ValidationResult, validate
     from aacmm_pin.data.campaign import (
         Campaign,
         LengthBarLog,
@@ -25,10 +29,7 @@ if TYPE_CHECKING:
         write_campaign,
         write_points,
     )
-    from aacmm_pin.analyses.discovery import discover
-    from aacmm_pin.outputs.discovery_figures import write_discovery
-    from aacmm_pin.analyses.discovery_results import Discovery
-    from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles
+    from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
     from aacmm_pin.errors import (
         AacmmError,
         ArmModelError,
@@ -37,18 +38,17 @@ if TYPE_CHECKING:
         FrameNotFound,
         Problem,
     )
-    from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.fit.identification_result import Calibration
-    from aacmm_pin.model.kinematics import StylusJacobians
-    from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
     from aacmm_pin.fit.measurements import IdentificationError, measured_positions
+    from aacmm_pin.model.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
+    from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles
+    from aacmm_pin.model.kinematics import StylusJacobians
     from aacmm_pin.model.parameters import Parameters, read_parameters, write_parameters
-    from aacmm_pin.analyses.planning import Plan, plan
-    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
     from aacmm_pin.model.sizes import Sizes, read_sizes, write_sizes
-    from aacmm_pin.analyses.uncertainty import MonteCarloResult, monte_carlo
-    from aacmm_pin.analyses.validation import ValidationResult, validate
+    from aacmm_pin.outputs.calibration_folder import CalibrationFolder, read_calibration
+    from aacmm_pin.outputs.discovery_figures import write_discovery
+    from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.outputs.viewer import View, view
 
 __version__ = "0.1.0"

@@ -17,9 +17,9 @@ from aacmm_pin.acquire.nest import Nest, read_nest
 from aacmm_pin.acquire.pairing import Pairer
 from aacmm_pin.acquire.session import AcquisitionConfig
 from aacmm_pin.acquire.writer import SpatWriter, write_zero
-from aacmm_pin.data.campaign import read_campaign
 from aacmm_pin.cli.acquisition import add_parsers
 from aacmm_pin.cli.iso10360 import add_parsers as add_iso10360
+from aacmm_pin.data.campaign import read_campaign
 from aacmm_pin.errors import FileFormatError
 
 Q_DEG = [-35.063444, 78.282159, 171.07413, 35.139578, -135.639175, -78.001445, 128.347322]

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aacmm_pin.data.campaign import read_campaign
 from aacmm_pin.cli.acquisition import add_parsers
+from aacmm_pin.data.campaign import read_campaign
 from tests.helpers import ENV, ROOT
 
 CLI = [sys.executable, "-m", "aacmm_pin"]

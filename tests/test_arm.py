@@ -11,8 +11,8 @@ import pytest
 import yourdfpy
 
 from aacmm_pin.effects import calibrated as kinematics
-from aacmm_pin.model.arm import load_arm
 from aacmm_pin.errors import ArmModelError, FrameNotFound
+from aacmm_pin.model.arm import load_arm
 from aacmm_pin.model.parameters import Parameters
 from tests.helpers import DH_NAMES, ENV, d_a, d_b, d_c, d_x, d_z
 

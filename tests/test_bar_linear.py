@@ -11,9 +11,9 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin.analyses.bar_linear import LinearBar, covered_readouts
+from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.effects import compliance
 from aacmm_pin.model.encoder_map import touched_nodes
-from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.model.samples import Samples
 
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.cli import main
 from aacmm_pin.analyses.discovery import discover
+from aacmm_pin.cli import main
 from aacmm_pin.model.samples import Samples
 
 SIGMA_RTEST = 2e-6
@@ -226,6 +226,7 @@ def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, mod
     to the linearisation error); with maps, the scoring's plausible-size prior and identify's
     held directions treat what the others cannot see slightly differently (measured 0.4-3 %)."""
     from aacmm_pin.effects.calibrated import stylus_positions
+
     from aacmm_pin.analyses.linear_scorer import LinearScorer
     from aacmm_pin.fit.measurements import measured_positions
 

@@ -7,12 +7,12 @@ import pickle
 
 import numpy as np
 import pytest
+from aacmm_pin.effects.calibrated import stylus_positions
 
 import aacmm_pin as ap
 from aacmm_pin import effects as fx
-from aacmm_pin.effects.calibrated import stylus_positions
-from aacmm_pin.model.samples import Samples, motion_direction
 from aacmm_pin.fit.unknowns import Unknowns
+from aacmm_pin.model.samples import Samples, motion_direction
 
 TERMS = (fx.compliance(2), fx.compliance(4), fx.thermal(), fx.backlash(3), fx.crosstalk(2, 3),
          fx.encoder_harmonic(5), fx.rtest())

@@ -14,10 +14,10 @@ import pytest
 from scipy.special import chdtrc
 from scipy.stats import chi2
 
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.fit import fit_rounds
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit.identification import identify
-from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.fit.solver import Problem, WarmStart
 from aacmm_pin.fit.unknowns import BlockJacobian
 

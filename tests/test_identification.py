@@ -9,18 +9,18 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import yourdfpy
+from aacmm_pin.effects.calibrated import predict
 
 import aacmm_pin as ap
-from aacmm_pin.model.arm import load_arm
-from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
-from aacmm_pin.cli import main
-from aacmm_pin.outputs.export import write_calibration
-from aacmm_pin.fit.identification import identify
-from aacmm_pin.effects.calibrated import predict
-from aacmm_pin.fit.measurements import IdentificationError
-from aacmm_pin.model.parameters import read_parameters
 from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.analyses.validation import validate
+from aacmm_pin.cli import main
+from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.fit.measurements import IdentificationError
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import read_parameters
+from aacmm_pin.outputs.export import write_calibration
 from tests.helpers import SAMPLE
 
 SEEDS = (0, 1, 2, 3)
@@ -323,8 +323,8 @@ def test_implausible_fit_rms_is_not_success(arm, small_sim):
 def test_every_residual_evaluation_is_counted_and_reported(arm, small_sim, monkeypatch, robust):
     """``nfev`` and the progress callback see every residual evaluation: the solves' and the
     Gauss-Newton step's that decides the held directions."""
-    from aacmm_pin.progress import Progress
     from aacmm_pin.fit.solver import Problem
+    from aacmm_pin.progress import Progress
 
     seen = {"fun": 0, "progress": 0}
     fun, update = Problem.fun, Progress.update

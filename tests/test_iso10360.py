@@ -140,10 +140,10 @@ def test_e_uni_hand_case():
 @pytest.mark.skipif(not SAMPLE.is_dir(), reason="shared sample campaign not found")
 def test_figures_on_the_sample_campaign_with_its_truth(tmp_path):
     """With the true parameters, SPAT deviations are R-Test noise and E_UNI matches validate."""
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.model.parameters import read_parameters
     from aacmm_pin.analyses.validation import validate
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.model.parameters import read_parameters
 
     arm, truth = load_arm(), read_parameters(SAMPLE / "truth.json")
     campaign = read_campaign(SAMPLE)

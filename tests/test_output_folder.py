@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.model.arm import resolve_arm_path
 from aacmm_pin.cli import main
-from aacmm_pin.errors import ArmModelError, FileFormatError
 from aacmm_pin.data.output_folder import OutputExistsError, output_folder
+from aacmm_pin.errors import ArmModelError, FileFormatError
+from aacmm_pin.model.arm import resolve_arm_path
 from tests.helpers import ENV
 
 

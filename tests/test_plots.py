@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import aacmm_pin.outputs.plots
+from aacmm_pin.analyses.validation import ValidationResult
 from aacmm_pin.data.campaign import Campaign, SpatLog, read_campaign
 from aacmm_pin.outputs.plots import (
     _encoder_map_figure,
@@ -17,7 +18,6 @@ from aacmm_pin.outputs.plots import (
     plot_length_errors,
     plot_rtest_displacement,
 )
-from aacmm_pin.analyses.validation import ValidationResult
 from tests.helpers import SAMPLE
 
 N_NODES = 72  # 5 deg step

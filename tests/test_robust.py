@@ -10,11 +10,11 @@ import pytest
 import scipy.sparse as sp
 
 import aacmm_pin as ap
-from aacmm_pin.fit import robust as rob
-from aacmm_pin.data.campaign import Campaign, PointLog, write_campaign
-from aacmm_pin.cli import main
 from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.analyses.validation import validate_points
+from aacmm_pin.cli import main
+from aacmm_pin.data.campaign import Campaign, PointLog, write_campaign
+from aacmm_pin.fit import robust as rob
 from tests.test_points import UR5, _points_campaign, _truth
 
 

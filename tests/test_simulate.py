@@ -8,11 +8,11 @@ import filecmp
 import numpy as np
 import pytest
 
-from aacmm_pin.model.arm import load_arm
-from aacmm_pin.data.campaign import read_campaign, read_readouts
-from aacmm_pin.cli import main
-from aacmm_pin.model.parameters import read_parameters
 from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.cli import main
+from aacmm_pin.data.campaign import read_campaign, read_readouts
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import read_parameters
 from tests.helpers import SAMPLE
 
 

@@ -12,8 +12,8 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin import cli, kinematics
-from aacmm_pin.data.campaign import PointLog, read_readout_columns
 from aacmm_pin.analyses.discovery import discover
+from aacmm_pin.data.campaign import PointLog, read_readout_columns
 from aacmm_pin.effects import compliance
 from aacmm_pin.fit.measurements import check_points
 from aacmm_pin.model.parameters import check_against_arm, parameters_from_dict

@@ -9,12 +9,12 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from aacmm_pin.model.arm import load_arm
-from aacmm_pin.data.campaign import write_campaign
-from aacmm_pin.cli import main
-from aacmm_pin.fit.identification import identify
 from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.analyses.uncertainty import monte_carlo
+from aacmm_pin.cli import main
+from aacmm_pin.data.campaign import write_campaign
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.model.arm import load_arm
 
 
 def _coverage_z(seed: int) -> np.ndarray:

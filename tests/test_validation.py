@@ -11,8 +11,8 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin.analyses.bar_scatter import CAUSES
-from aacmm_pin.outputs.calibration_folder import read_calibration
 from aacmm_pin.cli import main
+from aacmm_pin.outputs.calibration_folder import read_calibration
 from tests import fuzz
 from tests.conftest import SMALL
 from tests.helpers import SAMPLE

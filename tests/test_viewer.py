@@ -23,14 +23,14 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
-from aacmm_pin.model.arm import load_arm
-from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
-from aacmm_pin.cli.viewer import add_parsers
-from aacmm_pin.outputs.export import write_calibration
-from aacmm_pin.fit.identification import identify
 from aacmm_pin.effects.calibrated import predict
+
+from aacmm_pin.cli.viewer import add_parsers
+from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.model.arm import load_arm
 from aacmm_pin.model.parameters import read_parameters
+from aacmm_pin.outputs.export import write_calibration
 from aacmm_pin.outputs.viewer import view
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

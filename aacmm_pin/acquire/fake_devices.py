@@ -125,8 +125,8 @@ class FakeDevices:
     """
 
     def __init__(self, config: FakeConfig | None = None, arm: Any = None):
-        from aacmm_pin.model.arm import load_arm
         from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+        from aacmm_pin.model.arm import load_arm
 
         self.config = config = config or FakeConfig()
         sim = simulate_campaign(arm or load_arm(), SimulationConfig(

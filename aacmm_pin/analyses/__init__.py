@@ -1,1 +1,1 @@
-"""Analyses of a calibration: validation, uncertainty, planning, discovery and the residual scan, simulation, ISO 10360."""
+"""Analyses of a calibration: validation, uncertainty, planning, discovery, simulation, ISO 10360."""

@@ -27,19 +27,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from aacmm_pin.model.arm import Arm
+from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects import Kind, Term, term_columns
-from aacmm_pin.model.encoder_map import EncoderMap, node_count, touched_nodes
+from aacmm_pin.effects.calibrated import stylus_jacobians
 from aacmm_pin.fit.identifiability import plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
+from aacmm_pin.fit.unknowns import Unknowns
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.encoder_map import EncoderMap, node_count, touched_nodes
 from aacmm_pin.model.kinematics import StylusJacobians
-from aacmm_pin.effects.calibrated import stylus_jacobians
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.model.sizes import Sizes
-from aacmm_pin.fit.unknowns import Unknowns
-from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 
 
 def covered_readouts(spat_q: np.ndarray, q: np.ndarray, step_deg: float) -> np.ndarray:

@@ -36,18 +36,18 @@ import time
 import numpy as np
 
 from aacmm_pin._blas import single_threaded_blas
-from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.analyses.bar_linear import LinearBar
-from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
+from aacmm_pin.analyses.linear_scorer import LinearScorer
+from aacmm_pin.analyses.residual_scan import scan_residuals
+from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.fit.measurements import measurements, stated_noise
+from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.progress import Progress
-from aacmm_pin.analyses.residual_scan import scan_residuals
 
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3

@@ -9,10 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.effects import LIBRARY, Kind, Term
 from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.analyses.residual_scan import Scan
 
 
 @dataclass(frozen=True)

@@ -60,10 +60,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.data.campaign import Campaign, read_readouts
-from aacmm_pin.errors import AacmmError, FileFormatError, Problem
 from aacmm_pin.effects.calibrated import stylus_positions
+from aacmm_pin.errors import AacmmError, FileFormatError, Problem
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 

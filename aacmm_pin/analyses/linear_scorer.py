@@ -18,12 +18,12 @@ from scipy import stats
 from aacmm_pin.analyses.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.analyses.discovery_results import Score
 from aacmm_pin.effects import Kind, Term, residual_along
-from aacmm_pin.model.encoder_map import touched_nodes
+from aacmm_pin.effects.calibrated import stylus_jacobians
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identifiability import plausible_groups, plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
+from aacmm_pin.model.encoder_map import touched_nodes
 from aacmm_pin.model.kinematics import StylusJacobians
-from aacmm_pin.effects.calibrated import stylus_jacobians
 from aacmm_pin.model.samples import Samples
 
 FOLDS = 5

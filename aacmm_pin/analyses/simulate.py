@@ -27,11 +27,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.data.campaign import Campaign, LengthBarLog, SpatLog
+from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
 from aacmm_pin.model.kinematics import solve_ik
-from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import motion_direction
 from aacmm_pin.units import (

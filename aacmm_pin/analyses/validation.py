@@ -7,11 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.analyses.bar_scatter import SocketScatter, socket_scatter
 from aacmm_pin.data.campaign import Campaign
-from aacmm_pin.errors import AacmmError
 from aacmm_pin.effects.calibrated import predict, stylus_positions
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.units import SIGMA_SOCKET

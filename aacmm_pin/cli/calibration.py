@@ -31,10 +31,10 @@ if TYPE_CHECKING:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.data.output_folder import check_output
-    from aacmm_pin.progress import phase
     from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.progress import phase
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     config = SimulationConfig(seed=args.seed, effects=effects,
@@ -56,8 +56,6 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.outputs.calibration_folder import read_calibration
     from aacmm_pin.data.campaign import (
         read_id_columns,
         read_readout_columns,
@@ -65,8 +63,10 @@ def _predict(args: argparse.Namespace) -> int:
         write_points,
     )
     from aacmm_pin.effects.calibrated import predict
+    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.model.parameters import check_against_arm
     from aacmm_pin.model.samples import Samples
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
     params = read_calibration(args.params).parameters
     arm = load_arm(args.arm or params.arm)
@@ -83,11 +83,11 @@ def _predict(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.outputs.export import write_calibration
-    from aacmm_pin.fit.identification import identify
     from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.fit.identification import identify
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
     check_output(args.out, args.force)
@@ -138,11 +138,11 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
 
 
 def _discover(args: argparse.Namespace) -> int:
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.data.campaign import StatedNoise, read_campaign
     from aacmm_pin.analyses.discovery import discover
-    from aacmm_pin.outputs.discovery_figures import write_discovery
+    from aacmm_pin.data.campaign import StatedNoise, read_campaign
     from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
 
     check_output(args.out, args.force)
@@ -187,11 +187,11 @@ def _discover(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     import json
 
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.outputs.calibration_folder import read_calibration
-    from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.model.parameters import check_against_arm
     from aacmm_pin.analyses.validation import validate, validate_points
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.model.parameters import check_against_arm
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
     cal = read_calibration(args.caldir)
     params = cal.parameters
@@ -222,13 +222,13 @@ def _uncertainty(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
-    from aacmm_pin.fit.identification import identify
-    from aacmm_pin.data.output_folder import check_output, output_folder
-    from aacmm_pin.outputs.plots import plot_encoder_maps
     from aacmm_pin.analyses.uncertainty import monte_carlo, uncertainty_report
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.data.output_folder import check_output, output_folder
+    from aacmm_pin.fit.identification import identify
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
+    from aacmm_pin.outputs.plots import plot_encoder_maps
 
     check_output(args.out, args.force)
     arm = load_arm(args.arm)
@@ -279,10 +279,10 @@ def _plan(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.analyses.planning import plan
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.fit.identification import identify
-    from aacmm_pin.analyses.planning import plan
+    from aacmm_pin.model.arm import load_arm
 
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)

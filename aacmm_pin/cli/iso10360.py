@@ -22,8 +22,8 @@ from aacmm_pin.cli._options import (
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
     """Return (arm, parameters): from --params, else the nominal --arm."""
     from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.outputs.calibration_folder import read_calibration
     from aacmm_pin.model.parameters import Parameters, check_against_arm
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
     if getattr(args, "params", None):
         params = read_calibration(args.params).parameters
@@ -55,8 +55,8 @@ def _finish(args: argparse.Namespace, text: str, data: dict[str, Any]) -> int:
 
 
 def _spat(args: argparse.Namespace) -> int:
-    from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.analyses.iso10360 import point_articulation, spat_centres
+    from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
     centres = spat_centres(arm, params, read_campaign(args.campaign), use_rtest=not args.no_rtest)
@@ -100,8 +100,8 @@ def _ldia(args: argparse.Namespace) -> int:
 
 
 def _euni(args: argparse.Namespace) -> int:
-    from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.analyses.iso10360 import length_errors
+    from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
     r = length_errors(arm, params, read_campaign(args.campaign))

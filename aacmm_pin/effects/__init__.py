@@ -34,8 +34,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.errors import AacmmError
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.units import ARCSEC, REFERENCE_TEMPERATURE_C
 

@@ -1,1 +1,1 @@
-"""The fit: measurements and noise policy, unknowns, the solver, identifiability, identification, robust fitting."""
+"""The fit: measurements, unknowns, the solver, identifiability, identification, robust fits."""

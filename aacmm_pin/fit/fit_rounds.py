@@ -18,9 +18,9 @@ from scipy.optimize import OptimizeResult
 
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import robust as rob
-from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
 from aacmm_pin.fit.unknowns import BlockJacobian, Unknowns
+from aacmm_pin.model.parameters import Parameters
 
 
 class Fit(NamedTuple):

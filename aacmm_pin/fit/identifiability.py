@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from aacmm_pin.model.encoder_map import touched_nodes
 from aacmm_pin.fit.unknowns import BlockJacobian, NodeKey, Unknowns
+from aacmm_pin.model.encoder_map import touched_nodes
 
 GAUGE_TOL = 1e-6
 GAUGE_WEIGHT = 1e3

@@ -26,20 +26,21 @@ import numpy as np
 from scipy.optimize import OptimizeResult
 from scipy.special import chdtrc
 
-from aacmm_pin.fit import identifiability as ident
-from aacmm_pin.fit import robust as rob
 from aacmm_pin._blas import single_threaded_blas
-from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects import Kind, Term
+from aacmm_pin.effects.calibrated import stylus_positions
+from aacmm_pin.fit import identifiability as ident
+from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit.fit_rounds import Fit, fit_rounds, reject_outliers
 from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.fit.measurements import Measurements, measurements, stated_noise
-from aacmm_pin.model.parameters import Parameters
-from aacmm_pin.progress import Progress
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Factor, Nuisance, Problem, SolverSettings
+from aacmm_pin.fit.unknowns import FrameKey, NestKey, UnknownKey, Unknowns
+from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.progress import Progress
 from aacmm_pin.units import (
     SIGMA_BAR,
     SIGMA_LOCATION,
@@ -47,7 +48,6 @@ from aacmm_pin.units import (
     SIGMA_RTEST,
     STEP_DEG,
 )
-from aacmm_pin.fit.unknowns import FrameKey, NestKey, UnknownKey, Unknowns
 
 __all__ = ["MAX_FIT_RMS", "MIN_DOF_FRACTION", "MODELS", "NESTS", "NOISE_P", "FitOptions", "identify",
            "refit"]

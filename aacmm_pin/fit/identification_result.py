@@ -16,10 +16,10 @@ import scipy.sparse as sp
 from scipy.optimize import OptimizeResult
 
 from aacmm_pin.fit import identifiability as ident
-from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Problem, SolverSettings
 from aacmm_pin.fit.unknowns import NestKey, NodeKey, UnknownKey, Unknowns
+from aacmm_pin.model.parameters import Parameters
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.data.campaign import Campaign, PointLog, SpatLog, StatedNoise
 from aacmm_pin.errors import AacmmError
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.units import SIGMA_POINT, SIGMA_SOCKET, SOCKET_PRIOR
 

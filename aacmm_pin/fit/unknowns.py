@@ -18,11 +18,11 @@ from typing import NamedTuple, TypeAlias
 import numpy as np
 import scipy.sparse as sp
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.effects import Term, measurement_shift, term_columns
+from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
 from aacmm_pin.model.kinematics import StylusJacobians, identification_configuration, tool_rows
-from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 

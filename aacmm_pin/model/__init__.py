@@ -1,1 +1,1 @@
-"""The arm model: URDF, error frames, batched kinematics, encoder maps, parameters, plausible sizes, samples."""
+"""The arm model: URDF, error frames, kinematics, encoder maps, parameters, sizes, samples."""

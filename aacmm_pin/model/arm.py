@@ -50,8 +50,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.errors import ArmModelError, FrameNotFound
+from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.sizes import Sizes, sizes_of_urdf, sizes_path
 from aacmm_pin.model.urdf_tree import Joint, UrdfTree, read_urdf
 

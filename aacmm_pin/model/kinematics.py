@@ -18,11 +18,11 @@ from typing import NamedTuple, TypeAlias
 import numpy as np
 import scipy.sparse as sp
 
+from aacmm_pin.effects import apply_terms
+from aacmm_pin.errors import AacmmError
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.effects import apply_terms
 from aacmm_pin.model.encoder_map import correct_readouts
-from aacmm_pin.errors import AacmmError
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 

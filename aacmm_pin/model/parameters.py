@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from aacmm_pin.errors import FileFormatError, Problem
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import DEFAULT_STEP_DEG, EncoderMap
-from aacmm_pin.errors import FileFormatError, Problem
 from aacmm_pin.units import MAX_PARAMETER
 
 _IMPLAUSIBLE = f"beyond +-{MAX_PARAMETER:g} (m or rad): not a calibration value"

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.data.campaign import LengthBarLog, PointLog, SpatLog
+from aacmm_pin.model.arm import Arm
 
 
 class Samples:

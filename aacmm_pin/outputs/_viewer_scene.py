@@ -19,15 +19,15 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.model.arm import Arm, load_arm
-from aacmm_pin.outputs.calibration_folder import read_calibration
+from aacmm_pin.analyses.validation import ValidationResult, validate
 from aacmm_pin.data.campaign import Campaign
-from aacmm_pin.model.encoder_map import correct_readouts
 from aacmm_pin.effects.calibrated import predict
 from aacmm_pin.fit.measurements import measured_positions
+from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.model.encoder_map import correct_readouts
 from aacmm_pin.model.parameters import Parameters, check_against_arm
 from aacmm_pin.model.samples import Samples
-from aacmm_pin.analyses.validation import ValidationResult, validate
+from aacmm_pin.outputs.calibration_folder import read_calibration
 
 ARM = "arm"
 """Scene path of the arm: ``/meshcat/arm/visuals/<URDF visual>``."""

@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from aacmm_pin.model.arm import Arm
 from aacmm_pin.analyses.discovery_results import Discovery, Step
-from aacmm_pin.outputs.export import write_calibration_files
-from aacmm_pin.data.output_folder import output_folder
-from aacmm_pin.outputs.plots import DPI, MODEL_COLOURS, _new_figure
 from aacmm_pin.analyses.residual_scan import Scan
+from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.outputs.export import write_calibration_files
+from aacmm_pin.outputs.plots import DPI, MODEL_COLOURS, _new_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

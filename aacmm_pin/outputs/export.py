@@ -15,7 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.parameters import write_parameters
+from aacmm_pin.model.sizes import sizes_path, write_sizes
 from aacmm_pin.outputs.calibration_folder import (
     MAPS_FILE,
     PARAMETERS_FILE,
@@ -24,10 +28,6 @@ from aacmm_pin.outputs.calibration_folder import (
     CalibrationFolder,
     read_calibration,
 )
-from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.data.output_folder import output_folder
-from aacmm_pin.model.parameters import write_parameters
-from aacmm_pin.model.sizes import sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC
 
 __all__ = ["CalibrationFolder", "read_calibration", "write_calibration", "write_calibration_files",

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aacmm_pin.analyses.validation import ValidationResult
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.model.encoder_map import node_count
 from aacmm_pin.units import ARCSEC
-from aacmm_pin.analyses.validation import ValidationResult
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
