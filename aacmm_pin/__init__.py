@@ -39,12 +39,15 @@ if TYPE_CHECKING:
         FrameNotFound,
         Problem,
     )
-    from aacmm_pin.fit.identification import Calibration, IdentificationError, identify, measured_positions
+    from aacmm_pin.fit.identification import identify
+    from aacmm_pin.fit.identification_result import Calibration
+    from aacmm_pin.fit.measurements import IdentificationError, measured_positions
     from aacmm_pin.model.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
     from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles
     from aacmm_pin.model.kinematics import StylusJacobians
     from aacmm_pin.model.parameters import Parameters, write_parameters
     from aacmm_pin.model.sizes import Sizes, read_sizes, write_sizes
+    from aacmm_pin.outputs.calibration_folder import CalibrationFolder, read_calibration
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.outputs.viewer import View, view
@@ -55,7 +58,7 @@ __all__ = [
     "Calibration", "Discovery", "discover", "write_discovery",
     "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
     "identify", "measured_positions", "monte_carlo", "plan", "View", "view",
-    "validate", "write_calibration",
+    "validate", "write_calibration", "CalibrationFolder", "read_calibration",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",
@@ -78,7 +81,10 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "errors": ("AacmmError", "ArmModelError", "CampaignFormatError", "FileFormatError",
                "FrameNotFound", "Problem"),
     "outputs.export": ("write_calibration",),
-    "fit.identification": ("Calibration", "IdentificationError", "identify", "measured_positions"),
+    "fit.identification": ("identify",),
+    "fit.identification_result": ("Calibration",),
+    "fit.measurements": ("IdentificationError", "measured_positions"),
+    "outputs.calibration_folder": ("CalibrationFolder", "read_calibration"),
     "model.kinematics": ("StylusJacobians",),
     "effects.calibrated": ("predict", "stylus_jacobians", "stylus_positions"),
     "model.parameters": ("Parameters", "write_parameters"),

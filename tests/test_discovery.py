@@ -227,7 +227,7 @@ def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, mod
     held directions treat what the others cannot see slightly differently (measured 0.4-3 %)."""
     from aacmm_pin.analyses.linear_scorer import LinearScorer
     from aacmm_pin.effects.calibrated import stylus_positions
-    from aacmm_pin.fit.identification import measured_positions
+    from aacmm_pin.fit.measurements import measured_positions
 
     effects = ("dh", "encoder", "rtest") if model == "proposed" else ("dh", "rtest")
     campaign = _campaign(arm, seed, effects, n=80 if model == "dh" else 150).campaign

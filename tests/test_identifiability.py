@@ -7,16 +7,18 @@ start (one solve) against a decision taken at a solution (two solves)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.special import chdtrc
 from scipy.stats import chi2
 
 from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.fit import fit_rounds
 from aacmm_pin.fit import identifiability as ident
-from aacmm_pin.fit import identification
 from aacmm_pin.fit.identification import identify
-from aacmm_pin.fit.solver import Problem
+from aacmm_pin.fit.solver import Problem, WarmStart
 from aacmm_pin.fit.unknowns import BlockJacobian
 
 
@@ -71,10 +73,15 @@ def test_noise_p_value_is_scipy_stats_chi2():
 
 def test_reused_jacobians_change_nothing(arm, layout, monkeypatch):
     sim, cal, _, _ = layout
-    monkeypatch.setattr(Problem, "take_jacobian", lambda self, z: None)
     solve = Problem.solve
-    monkeypatch.setattr(Problem, "solve", lambda self, *a, **kw: solve(self, *a, **{**kw,
-                                                                              "jac0": None}))
+
+    def without_jacobians(self, start, *a, **kw):
+        # no Jacobian handed in, none handed back: every Jacobian is computed
+        if isinstance(start, WarmStart):
+            start = dataclasses.replace(start, jacobian=None)
+        return dataclasses.replace(solve(self, start, *a, **kw), jacobian=None)
+
+    monkeypatch.setattr(Problem, "solve", without_jacobians)
     again = identify(sim.campaign, arm)
     assert np.array_equal(again.x, cal.x)
     assert np.array_equal(again.covariance, cal.covariance)
@@ -100,7 +107,7 @@ def test_held_directions_are_decided_where_a_gauss_newton_step_lands(arm, monkey
     cal = identify(sim.campaign, arm, sigma=noise)
     assert len(solves) == 1
     # the rule before: decided at the start, checked at the solution, decided again there
-    monkeypatch.setattr(identification, "_decision_point",
+    monkeypatch.setattr(fit_rounds, "decision_point",
                         lambda problem, jac0, on_evaluation: (np.zeros(problem.p.shape[1]), None, 0))
     ref = identify(sim.campaign, arm, sigma=noise)
     assert len(solves) == 1 + 2  # the start holds what the solution determines

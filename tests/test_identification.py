@@ -16,7 +16,8 @@ from aacmm_pin.analyses.validation import validate
 from aacmm_pin.cli import main
 from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
 from aacmm_pin.effects.calibrated import predict
-from aacmm_pin.fit.identification import IdentificationError, identify
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.fit.measurements import IdentificationError
 from aacmm_pin.model.arm import load_arm
 from aacmm_pin.model.parameters import read_parameters
 from aacmm_pin.outputs.export import write_calibration
@@ -235,7 +236,7 @@ def _plain_dh_fixed_nests(arm, campaign):
     differences, from the nominal arm placed by a Kabsch fit of the location centres."""
     from scipy.optimize import least_squares
 
-    from aacmm_pin.fit.identification import measured_positions
+    from aacmm_pin.fit.measurements import measured_positions
     from aacmm_pin.model.parameters import Parameters
 
     spat = campaign.spat
@@ -297,7 +298,7 @@ def test_lsmr_steps_reach_the_exact_solvers_solution(small_cal):
     z = problem.z(small_cal.x)
     # z: metres of residual per unit (J P nearly orthonormal); start ~5 noise sigmas off everywhere
     z0 = z + np.random.default_rng(0).normal(0.0, 5 * small_cal.sigma, z.size)
-    res = problem.solve(z0, small_cal.settings)
+    res = problem.solve(z0, small_cal.settings).result
     ref = least_squares(problem.fun, z0, jac=problem.jac, method="trf", tr_solver="exact",
                         ftol=1e-12, xtol=1e-12, gtol=1e-12)
     assert res.success and ref.success
@@ -360,3 +361,21 @@ def test_a_solve_that_ends_on_the_step_test_is_at_the_solution(arm, small_sim, m
     seen = np.concatenate([ref.identifiable, np.ones(std.size - len(ref.unknowns.names), bool)])
     np.testing.assert_array_less(np.abs(cal.x - ref.x)[seen], 1e-3 * std[seen])
     assert abs(cal.fit_rms - ref.fit_rms) < 1e-6 * ref.fit_rms
+
+
+def test_fit_options_have_identifys_defaults_and_checks():
+    """FitOptions, the one value identify hands to its fits, has identify's keyword defaults and
+    refuses what identify refuses."""
+    import dataclasses
+    import inspect
+
+    from aacmm_pin.fit.identification import FitOptions
+
+    params = inspect.signature(identify).parameters
+    fields = dataclasses.fields(FitOptions)
+    assert {f.name for f in fields} == set(params) - {"campaign", "arm"}
+    for f in fields:
+        assert params[f.name].default == f.default, f.name
+    for bad in ({"nests": "sometimes"}, {"model": "spline"}, {"sigma": -1.0}, {"jac": "exact"}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            FitOptions(**bad)

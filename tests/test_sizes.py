@@ -15,7 +15,7 @@ from aacmm_pin.analyses.linear_scorer import LinearScorer, size_factors
 from aacmm_pin.data.campaign import PointLog
 from aacmm_pin.effects import backlash, compliance, crosstalk, encoder_harmonic, thermal
 from aacmm_pin.fit.identifiability import plausible_sizes
-from aacmm_pin.fit.identification import measurements
+from aacmm_pin.fit.measurements import measurements
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.model.sizes import DEFAULT, Sizes, read_sizes, sizes_path, write_sizes

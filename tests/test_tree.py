@@ -16,7 +16,7 @@ from aacmm_pin.analyses.discovery import discover
 from aacmm_pin.data.campaign import PointLog, read_readout_columns
 from aacmm_pin.effects import calibrated as kinematics
 from aacmm_pin.effects import compliance
-from aacmm_pin.fit.identification import check_points
+from aacmm_pin.fit.measurements import check_points
 from aacmm_pin.model.parameters import check_against_arm, parameters_from_dict
 from aacmm_pin.model.samples import Samples
 

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.analyses.bar_scatter import CAUSES, read_accuracy
+from aacmm_pin.analyses.bar_scatter import CAUSES
 from aacmm_pin.cli import main
+from aacmm_pin.outputs.calibration_folder import read_calibration
 from tests import fuzz
 from tests.conftest import SMALL
 from tests.helpers import SAMPLE
@@ -126,9 +127,10 @@ def test_cli_validate_compares_the_scatter_with_report_json(small_sim: ap.Simula
     arm = ap.load_arm()
     ap.write_campaign(small_sim.campaign, tmp_path / "camp")
     ap.write_calibration(small_cal, arm, tmp_path / "cal")
-    assert read_accuracy(tmp_path / "cal" / "parameters.json") == pytest.approx(small_cal.accuracy)
+    assert read_calibration(tmp_path / "cal" / "parameters.json").accuracy == pytest.approx(
+        small_cal.accuracy)
     (tmp_path / "cal" / "parameters.json").rename(tmp_path / "cal" / "other.json")
-    assert read_accuracy(tmp_path / "cal" / "other.json") is None  # not the neighbour's report
+    assert read_calibration(tmp_path / "cal" / "other.json").accuracy is None  # not the neighbour's
     (tmp_path / "cal" / "other.json").rename(tmp_path / "cal" / "parameters.json")
     header = (tmp_path / "camp" / "lengthbar.csv").read_text().splitlines()[0].split(",")
     fuzz.scale_column(tmp_path / "camp" / "lengthbar.csv", header.index("q7_deg"), np.pi / 180)

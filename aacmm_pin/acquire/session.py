@@ -267,6 +267,73 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
         return _record(config, lock, stop or threading.Event(), status)
 
 
+def _open_readers(configs: list[PortConfig], events: queue.Queue[PortEvent],
+                  halt: threading.Event) -> list[PortReader]:
+    """Open every port (all or none: the ones opened are closed on an error) and its reader."""
+    opened: list[Any] = []
+    try:
+        for pc in configs:
+            opened.append(open_port(pc.url, pc.baudrate))
+    except AcquisitionError:
+        for port in opened:
+            port.close()
+        raise
+    return [PortReader(pc, events, halt, port) for pc, port in zip(configs, opened)]
+
+
+class _Recording:
+    """One recording's state: arm samples paired with gauge readings, the rows written, why it ends."""
+
+    def __init__(self, cfg: AcquisitionConfig, writer: SpatWriter, summary: AcquisitionSummary):
+        self.cfg, self.writer, self.summary = cfg, writer, summary
+        self.pairer = Pairer((1, 2, 3), cfg.max_skew)
+        self.t0, self.wall0 = time.monotonic(), time.time()
+        self.last_counter: int | None = None
+        self.n_pairs = 0
+        self.reason: str | None = None
+        """Why the recording ends (None: it goes on)."""
+
+    def handle(self, event: PortEvent) -> str | None:
+        """Count and pair one port event; return why the recording must end (a port gone)."""
+        summary = self.summary
+        what, name = event[0], event[1]
+        counts = summary.ports[name]
+        if what == "data":
+            counts.lines += len(event[3])
+            if event[2] == "arm":
+                for t, (counter, q), u in event[3]:
+                    if counter is not None and self.last_counter is not None:
+                        gap = (counter - self.last_counter - 1) % COUNTER_MODULUS
+                        # a counter that goes back (device restarted) is no gap of ~2**32
+                        summary.missed_samples += gap if gap < COUNTER_MODULUS // 2 else 0
+                    self.last_counter = counter if counter is not None else self.last_counter
+                    self.pairer.add_arm(t, q, u)
+            else:
+                for t, (channel, value), u in event[3]:
+                    self.pairer.add_gauge(channel, t, value, u)
+        elif what == "fault":
+            counts.add(event[2])
+        elif what == "reconnect":
+            counts.reconnects += 1
+        elif what == "gone":
+            return f"{name} port gone: {event[3]}"
+        return None
+
+    def write(self, pairs: list[Pair]) -> None:
+        """Write every ``decimate``-th pair as a SPAT row (time, readouts, displacement)."""
+        cfg, summary = self.cfg, self.summary
+        for pair in pairs:
+            self.n_pairs += 1
+            if (self.n_pairs - 1) % cfg.decimate:
+                continue
+            d = cfg.nest.displacement(np.array(pair.readings))
+            self.writer.write(self.wall0 + (pair.t - self.t0), pair.q, d)
+            summary.rows_written += 1
+            summary.last_q, summary.last_d = pair.q, d
+            np.minimum(summary.d_min, d, out=summary.d_min)
+            np.maximum(summary.d_max, d, out=summary.d_max)
+
+
 def _record(cfg: AcquisitionConfig, lock: CampaignLock, stop: threading.Event,
             status: TextIO | None) -> AcquisitionSummary:
     """Run :func:`acquire` while holding the campaign's lock."""
@@ -277,108 +344,71 @@ def _record(cfg: AcquisitionConfig, lock: CampaignLock, stop: threading.Event,
     configs = _port_configs(cfg)
     events: queue.Queue[PortEvent] = queue.Queue()
     halt = threading.Event()
-    opened: list[Any] = []
-    try:
-        for pc in configs:
-            opened.append(open_port(pc.url, pc.baudrate))
-    except AcquisitionError:
-        for port in opened:
-            port.close()
-        raise
-    readers = [PortReader(pc, events, halt, port) for pc, port in zip(configs, opened)]
+    readers = _open_readers(configs, events, halt)
     for pc in configs:
         summary.ports[pc.name] = PortCounts()
         summary.port_urls[pc.name] = pc.url
     tty = bool(status is not None and getattr(status, "isatty", lambda: False)())
-    width = shutil.get_terminal_size().columns - 1
-    pairer = Pairer((1, 2, 3), cfg.max_skew)
-    t0, wall0 = time.monotonic(), time.time()
-    last_status, rows_at_status, rate = t0, 0, 0.0
-    last_counter: int | None = None
-    n_pairs = 0
-
-    def handle(event: PortEvent) -> str | None:
-        nonlocal last_counter
-        what, name = event[0], event[1]
-        counts = summary.ports[name]
-        if what == "data":
-            counts.lines += len(event[3])
-            if event[2] == "arm":
-                for t, (counter, q), u in event[3]:
-                    if counter is not None and last_counter is not None:
-                        gap = (counter - last_counter - 1) % COUNTER_MODULUS
-                        # a counter that goes back (device restarted) is no gap of ~2**32
-                        summary.missed_samples += gap if gap < COUNTER_MODULUS // 2 else 0
-                    last_counter = counter if counter is not None else last_counter
-                    pairer.add_arm(t, q, u)
-            else:
-                for t, (channel, value), u in event[3]:
-                    pairer.add_gauge(channel, t, value, u)
-        elif what == "fault":
-            counts.add(event[2])
-        elif what == "reconnect":
-            counts.reconnects += 1
-        elif what == "gone":
-            return f"{name} port gone: {event[3]}"
-        return None
-
-    def write(pairs: list[Pair]) -> None:
-        nonlocal n_pairs
-        for pair in pairs:
-            n_pairs += 1
-            if (n_pairs - 1) % cfg.decimate:
-                continue
-            d = cfg.nest.displacement(np.array(pair.readings))
-            writer.write(wall0 + (pair.t - t0), pair.q, d)
-            summary.rows_written += 1
-            summary.last_q, summary.last_d = pair.q, d
-            np.minimum(summary.d_min, d, out=summary.d_min)
-            np.maximum(summary.d_max, d, out=summary.d_max)
-
-    reason = None
+    rec = _Recording(cfg, writer, summary)
     for reader in readers:
         reader.start()
     try:
-        while reason is None:
-            for item in _drain(events, 0.01):
-                gone = handle(item)
-                reason = reason or gone
-            now = time.monotonic()
-            write(pairer.pop(now))
-            summary.unpaired = pairer.unpaired
-            summary.duration_s = now - t0
-            if reason is not None:
-                summary.status = 1
-            elif stop.is_set():
-                reason = "stopped (signal or request)"
-            elif cfg.seconds is not None and now - t0 >= cfg.seconds:
-                reason = f"time up ({cfg.seconds:g} s)"
-            if now - last_status >= cfg.status_interval:
-                rate = (summary.rows_written - rows_at_status) / (now - last_status)
-                last_status, rows_at_status = now, summary.rows_written
-                if status is not None:
-                    line = summary.status_line(rate)
-                    status.write(f"\r{line[:width]}\x1b[K" if tty else line + "\n")
-                    status.flush()
-                _write_json(cfg.summary_path, summary.to_dict() | {"running": True})
+        _run(rec, events, stop, status, tty)
     finally:
         halt.set()
         for reader in readers:
             reader.join(timeout=1.0)
-        try:
-            while True:
-                item = events.get_nowait()
-                if item[0] != "gone":
-                    handle(item)
-        except queue.Empty:
-            pass
-        write(pairer.pop())
-        writer.close()
-        summary.unpaired = pairer.unpaired
-        summary.duration_s = time.monotonic() - t0
-        summary.stop_reason = reason or "interrupted"
-        _write_json(cfg.summary_path, summary.to_dict())
-        if status is not None:
-            status.write(("\n" if tty else "") + summary.report() + "\n")
-            status.flush()
+        _finish(rec, events, status, tty)
     return summary
+
+
+def _run(rec: _Recording, events: queue.Queue[PortEvent], stop: threading.Event,
+         status: TextIO | None, tty: bool) -> None:
+    """Pair and write the ports' events until a port is gone, a stop or the time is up."""
+    cfg, summary, t0 = rec.cfg, rec.summary, rec.t0
+    width = shutil.get_terminal_size().columns - 1
+    last_status, rows_at_status, rate = t0, 0, 0.0
+    while rec.reason is None:
+        for item in _drain(events, 0.01):
+            gone = rec.handle(item)
+            rec.reason = rec.reason or gone
+        now = time.monotonic()
+        rec.write(rec.pairer.pop(now))
+        summary.unpaired = rec.pairer.unpaired
+        summary.duration_s = now - t0
+        if rec.reason is not None:
+            summary.status = 1
+        elif stop.is_set():
+            rec.reason = "stopped (signal or request)"
+        elif cfg.seconds is not None and now - t0 >= cfg.seconds:
+            rec.reason = f"time up ({cfg.seconds:g} s)"
+        if now - last_status >= cfg.status_interval:
+            rate = (summary.rows_written - rows_at_status) / (now - last_status)
+            last_status, rows_at_status = now, summary.rows_written
+            if status is not None:
+                line = summary.status_line(rate)
+                status.write(f"\r{line[:width]}\x1b[K" if tty else line + "\n")
+                status.flush()
+            _write_json(cfg.summary_path, summary.to_dict() | {"running": True})
+
+
+def _finish(rec: _Recording, events: queue.Queue[PortEvent], status: TextIO | None,
+            tty: bool) -> None:
+    """After the readers stopped: take their last events, write the last pairs, close, report."""
+    summary = rec.summary
+    try:
+        while True:
+            item = events.get_nowait()
+            if item[0] != "gone":
+                rec.handle(item)
+    except queue.Empty:
+        pass
+    rec.write(rec.pairer.pop())
+    rec.writer.close()
+    summary.unpaired = rec.pairer.unpaired
+    summary.duration_s = time.monotonic() - rec.t0
+    summary.stop_reason = rec.reason or "interrupted"
+    _write_json(rec.cfg.summary_path, summary.to_dict())
+    if status is not None:
+        status.write(("\n" if tty else "") + summary.report() + "\n")
+        status.flush()

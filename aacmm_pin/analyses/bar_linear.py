@@ -32,7 +32,7 @@ from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_jacobians
 from aacmm_pin.fit.identifiability import plausible_sizes
-from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_count, touched_nodes

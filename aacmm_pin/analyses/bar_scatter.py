@@ -6,7 +6,7 @@ the same arm: how far the model's stylus centre moves when only the posture chan
 readouts should scatter about their socket's mean point by about
 ``sqrt(accuracy**2 + sigma_socket**2)`` per coordinate: the accuracy the calibration claims (its
 fit's noise estimate ``sigma``, the fit RMS with the dof of its determined parameters removed, at
-least the fit RMS: :attr:`~aacmm_pin.fit.identification.Calibration.accuracy`, ``report.json``) and
+least the fit RMS: :attr:`~aacmm_pin.fit.identification_result.Calibration.accuracy`, ``report.json``) and
 the socket's seating repeatability (``campaign.json``'s ``socket``, else
 :data:`aacmm_pin.units.SIGMA_SOCKET`). A much larger scatter means the readouts and the calibration
 do not belong together: a unit error in a readout column (the stylus axis A7 in radians moves the
@@ -35,16 +35,13 @@ unit errors it is for give ratios of 8-90).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy.special import betaincinv, chdtri  # not scipy.stats: its import takes ~0.5 s
 
-from aacmm_pin.model.parameters import MAX_PARAMETERS_BYTES
 from aacmm_pin.units import UM
 
 FALSE_ALARM = 1e-3
@@ -156,43 +153,3 @@ def socket_scatter(points: np.ndarray, placement: np.ndarray, socket: np.ndarray
     d2 = np.concatenate(robust)
     return SocketScatter(math.sqrt(float(np.median(d2)) / _CHI2_3_MEDIAN),
                          math.sqrt(pooled[0] / pooled[1]), int(d2.size), accuracy, sigma_socket)
-
-
-def read_report(caldir: str | Path) -> dict[str, Any] | None:
-    """Return a calibration folder's ``report.json``, or None where there is none to trust.
-
-    ``caldir`` is the folder or its ``parameters.json`` (a parameters file of another name has no
-    report of its own: None, rather than a neighbour's report). None when the report is missing,
-    larger than :data:`~aacmm_pin.model.parameters.MAX_PARAMETERS_BYTES`, not a JSON object.
-    """
-    path = Path(caldir)
-    if not path.is_dir() and path.name != "parameters.json":
-        return None
-    report = (path if path.is_dir() else path.parent) / "report.json"
-    try:
-        with report.open("rb") as f:
-            raw = f.read(MAX_PARAMETERS_BYTES + 1)  # bounded: a huge file or /dev/zero
-        data = json.loads(raw.decode("utf-8-sig")) if len(raw) <= MAX_PARAMETERS_BYTES else None
-    except (OSError, ValueError, RecursionError):
-        return None
-    return data if isinstance(data, dict) else None
-
-
-def read_accuracy(caldir: str | Path) -> float | None:
-    """Return the accuracy per coordinate a calibration folder's ``report.json`` claims, m.
-
-    The larger of its ``sigma_um`` (the fit's noise estimate) and ``fit_rms_um``, as
-    :attr:`~aacmm_pin.fit.identification.Calibration.accuracy`; None without a report
-    (:func:`read_report`) or with neither as a positive finite number.
-    """
-    data = read_report(caldir) or {}
-    values = [data.get(key) for key in ("sigma_um", "fit_rms_um")]
-    good = [float(v) for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)
-            and math.isfinite(v) and v > 0]
-    return max(good) * UM if good else None
-
-
-def fitted_with_bar(caldir: str | Path) -> bool:
-    """Whether the calibration's ``report.json`` lists the length bar among its fit's inputs."""
-    inputs = (read_report(caldir) or {}).get("inputs")
-    return isinstance(inputs, list) and "bar" in inputs

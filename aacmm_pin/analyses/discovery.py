@@ -44,7 +44,9 @@ from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import ModelSpec, Term
 from aacmm_pin.effects.registry import library
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.fit.identification import Calibration, Measurements, identify, measurements
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.fit.identification_result import Calibration
+from aacmm_pin.fit.measurements import Measurements, measurements
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.progress import Progress

@@ -13,7 +13,7 @@ from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.registry import library
-from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.fit.identification_result import Calibration
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_jacobians
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identifiability import plausible_groups, plausible_sizes
-from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.encoder_map import touched_nodes
 from aacmm_pin.model.kinematics import StylusJacobians
 from aacmm_pin.model.samples import Samples

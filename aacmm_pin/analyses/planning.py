@@ -22,7 +22,7 @@ from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import stylus_ik
 from aacmm_pin.fit.identifiability import GAUGE_WEIGHT, plausible_sizes
-from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters

@@ -34,7 +34,7 @@ from scipy import stats
 
 from aacmm_pin.effects.base import Variable
 from aacmm_pin.effects.registry import library
-from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.samples import Samples
 
 DEGREES = (1, 3)

@@ -21,7 +21,9 @@ import numpy as np
 
 from aacmm_pin.analyses.validation import as_table, bar_pairs, pair_errors, pair_weights, validate
 from aacmm_pin.data.campaign import Campaign
-from aacmm_pin.fit.identification import Calibration, measured_positions, refit
+from aacmm_pin.fit.identification import refit
+from aacmm_pin.fit.identification_result import Calibration
+from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.fit.solver import Factor
 from aacmm_pin.fit.unknowns import NodeKey, UnknownKey
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST

@@ -27,7 +27,7 @@ from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
 
 if TYPE_CHECKING:
-    from aacmm_pin.fit.identification import Calibration
+    from aacmm_pin.fit.identification_result import Calibration
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -63,15 +63,14 @@ def _predict(args: argparse.Namespace) -> int:
         write_points,
     )
     from aacmm_pin.effects.calibrated import predict
-    from aacmm_pin.effects.registry import check_extensions, read_parameters
     from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.model.parameters import check_against_arm
     from aacmm_pin.model.samples import Samples
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
-    params = read_parameters(args.params)
+    folder = read_calibration(args.params)
+    params = folder.parameters
     arm = load_arm(args.arm or params.arm)
-    check_against_arm(params, arm)
-    check_extensions(params, arm)
+    folder.check(arm)
     q, temp, t = read_readout_columns(args.readouts, arm)
     tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
         args.readouts, arm)
@@ -188,24 +187,22 @@ def _discover(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     import json
 
-    from aacmm_pin.analyses.bar_scatter import fitted_with_bar, read_accuracy
     from aacmm_pin.analyses.validation import validate, validate_points
     from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.effects.registry import check_extensions, read_parameters
     from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.model.parameters import check_against_arm
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
-    params = read_parameters(args.caldir)
+    cal = read_calibration(args.caldir)
+    params = cal.parameters
     arm = load_arm(params.arm)
-    check_against_arm(params, arm)  # exactly as predict does
-    check_extensions(params, arm)
+    cal.check(arm)  # exactly as predict does
     campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
     if campaign.lengthbar is not None or campaign.points is None:
-        result = validate(arm, params, campaign, read_accuracy(args.caldir))
+        result = validate(arm, params, campaign, cal.accuracy)
         print(result.table())
         data = result.to_dict()
-        if fitted_with_bar(args.caldir):
+        if cal.fitted_with_bar:
             data["note"] = ("this calibration was fitted with a length bar (identify --use-bar): on "
                             "that bar's campaign these errors and the scatter check are not an "
                             "independent test")
@@ -338,7 +335,13 @@ def add_parsers(subparsers: Any) -> None:
             ``handler``, a function of the parsed arguments returning the exit status.
     """
     arm = arm_option()
+    _add_model_parsers(subparsers, arm)
+    _add_fit_parsers(subparsers, arm)
+    _add_analysis_parsers(subparsers, arm)
 
+
+def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
+    """Add axes, simulate and predict (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
                     "over its tree), their limits, its tools and its error frames")
     p.add_argument("arm", nargs="?", default="aacmm7", metavar="URDF",
@@ -369,6 +372,10 @@ def add_parsers(subparsers: Any) -> None:
                         "default: the readouts' tool column")
     p.set_defaults(handler=_predict)
 
+
+
+def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
+    """Add identify and discover (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
                     parents=[model_option(),
                              no_rtest_option("conventional SPAT: each location's mean "
@@ -417,6 +424,9 @@ def add_parsers(subparsers: Any) -> None:
                             f"residual is judged against (default: campaign.json, else {default})")
     p.set_defaults(handler=_discover)
 
+
+def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
+    """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
                     parents=[json_option("the errors")])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")

@@ -21,16 +21,15 @@ from aacmm_pin.cli._options import (
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
     """Return (arm, parameters): from --params, else the nominal --arm."""
-    from aacmm_pin.effects.registry import check_extensions, read_parameters
     from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.model.parameters import Parameters, check_against_arm
+    from aacmm_pin.model.parameters import Parameters
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
     if getattr(args, "params", None):
-        params = read_parameters(args.params)
-        arm = load_arm(args.arm or params.arm)
-        check_against_arm(params, arm)
-        check_extensions(params, arm)
-        return arm, params
+        folder = read_calibration(args.params)
+        arm = load_arm(args.arm or folder.parameters.arm)
+        folder.check(arm)
+        return arm, folder.parameters
     arm = load_arm(args.arm or "aacmm7")
     return arm, Parameters.nominal(arm)
 

@@ -11,7 +11,7 @@ reader is given the arm, one ``<joint name>_deg`` column per axis (``A1_deg``, `
 any column order; not both. The joint names are the arm's, so without the arm only ``q`` columns are
 read. **Tools.** ``points.csv`` may name the tool each point measures in a ``tool`` column (a name of
 ``Arm.tool_names``, e.g. ``left``): optional for a single-tool arm, needed for several tools; given
-the arm, the reader checks it (else :func:`aacmm_pin.fit.identification.check_points` does).
+the arm, the reader checks it (else :func:`aacmm_pin.fit.measurements.check_points` does).
 """
 
 from __future__ import annotations

@@ -65,7 +65,7 @@ class Outlier(NamedTuple):
 def sample_sources(campaign: Campaign, use_bar: bool) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Return the file, line (-1: unknown) and log row of every sample of an identification.
 
-    The order is that of :func:`aacmm_pin.fit.identification.measurements`: SPAT samples (when the
+    The order is that of :func:`aacmm_pin.fit.measurements.measurements`: SPAT samples (when the
     campaign has SPATs, or no points), then points, then (``use_bar``) the length-bar readouts.
     """
     files: list[str] = []

@@ -3,7 +3,8 @@ r"""The least-squares problem of an identification, in reduced and preconditione
 :class:`Problem` is the typed interface that the analyses above the solver use (uncertainty,
 discovery, the linearised length bar): residuals, Jacobians, coordinates, covariance and the solve
 itself. :func:`aacmm_pin.identify` builds one per round and keeps the last in
-:attr:`aacmm_pin.Calibration.problem`.
+:attr:`aacmm_pin.Calibration.problem`. :meth:`Problem.solve` starts from a
+:class:`~aacmm_pin.fit.solver_values.WarmStart` and returns a :class:`~aacmm_pin.fit.solver_values.Solution`.
 
 The full vector is ``[arm unknowns, nest offsets, instrument frames]`` (:class:`Nuisance`): every
 R-Test location's zero position has an unknown error (3 per location) with the stated prior
@@ -24,15 +25,19 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple, TypeVar
+from typing import TypeVar
 
 import numpy as np
 import pinocchio as pin
 import scipy.sparse as sp
-from scipy.optimize import OptimizeResult, least_squares
+from scipy.optimize import least_squares
 from scipy.sparse.linalg import LinearOperator, lsmr
 
+from aacmm_pin.fit.solver_values import Factor, Solution, SolverSettings, WarmStart
 from aacmm_pin.fit.unknowns import BlockJacobian, Unknowns
+
+__all__ = ["DENSE_LIMIT", "STEP_TOL", "Factor", "Nuisance", "Problem", "Solution", "SolverSettings",
+           "WarmStart"]
 
 T = TypeVar("T")
 
@@ -55,27 +60,6 @@ RANK_TOL = 1e-10
 FRAME_ANGLE = 1e-2
 FRAME_LENGTH = 1e-2
 """Scales (rad, m) of an instrument frame's six unknowns in the preconditioner's basis."""
-
-
-@dataclass(frozen=True)
-class SolverSettings:
-    """How :meth:`Problem.solve` minimises (scipy's ``least_squares`` vocabulary)."""
-
-    loss: str
-    """``"linear"`` or a robust loss (``"soft_l1"``, ``"huber"``, ...)."""
-    f_scale: float
-    """Residual scale of a robust loss, m."""
-    max_nfev: int
-    """Most residual evaluations of one solve."""
-
-
-class Factor(NamedTuple):
-    """Reduced QR factors of the dense Jacobian ``J P`` at one point (for Gauss-Newton refits)."""
-
-    q: np.ndarray
-    """Orthonormal factor, shape (n_residuals, n_z)."""
-    r: np.ndarray
-    """Upper triangular factor, shape (n_z, n_z)."""
 
 
 @dataclass(frozen=True)
@@ -114,19 +98,29 @@ class Nuisance:
         return int(self.frame_start.shape[0])
 
 
-def _handed(z0: np.ndarray, value: T | None) -> Callable[[np.ndarray], T | None]:
-    """Return ``take(z)``: ``value`` on the first call if z is z0 exactly, else (and later) None.
+class _Handover:
+    """A warm start's residual and Jacobian for scipy's first calls.
 
-    What a caller has at a solve's start (its residual, its Jacobian) serves scipy's first call
-    there instead of being computed again, and is released after it.
+    Each is served to the first call of its kind if that call is at the start exactly, and
+    released after it.
     """
-    held = [] if value is None else [(np.array(z0, dtype=float), value)]
 
-    def take(z: np.ndarray) -> T | None:
+    def __init__(self, warm: WarmStart, jacobian: bool):
+        self.z = np.array(warm.z, dtype=float)
+        self._residual = [] if warm.residual is None else [warm.residual]
+        self._jacobian = [] if warm.jacobian is None or not jacobian else [warm.jacobian]
+
+    def _take(self, held: list[T], z: np.ndarray) -> T | None:
         given = held.pop() if held else None
-        return given[1] if given is not None and np.array_equal(given[0], z) else None
+        return given if given is not None and np.array_equal(self.z, z) else None
 
-    return take
+    def residual(self, z: np.ndarray) -> np.ndarray | None:
+        """Return the start's residual on the first call if z is the start, else None."""
+        return self._take(self._residual, z)
+
+    def jacobian(self, z: np.ndarray) -> BlockJacobian | None:
+        """Return the start's data Jacobian on the first call if z is the start, else None."""
+        return self._take(self._jacobian, z)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -200,7 +194,6 @@ class Problem:
                  weight: np.ndarray | None = None, jac_lin: BlockJacobian | None = None):
         self.unknowns, self.q, self.measured = unknowns, q, measured
         self.nuisance = nuisance
-        self._last: tuple[np.ndarray, BlockJacobian] | None = None
         n = len(q)
         self.n_arm = int(unknowns.free.sum())
         self.n_loc = 3 * nuisance.n_nests
@@ -488,46 +481,38 @@ class Problem:
         """Whether a Jacobian of n_z reduced columns is small enough for the dense solver."""
         return bool(n_z * self.q.shape[0] * 3 < DENSE_LIMIT)
 
-    def solve(self, z0: np.ndarray, settings: SolverSettings, jac: str = "analytic",
-              on_evaluation: Callable[[float], None] | None = None,
-              keep_jacobian: bool = False, jac0: BlockJacobian | None = None,
-              f0: np.ndarray | None = None, jac0_at: np.ndarray | None = None) -> OptimizeResult:
-        """Minimise from z0 with scipy's trust-region reflective solver (LSMR steps).
+    def solve(self, start: WarmStart | np.ndarray, settings: SolverSettings,
+              jac: str = "analytic", on_evaluation: Callable[[float], None] | None = None
+              ) -> Solution:
+        """Minimise from ``start`` with scipy's trust-region reflective solver (LSMR steps).
 
         Args:
-            z0: start, reduced coordinates, shape (n_z,).
+            start: the start, reduced coordinates, shape (n_z,), or a :class:`WarmStart` with
+                what the caller has there (the caller keeps no reference to its Jacobian, so that
+                its memory is freed after scipy's first step).
             settings: loss, its scale and the evaluation budget.
             jac: ``"analytic"`` or a scipy finite-difference scheme (``"2-point"``, ...).
             on_evaluation: called after every residual evaluation with the residual's RMS (m,
                 in units of the solve's sigma for weighted rows), for progress.
-            keep_jacobian: keep the last data Jacobian (:meth:`data_jacobian`, the solver's last,
-                at the solution) for :meth:`take_jacobian` instead of releasing it.
-            jac0: the data Jacobian (:meth:`data_jacobian`, shape (3N, n_arm), m per unit) at the
-                start when the caller has it: scipy's first Jacobian, if it asks at z0 exactly, is
-                built from it instead of computed again. Released after that first call (a caller
-                that wants its memory back keeps no reference).
-            f0: :meth:`fun` at z0 when the caller has it (not evaluated again).
-            jac0_at: the full vector where ``jac0`` was taken when it is not ``x(z0)`` exactly
-                (a point a held component away): then it serves scipy's first step only and is
-                never kept as the Jacobian at the solution.
 
         Returns:
-            scipy's result (``nfev``: the residual evaluations made; ``status`` 1 when it ended on
-            :data:`STEP_TOL`); with the analytic Jacobian without ``jac`` (the last Jacobian's
-            memory is released: :meth:`jac_operator` gives it again).
+            scipy's result and, with the analytic Jacobian, the data Jacobian at the solution
+            (:class:`Solution`).
         """
-        self._last = None
+        warm = start if isinstance(start, WarmStart) else WarmStart(np.asarray(start))
         # The analytic Jacobian goes to LSMR as an operator at every size: in the preconditioned
         # coordinates its columns are nearly orthonormal, so LSMR takes a few products per step
         # where the exact solver takes a dense SVD (paper-sized campaign: 3x less CPU, the same
         # solution to 1e-4 of its standard deviations, tests/test_identification.py)
         dense = jac != "analytic"
-
-        residual_at_start = _handed(z0, f0)
+        z0 = warm.z
+        handover = _Handover(warm, jacobian=not dense)
+        exact = warm.at is None or np.array_equal(warm.at, self.x(z0))
+        del warm, start
         evaluations = [0]
 
         def fun(z: np.ndarray) -> np.ndarray:
-            given = residual_at_start(z)
+            given = handover.residual(z)
             if given is not None:
                 return given
             evaluations[0] += 1
@@ -535,11 +520,7 @@ class Problem:
 
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
         previous: list[list[BlockJacobian]] = []
-
         at: list[np.ndarray] = []
-        jacobian_at_start = _handed(z0, None if dense else jac0)
-        del jac0
-        exact = jac0_at is None or np.array_equal(jac0_at, self.x(z0))
         used_given = [False]  # the current operator holds the caller's (maybe inexact) Jacobian
 
         def operator(z: np.ndarray) -> LinearOperator:
@@ -548,7 +529,7 @@ class Problem:
             # is released first
             while previous:
                 previous.pop().clear()
-            given = jacobian_at_start(z)
+            given = handover.jacobian(z)
             op, held = self._operator(z, given)
             used_given[0] = given is not None
             del given
@@ -563,14 +544,14 @@ class Problem:
                             f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
                             xtol=1e-12, gtol=STEP_TOL * self.sigma_class)
         out.nfev = evaluations[0]
-        if previous:  # the last operator's Jacobian is not kept with the result
+        last: BlockJacobian | None = None
+        if previous:  # the last operator's Jacobian, if taken at the solution
             held = previous.pop()
-            if (keep_jacobian and held and np.array_equal(at[0], out.x)
-                    and (exact or not used_given[0])):
-                self._last = (at[0], held[0])
+            if held and np.array_equal(at[0], out.x) and (exact or not used_given[0]):
+                last = held[0]
             held.clear()
             out.pop("jac", None)
-        return out
+        return Solution(out, last)
 
     def newton_step(self, z: np.ndarray, f: np.ndarray, data: BlockJacobian | None = None
                     ) -> np.ndarray:
@@ -588,11 +569,6 @@ class Problem:
         """
         step: np.ndarray = lsmr(self.jac_operator(z, data), -f, atol=1e-12, btol=1e-12)[0]
         return step
-
-    def take_jacobian(self, z: np.ndarray) -> BlockJacobian | None:
-        """Return (and release) the data Jacobian :meth:`solve` kept, if it was taken at z."""
-        last, self._last = self._last, None
-        return last[1] if last is not None and np.array_equal(last[0], z) else None
 
     def gauss_newton(self, z: np.ndarray, factor: Factor, iterations: int
                      ) -> tuple[np.ndarray, bool]:

@@ -19,16 +19,16 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.analyses.bar_scatter import read_report
 from aacmm_pin.analyses.validation import ValidationResult, validate
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import predict
-from aacmm_pin.effects.registry import check_extensions, read_parameters
-from aacmm_pin.fit.identification import measured_positions
+from aacmm_pin.effects.registry import check_extensions
+from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.encoder_map import correct_readouts
 from aacmm_pin.model.parameters import Parameters, check_against_arm
 from aacmm_pin.model.samples import Samples
+from aacmm_pin.outputs.calibration_folder import read_calibration
 
 ARM = "arm"
 """Scene path of the arm: ``/meshcat/arm/visuals/<URDF visual>``."""
@@ -108,14 +108,12 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
     if isinstance(source, Parameters):
         params, default_label = source, "model"
     else:
-        path = Path(source)
-        params = read_parameters(path)
-        folder = path if path.is_dir() else path.parent
-        default_label = folder.resolve().name or "model"
-        offsets = _nest_offsets(path)
+        cal = read_calibration(source)
+        params, offsets = cal.parameters, cal.nest_offsets_um
+        default_label = cal.folder.resolve().name or "model"
     arm = load_arm(params.arm)
     check_against_arm(params, arm)
-    check_extensions(params, arm)
+    check_extensions(params, arm, None if isinstance(source, Parameters) else cal.file)
     rot, trans = params.rotation(), params.translation
     spat = campaign.spat
     if spat is None:
@@ -136,19 +134,6 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
             sockets[(int(k), str(s))] = points[(bar.placement == k) & (bar.socket == s)].mean(axis=0)
     name = re.sub(r"[^A-Za-z0-9_.+-]", "_", label or default_label)
     return ModelResiduals(name, params, arm, nest, predicted, measured, validation, sockets)
-
-
-def _nest_offsets(caldir: Path) -> dict[str, list[float]]:
-    """Return a calibration's estimated nest offsets (location -> um), {} if not recorded.
-
-    ``caldir``: the folder or its ``parameters.json`` (its ``report.json``, read as
-    :func:`aacmm_pin.analyses.bar_scatter.read_report` reads it: bounded, never a neighbour's).
-    """
-    offsets = (read_report(caldir) or {}).get("nest_offsets_um")
-    if not isinstance(offsets, dict):
-        return {}
-    return {str(k): [float(x) for x in v] for k, v in offsets.items()
-            if isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)}
 
 
 class ArmPoser:

@@ -4,6 +4,8 @@
 ``calibrated.urdf`` holds the identified DH values in its error frames and the identified tool vector
 of every tool (it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json``
 maps first); ``calibrated.sizes.json`` beside it carries the arm's plausible sizes, if it has any.
+:func:`read_calibration` (:mod:`aacmm_pin.outputs.calibration_folder`, which needs no identification)
+reads a folder back.
 """
 
 from __future__ import annotations
@@ -14,11 +16,22 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin.data.output_folder import output_folder
-from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import write_parameters
 from aacmm_pin.model.sizes import sizes_path, write_sizes
+from aacmm_pin.outputs.calibration_folder import (
+    MAPS_FILE,
+    PARAMETERS_FILE,
+    REPORT_FILE,
+    URDF_FILE,
+    CalibrationFolder,
+    read_calibration,
+)
 from aacmm_pin.units import ARCSEC
+
+__all__ = ["CalibrationFolder", "read_calibration", "write_calibration", "write_calibration_files",
+           "write_maps_csv"]
 
 
 def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray] | None = None
@@ -59,12 +72,12 @@ def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: boo
 def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
     """Write the files of a calibration folder into an existing ``folder`` (not atomically)."""
     params = cal.parameters
-    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
-                                          encoding="utf-8")
+    (folder / URDF_FILE).write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
+                                    encoding="utf-8")
     if sizes_path(arm.source).is_file():
-        write_sizes(arm.sizes, sizes_path(folder / "calibrated.urdf"))
-    write_parameters(params.replace(arm="calibrated.urdf"), folder / "parameters.json")
-    write_maps_csv(cal, folder / "encoder_maps.csv")
+        write_sizes(arm.sizes, sizes_path(folder / URDF_FILE))
+    write_parameters(params.replace(arm=URDF_FILE), folder / PARAMETERS_FILE)
+    write_maps_csv(cal, folder / MAPS_FILE)
     report = cal.report()
     report["arm"] = arm.name
-    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (folder / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n")

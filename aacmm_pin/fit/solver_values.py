@@ -1,0 +1,72 @@
+"""The values a solve takes and returns: settings, a warm start, the solution, a factored Jacobian.
+
+:meth:`aacmm_pin.fit.solver.Problem.solve` minimises from a :class:`WarmStart` (scipy's ``x0`` with
+the ``f0`` and ``J0`` the caller has there) with :class:`SolverSettings` and returns a
+:class:`Solution` (scipy's result and the data Jacobian at the solution, which the caller would
+otherwise compute again). :class:`Factor` is what Gauss-Newton refits share.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import OptimizeResult
+
+from aacmm_pin.fit.unknowns import BlockJacobian
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How :meth:`~aacmm_pin.fit.solver.Problem.solve` minimises (scipy's ``least_squares`` vocabulary)."""
+
+    loss: str
+    """``"linear"`` or a robust loss (``"soft_l1"``, ``"huber"``, ...)."""
+    f_scale: float
+    """Residual scale of a robust loss, m."""
+    max_nfev: int
+    """Most residual evaluations of one solve."""
+
+
+class Factor(NamedTuple):
+    """Reduced QR factors of the dense Jacobian ``J P`` at one point (for Gauss-Newton refits)."""
+
+    q: np.ndarray
+    """Orthonormal factor, shape (n_residuals, n_z)."""
+    r: np.ndarray
+    """Upper triangular factor, shape (n_z, n_z)."""
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """Where a solve starts and what the caller already has there (scipy's ``x0``, ``f0``, ``J0``).
+
+    What is given serves scipy's first call at ``z`` instead of being computed again, and is
+    released after it: a caller that wants the Jacobian's memory back keeps no reference to it
+    (a campaign's data Jacobian can weigh hundreds of MB).
+    """
+
+    z: np.ndarray
+    """Start, reduced coordinates, shape (n_z,)."""
+    residual: np.ndarray | None = None
+    """:meth:`~aacmm_pin.fit.solver.Problem.fun` at ``z``, or None (evaluated)."""
+    jacobian: BlockJacobian | None = field(default=None, repr=False)
+    """:meth:`~aacmm_pin.fit.solver.Problem.data_jacobian` (shape (3N, n_arm), m per unit) at ``at``,
+    or None."""
+    at: np.ndarray | None = None
+    """The full vector where ``jacobian`` was taken; None: ``x(z)``. Another point (a held
+    component away) serves scipy's first step only: never returned as the solution's Jacobian."""
+
+
+@dataclass(frozen=True)
+class Solution:
+    """What :meth:`~aacmm_pin.fit.solver.Problem.solve` found."""
+
+    result: OptimizeResult
+    """scipy's result without its ``jac`` (``nfev``: the residual evaluations made; ``status`` 1
+    when it ended on :data:`STEP_TOL`)."""
+    jacobian: BlockJacobian | None = field(default=None, repr=False)
+    """:meth:`~aacmm_pin.fit.solver.Problem.data_jacobian` at the solution when the solver's last
+    Jacobian was taken there (analytic Jacobian), else None: a caller that needs it there need not
+    compute it again."""
