@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.effects.registry import write_parameters
 from aacmm_pin.fit.identification import Calibration
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.parameters import write_parameters
 from aacmm_pin.model.sizes import sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC
 
@@ -57,7 +57,11 @@ def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: boo
 
 
 def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
-    """Write the files of a calibration folder into an existing ``folder`` (not atomically)."""
+    """Write the files of a calibration folder into an existing ``folder`` (not atomically).
+
+    ``parameters.json`` names the plugins of the extensions' effects that are not built in
+    (:func:`aacmm_pin.effects.registry.write_parameters`).
+    """
     params = cal.parameters
     (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
                                           encoding="utf-8")
