@@ -60,7 +60,8 @@ def register_effect(effect: Effect | type[Effect], plugin: str | None = None) ->
     Args:
         effect: an effect instance, or an effect class (instantiated without arguments).
         plugin: where it comes from, written into ``parameters.json`` so that another process can
-            say what to install: a distribution name, or a file path (default: the caller's module).
+            say what to install: a distribution name, or a file path (default: the module of the
+            effect's class; a script's path for a class defined in the script run).
     """
     if isinstance(effect, type):
         effect = effect()
@@ -68,8 +69,17 @@ def register_effect(effect: Effect | type[Effect], plugin: str | None = None) ->
         raise AacmmError(f"register_effect: an aacmm_pin.effects.Effect with a name expected, got "
                          f"{effect!r}")
     LIBRARY[effect.name] = effect
-    _SOURCE[effect.name] = plugin or type(effect).__module__
+    _SOURCE[effect.name] = plugin or _module_of(type(effect))
     return effect
+
+
+def _module_of(cls: type) -> str:
+    """Return the module that defines ``cls``; a script run as ``__main__``: its file's path."""
+    if cls.__module__ == "__main__":
+        main = getattr(sys.modules.get("__main__"), "__file__", None)
+        if main:
+            return str(Path(main).resolve())
+    return cls.__module__
 
 
 for _builtin in (Encoder, Compliance, Thermal, Backlash, Crosstalk, RTest, Tool):
