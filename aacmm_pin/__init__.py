@@ -29,8 +29,24 @@ if TYPE_CHECKING:
         write_campaign,
         write_points,
     )
+    from aacmm_pin.effects.base import (
+        AngleTerm,
+        BasisTerm,
+        Effect,
+        MapTerm,
+        MeasurementTerm,
+        ScaleTerm,
+        Term,
+        TiltTerm,
+        Variable,
+    )
     from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
-    from aacmm_pin.effects.registry import read_parameters
+    from aacmm_pin.effects.registry import (
+        load_effect_file,
+        read_parameters,
+        register_effect,
+        write_parameters,
+    )
     from aacmm_pin.errors import (
         AacmmError,
         ArmModelError,
@@ -45,7 +61,7 @@ if TYPE_CHECKING:
     from aacmm_pin.model.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
     from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles
     from aacmm_pin.model.kinematics import StylusJacobians
-    from aacmm_pin.model.parameters import Parameters, write_parameters
+    from aacmm_pin.model.parameters import Parameters
     from aacmm_pin.model.sizes import Sizes, read_sizes, write_sizes
     from aacmm_pin.outputs.calibration_folder import CalibrationFolder, read_calibration
     from aacmm_pin.outputs.discovery_figures import write_discovery
@@ -67,6 +83,9 @@ __all__ = [
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
     "Sizes", "read_sizes", "write_sizes",
+    # the extension point: an effect, the ways its terms act, registration
+    "Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm", "MapTerm", "BasisTerm",
+    "Variable", "register_effect", "load_effect_file",
 ]
 
 _PUBLIC: dict[str, tuple[str, ...]] = {
@@ -87,8 +106,11 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "outputs.calibration_folder": ("CalibrationFolder", "read_calibration"),
     "model.kinematics": ("StylusJacobians",),
     "effects.calibrated": ("predict", "stylus_jacobians", "stylus_positions"),
-    "model.parameters": ("Parameters", "write_parameters"),
-    "effects.registry": ("read_parameters",),
+    "model.parameters": ("Parameters",),
+    "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm",
+                     "MapTerm", "BasisTerm", "Variable"),
+    "effects.registry": ("read_parameters", "write_parameters", "register_effect",
+                         "load_effect_file"),
     "analyses.planning": ("Plan", "plan"),
     "model.sizes": ("Sizes", "read_sizes", "write_sizes"),
     "analyses.simulate": ("Simulation", "SimulationConfig", "simulate_campaign", "write_simulation"),

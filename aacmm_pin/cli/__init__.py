@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
-from aacmm_pin.cli._options import Handler, HelpFormatter
+from aacmm_pin.cli._options import Handler, HelpFormatter, load_effect_files
 from aacmm_pin.errors import AacmmError
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
@@ -108,6 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         handler: Handler = args.handler
         with Heartbeat(f"aacmm-pin {args.command}", enabled=beat):
+            load_effect_files(args)  # --effects-file: before anything reads parameters
             return handler(args)
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)

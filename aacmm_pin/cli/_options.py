@@ -3,7 +3,8 @@
 Every option repeated across commands is a parent parser (``argparse``'s ``parents=[...]``) made by
 one function here, so its name, type and wording are written once. The functions take the default
 or the help text where commands differ (the ``--out`` folder of ``identify`` is not ``demo``'s).
-Nothing here imports the rest of the package: building the parser stays cheap.
+Nothing here imports the rest of the package at import time: building the parser stays cheap
+(:func:`load_effect_files` imports the effect library when a command is given a file).
 """
 
 from __future__ import annotations
@@ -150,6 +151,34 @@ def params_option() -> argparse.ArgumentParser:
     p.add_argument("--params", type=Path, default=None, metavar="PARAMS_OR_CALDIR",
                    help="parameters.json or calibration folder (default: the nominal arm)")
     return p
+
+
+def effects_file_option() -> argparse.ArgumentParser:
+    """``--effects-file FILE`` (repeatable): Python files that register effects, run first.
+
+    :func:`load_effect_files` runs them (``main`` does, before the command's handler), so that
+    the command's reading of parameters and its ``--effects`` know their effects.
+    """
+    p = _parent()
+    p.add_argument("--effects-file", type=Path, action="append", default=[], metavar="FILE",
+                   help="a Python file that registers effects (aacmm_pin.register_effect), run "
+                        "before anything else; repeatable. Effects of installed packages (entry "
+                        "point group aacmm_pin.effects) load without it")
+    return p
+
+
+def load_effect_files(args: argparse.Namespace) -> list[str]:
+    """Run every ``--effects-file`` of the parsed arguments, in order; return the effects registered.
+
+    Raises:
+        AacmmError: naming the file that does not exist or fails.
+    """
+    files = getattr(args, "effects_file", None) or []
+    if not files:
+        return []
+    from aacmm_pin.effects.registry import load_effect_file  # the effect library: only when asked
+
+    return [name for path in files for name in load_effect_file(path)]
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

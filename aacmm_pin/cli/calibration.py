@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 from aacmm_pin.cli._options import (
     add_command,
     arm_option,
+    effects_file_option,
     force_option,
     json_option,
     max_nfev_option,
@@ -85,18 +86,20 @@ def _predict(args: argparse.Namespace) -> int:
 def _identify(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.effects.registry import term_from_key
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
     check_output(args.out, args.force)
+    terms = tuple(term_from_key(k.strip()) for k in (args.terms or "").split(",") if k.strip())
     phase("loading the arm")
     arm = load_arm(args.arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)
     phase(f"identifying the {args.model} model")
-    cal = identify(campaign, arm, model=args.model,
+    cal = identify(campaign, arm, model=args.model, extensions=terms,
                    use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
                    max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
@@ -363,7 +366,8 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
 
     p = add_command(subparsers, "predict", "stylus centres (r-CS, mm) for encoder readouts",
                     parents=[out_option(Path("points.csv"), "output CSV"),
-                             arm_option(None, "override the URDF named in the parameters")])
+                             arm_option(None, "override the URDF named in the parameters"),
+                             effects_file_option()])
     p.add_argument("params", type=Path, help="parameters.json or a calibration folder")
     p.add_argument("readouts", type=Path,
                    help="CSV with columns q1_deg..qn_deg (or one <joint>_deg per axis)")
@@ -381,7 +385,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                              no_rtest_option("conventional SPAT: each location's mean "
                                              "displacement for every sample"),
                              arm, out_option(Path("calibration"), "calibration folder"),
-                             max_nfev_option(), force_option()])
+                             max_nfev_option(), force_option(), effects_file_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--loss", default="linear",
                    help="scipy loss of every solve: linear, soft_l1, huber, cauchy, arctan (for "
@@ -392,6 +396,10 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p.add_argument("--sigma-um", type=positive(), default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=positive(), default=5.0, help="map node step, deg")
+    p.add_argument("--terms", default=None, metavar="KEYS",
+                   help="comma-separated effect terms to estimate beside the model, as "
+                        "parameters.json names them (e.g. compliance[A2],thermal; a plugin's "
+                        "too: see --effects-file)")
     p.add_argument("--nests", choices=("auto", "estimate", "fixed"), default="auto",
                    help="R-Test nest offsets: estimated with their 3 um prior, fixed at the "
                         "measured positions, or auto: estimated only when the model's residual "
@@ -408,12 +416,13 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                                              "(location means)"),
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
                                                                 "figures, final CALDIR"),
-                             max_nfev_option(), force_option()])
+                             max_nfev_option(), force_option(), effects_file_option()])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
-                   help="comma-separated library effects to try (default: all)")
+                   help="comma-separated library effects to try (default: all: the built-ins, "
+                        "installed plugins' and --effects-file's)")
     p.add_argument("--max-steps", type=positive(int, zero=True), default=6,
                    help="most effects to add")
     for kind, what, default in (("rtest", "R-Test gauge reading", "2"),
@@ -428,7 +437,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
 def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
-                    parents=[json_option("the errors")])
+                    parents=[json_option("the errors"), effects_file_option()])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")
     p.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
     p.set_defaults(handler=_validate)

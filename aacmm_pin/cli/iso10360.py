@@ -12,6 +12,7 @@ from typing import Any
 from aacmm_pin.cli._options import (
     add_command,
     arm_option,
+    effects_file_option,
     json_option,
     no_rtest_option,
     params_option,
@@ -125,7 +126,7 @@ def add_parsers(subparsers: Any) -> None:
         description="Point articulation (SPAT), P_Size/P_Form, L_Dia and E_UNI; formulas and "
                     "sources in aacmm_pin.analyses.iso10360.")
     sub = iso.add_subparsers(dest="figure", required=True)
-    common = [params_option(),
+    common = [params_option(), effects_file_option(),
               arm_option(None, "URDF path or embedded arm name (default: the one the parameters "
                                "name, else aacmm7)"),
               json_option("the figures")]

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from aacmm_pin.cli._options import add_command
+from aacmm_pin.cli._options import add_command, effects_file_option
 
 
 def _view(args: argparse.Namespace) -> int:
@@ -42,7 +42,8 @@ def add_parsers(subparsers: Any) -> None:
         subparsers: what ``ArgumentParser.add_subparsers()`` returned.
     """
     p = add_command(subparsers, "view", "MeshCat view of the arm, the campaign and the residuals "
-                                        "(live on localhost, or --html FILE)")
+                                        "(live on localhost, or --html FILE)",
+                    parents=[effects_file_option()])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json (shown first)")
     p.add_argument("campaign", type=Path, help="campaign folder")
     p.add_argument("--html", type=Path, default=None, metavar="FILE",

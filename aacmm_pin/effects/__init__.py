@@ -46,9 +46,13 @@ from aacmm_pin.effects.registry import (
     load_effect_file,
     load_plugins,
     measurement_shift,
+    plugin_of,
+    plugins_of,
+    read_parameters,
     register_effect,
     term_from_key,
     terms_of,
+    write_parameters,
 )
 from aacmm_pin.effects.rtest import rtest
 from aacmm_pin.effects.thermal import thermal
@@ -57,6 +61,7 @@ __all__ = [
     "LIBRARY", "Adjustment", "AngleTerm", "BasisTerm", "Effect", "EffectNotFound", "MapTerm",
     "MeasurementTerm", "ModelSpec", "ScaleTerm", "StylusDerivatives", "Term", "TiltTerm", "Variable",
     "backlash", "check_extensions", "compliance", "crosstalk", "effect_names", "encoder_harmonic",
-    "encoder_map", "library", "load_effect_file", "load_plugins", "measurement_shift",
-    "register_effect", "rtest", "term_from_key", "terms_of", "thermal",
+    "encoder_map", "library", "load_effect_file", "load_plugins", "measurement_shift", "plugin_of",
+    "plugins_of", "read_parameters", "register_effect", "rtest", "term_from_key", "terms_of",
+    "thermal", "write_parameters",
 ]

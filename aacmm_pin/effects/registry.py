@@ -4,8 +4,10 @@ Effects come from three places, in this order: the built-ins of :mod:`aacmm_pin.
 installed packages that offer an entry point in the group ``aacmm_pin.effects`` (each entry point
 loads an :class:`~aacmm_pin.effects.base.Effect` instance or class, or a list of them), and a
 Python file a command is given (``--effects-file FILE``, :func:`load_effect_file`), which calls
-:func:`register_effect` itself. ``parameters.json`` names the effects its extensions need beside
-the plugin that brings each one (:func:`plugins_of`); a missing one is a one-line error naming it.
+:func:`register_effect` itself. ``parameters.json`` names the plugin that brings the effect of each
+of its extensions (``"plugins": {plugin: [term keys]}``, :func:`write_parameters`, plugin being the
+distribution name or the effects file's path); reading it where that effect is not registered is
+a one-line error naming the key and the plugin (:func:`check_extensions`).
 """
 
 from __future__ import annotations
@@ -58,7 +60,8 @@ def register_effect(effect: Effect | type[Effect], plugin: str | None = None) ->
     Args:
         effect: an effect instance, or an effect class (instantiated without arguments).
         plugin: where it comes from, written into ``parameters.json`` so that another process can
-            say what to install: a distribution name, or a file path (default: the caller's module).
+            say what to install: a distribution name, or a file path (default: the module of the
+            effect's class; a script's path for a class defined in the script run).
     """
     if isinstance(effect, type):
         effect = effect()
@@ -66,8 +69,17 @@ def register_effect(effect: Effect | type[Effect], plugin: str | None = None) ->
         raise AacmmError(f"register_effect: an aacmm_pin.effects.Effect with a name expected, got "
                          f"{effect!r}")
     LIBRARY[effect.name] = effect
-    _SOURCE[effect.name] = plugin or type(effect).__module__
+    _SOURCE[effect.name] = plugin or _module_of(type(effect))
     return effect
+
+
+def _module_of(cls: type) -> str:
+    """Return the module that defines ``cls``; a script run as ``__main__``: its file's path."""
+    if cls.__module__ == "__main__":
+        main = getattr(sys.modules.get("__main__"), "__file__", None)
+        if main:
+            return str(Path(main).resolve())
+    return cls.__module__
 
 
 for _builtin in (Encoder, Compliance, Thermal, Backlash, Crosstalk, RTest, Tool):
@@ -96,9 +108,15 @@ def load_plugins() -> None:
         plugin = ep.dist.name if ep.dist is not None else ep.value.split(":")[0]
         try:
             _from_entry_point(ep.load(), plugin)
-        except Exception as exc:  # a broken plugin names itself, whatever it raised
+        except Exception as exc:  # a broken plugin names itself, whatever it raised, in one line
             raise AacmmError(f"effect plugin {plugin!r} (entry point {ep.name} = {ep.value}) "
-                             f"failed to load: {type(exc).__name__}: {exc}") from exc
+                             f"failed to load: {_one_line(exc)}") from exc
+
+
+def _one_line(exc: BaseException) -> str:
+    """Return ``Type: first line of the message`` of an exception."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
 def load_effect_file(path: str | Path) -> list[str]:
@@ -120,7 +138,7 @@ def load_effect_file(path: str | Path) -> list[str]:
     try:
         spec.loader.exec_module(module)
     except Exception as exc:
-        raise AacmmError(f"{path}: the effects file failed: {type(exc).__name__}: {exc}") from exc
+        raise AacmmError(f"{path}: the effects file failed: {_one_line(exc)}") from exc
     new = [n for n, e in LIBRARY.items() if before.get(n) is not e]
     for n in new:
         _SOURCE[n] = str(path.resolve())
@@ -214,30 +232,86 @@ def read_parameters(path: str | Path) -> Parameters:
     return params
 
 
+def needed_plugins(params: Parameters) -> dict[str, str]:
+    """Return extension key -> plugin, as the parameters' ``"plugins"`` entry names them."""
+    plugins = params.extra.get("plugins")
+    if not isinstance(plugins, dict):
+        return {}
+    return {str(k): str(p) for p, keys in plugins.items() if isinstance(keys, list) for k in keys}
+
+
+def with_plugins(params: Parameters) -> Parameters:
+    """Return the parameters with ``extra["plugins"]`` naming the plugin of every extension's effect.
+
+    ``{plugin: [term keys]}`` for the terms of effects that are not built in (:func:`plugins_of`);
+    no entry when every term is built in. A key whose effect is not registered here keeps the
+    plugin the parameters named for it.
+    """
+    old = needed_plugins(params)
+    plugins: dict[str, list[str]] = {}
+    for key in params.extensions:
+        try:
+            found = plugins_of([term_from_key(key)])
+        except EffectNotFound:
+            found = {old[key]: [key]} if key in old else {}
+        for plugin, keys in found.items():
+            plugins.setdefault(plugin, []).extend(keys)
+    extra = {k: v for k, v in params.extra.items() if k != "plugins"}
+    return params.replace(extra={**extra, "plugins": plugins} if plugins else extra)
+
+
+def write_parameters(params: Parameters, path: str | Path) -> None:
+    """Write ``parameters.json``, naming the plugins its extensions need (``"plugins"``).
+
+    :func:`aacmm_pin.model.parameters.write_parameters` of :func:`with_plugins`: a process without
+    a plugin's effect then says which plugin to install (:func:`check_extensions`).
+    """
+    from aacmm_pin.model.parameters import write_parameters as write_file
+
+    write_file(with_plugins(params), path)
+
+
+def _missing_plugins(needed: dict[str, str], keys: Iterable[str], where: object) -> str:
+    """Return one line naming the extension keys whose plugin is not loaded, and the plugins."""
+    by_plugin: dict[str, list[str]] = {}
+    for key in keys:
+        by_plugin.setdefault(needed[key], []).append(key)
+    parts = []
+    for plugin, its in by_plugin.items():
+        how = (f"pass --effects-file {plugin}" if plugin.endswith(".py") else
+               f"install the package {plugin} (or pass --effects-file FILE)")
+        parts.append(f"extensions {', '.join(its)} need the effect plugin {plugin!r}, not loaded "
+                     f"here: {how}")
+    return f"{where}: " + "; ".join(parts)
+
+
 def check_extensions(params: Parameters, arm: Arm | None = None, path: str | Path | None = None
                      ) -> None:
     """Check that every extension names a registered term with its number of values (and axes).
 
     A calibration written with a plugin's effect names the plugin (``parameters.json``
-    ``"plugins"``); when the effect is not registered here, the error says which plugin to install.
+    ``"plugins"``); when the effect is not registered here, the error is one line naming the key
+    and the plugin to install (or the file to pass with ``--effects-file``).
 
     Raises:
-        FileFormatError: listing every problem, naming the file and the key.
+        EffectNotFound: one line naming the file, the keys and the plugins not loaded here.
+        FileFormatError: listing every other problem, naming the file and the key.
     """
     where = path if path is not None else params.arm
-    plugins = params.extra.get("plugins")
-    needed = {str(k): str(p) for p, keys in plugins.items() if isinstance(keys, list) for k in keys
-              } if isinstance(plugins, dict) else {}
+    needed = needed_plugins(params)
     problems: list[Problem] = []
+    unloaded = []
     for key, values in params.extensions.items():
         try:
             term = term_from_key(key)
         except EffectNotFound:
-            hint = (f"its effect comes from the plugin {needed[key]!r}, not loaded here: install that "
-                    f"package, or pass --effects-file FILE" if key in needed else
-                    "not a term of the effect library (e.g. compliance[A2], thermal, backlash[A3], "
-                    "crosstalk[A2<-A3], encoder_harmonic[A4], rtest)")
-            problems.append(Problem(where, None, f"extensions.{key}", hint))
+            if key in needed:
+                unloaded.append(key)
+            else:
+                problems.append(Problem(where, None, f"extensions.{key}",
+                                        "not a term of the effect library (e.g. compliance[A2], "
+                                        "thermal, backlash[A3], crosstalk[A2<-A3], "
+                                        "encoder_harmonic[A4], rtest)"))
             continue
         if values.size != len(term.names):
             problems.append(Problem(where, None, f"extensions.{key}",
@@ -245,5 +319,7 @@ def check_extensions(params: Parameters, arm: Arm | None = None, path: str | Pat
         elif arm is not None and any(not 1 <= a <= arm.n_axes for a in term.axes):
             problems.append(Problem(where, None, f"extensions.{key}",
                                     f"the arm has axes 1..{arm.n_axes}"))
+    if unloaded:
+        raise EffectNotFound(_missing_plugins(needed, unloaded, where))
     if problems:
         raise FileFormatError(problems)

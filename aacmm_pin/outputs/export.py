@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.effects.registry import write_parameters
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.parameters import write_parameters
 from aacmm_pin.model.sizes import sizes_path, write_sizes
 from aacmm_pin.outputs.calibration_folder import (
     MAPS_FILE,
@@ -70,7 +70,11 @@ def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: boo
 
 
 def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
-    """Write the files of a calibration folder into an existing ``folder`` (not atomically)."""
+    """Write the files of a calibration folder into an existing ``folder`` (not atomically).
+
+    ``parameters.json`` names the plugins of the extensions' effects that are not built in
+    (:func:`aacmm_pin.effects.registry.write_parameters`).
+    """
     params = cal.parameters
     (folder / URDF_FILE).write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
                                     encoding="utf-8")
