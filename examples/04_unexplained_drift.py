@@ -26,6 +26,7 @@ import numpy as np
 
 from aacmm_pin import SimulationConfig, discover, load_arm, simulate_campaign, write_discovery
 from aacmm_pin.effects import Effect, MeasurementTerm, Term, register_effect
+from aacmm_pin.effects.base import TIME_WITHIN_LOCATION
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.samples import Samples
 
@@ -79,7 +80,7 @@ def fixture_creep() -> Term:
     return MeasurementTerm("fixture_creep", "fixture_creep",
                            ("fixture_creep.vx", "fixture_creep.vy", "fixture_creep.vz"), (2e-8,) * 3,
                            "the R-Test fixture creeps at a constant rate while each location is "
-                           "measured", follows=("time within each location",),
+                           "measured", follows=(TIME_WITHIN_LOCATION,),
                            basis_of=creep_basis, variable_of=creep_variable)
 
 

@@ -250,3 +250,59 @@ def test_unknown_start_or_effect_is_a_message(arm: ap.Arm) -> None:
         discover(sim.campaign, arm, "full")
     with pytest.raises(ValueError, match="unknown"):
         discover(sim.campaign, arm, "dh", effects=["gravity"])
+
+
+class _Creep(ap.Effect):
+    """A fixture creeping at a constant rate within each location (example 04's effect)."""
+
+    name = "creep_in_test"
+
+    def candidates(self, arm: ap.Arm, samples: Samples) -> list[ap.Term]:
+        return [_creep_term()]
+
+    def term(self, key: str) -> ap.Term | None:
+        return _creep_term() if key == "creep_in_test" else None
+
+
+def _creep_basis(samples: Samples) -> np.ndarray:
+    out = np.zeros((samples.n, 3, 3))
+    for c in range(3):
+        out[:, c, c] = samples.time_in_location()
+    return out
+
+
+def _creep_variable(samples: Samples) -> tuple[str, np.ndarray]:
+    return "time within its location (s)", samples.time_in_location()
+
+
+def _creep_term() -> ap.Term:
+    from aacmm_pin.effects.base import TIME_WITHIN_LOCATION
+
+    return ap.MeasurementTerm("creep_in_test", "creep_in_test", ("vx", "vy", "vz"), (2e-8,) * 3,
+                              "creep", follows=(TIME_WITHIN_LOCATION,), basis_of=_creep_basis,
+                              variable_of=_creep_variable)
+
+
+def test_a_term_that_follows_time_is_a_suspect_when_the_residual_follows_time(arm: ap.Arm) -> None:
+    """The scan reports time once (merged): a term following either time variable is suspected."""
+    from aacmm_pin.effects import LIBRARY, register_effect
+
+    campaign = ap.simulate_campaign(arm, ap.SimulationConfig(seed=7, samples_per_location=60,
+                                                             bar_placements=0)).campaign
+    spat = campaign.spat
+    assert spat is not None
+    t = np.arange(len(spat.location)) * 2.0
+    displacement = np.array(spat.displacement)
+    for m in np.unique(spat.location):
+        sel = spat.location == m
+        since = t[sel] - t[sel].min()
+        displacement[sel] += np.outer(since / since.max(), [0.6, -0.3, 0.74]) * 6e-6
+    campaign = campaign.with_spat(t=t, displacement=displacement)
+    register_effect(_Creep)
+    try:
+        result = discover(campaign, arm, start="proposed", effects=["creep_in_test"], max_steps=0)
+    finally:
+        del LIBRARY["creep_in_test"]
+    assert result.scan is not None and result.scan.structure
+    assert any(s.variable.startswith("time") for s in result.scan.structure)
+    assert result.scan.suspects == ("creep_in_test",)

@@ -39,9 +39,9 @@ from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
 from aacmm_pin.analyses.linear_scorer import LinearScorer
-from aacmm_pin.analyses.residual_scan import scan_residuals
+from aacmm_pin.analyses.residual_scan import TIME, scan_residuals
 from aacmm_pin.data.campaign import Campaign, StatedNoise
-from aacmm_pin.effects.base import ModelSpec, Term
+from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, ModelSpec, Term
 from aacmm_pin.effects.registry import library
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identification import identify
@@ -208,6 +208,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                           np.einsum("nij,j->ni", lin.stylus.tool, tools))
     if scan.structure:  # library terms on a variable the residual follows, not named
         followed = {s.variable for s in scan.structure}
+        if TIME in followed:  # the scan reports time once: either of its two variables
+            followed |= {TIME_WITHIN_LOCATION, TIME_OVERALL}
         scan = dataclasses.replace(scan, suspects=tuple(
             t.key for e in effects for t in e.candidates(arm, samples)
             if not t.in_model(spec) and followed.intersection(t.follows)))

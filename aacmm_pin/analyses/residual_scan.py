@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from aacmm_pin.effects.base import Variable
+from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Variable
 from aacmm_pin.effects.registry import library
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.samples import Samples
@@ -164,8 +164,8 @@ def residual_dof(cal: Calibration) -> float:
     return float(n_data - np.trace(np.linalg.solve(gram + ridge, data)))
 
 
-WITHIN = "time within each location"
-OVERALL = "time over the campaign"
+WITHIN = TIME_WITHIN_LOCATION
+OVERALL = TIME_OVERALL
 TIME = "time"
 
 

@@ -58,6 +58,13 @@ class StylusDerivatives(Protocol):
         """d(position)/d(lateral tilts), shape (N, 3, n_axes, 2), m/rad, or None."""
 
 
+TIME_WITHIN_LOCATION = "time within each location"
+"""The residual scan's name of the time since each location's first sample (a term that follows
+it names it in :attr:`Term.follows`)."""
+TIME_OVERALL = "time over the campaign"
+"""The residual scan's name of the time over the whole campaign."""
+
+
 class Variable(NamedTuple):
     """A per-sample variable the residual scan tests the residual against."""
 

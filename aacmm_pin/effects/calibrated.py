@@ -28,6 +28,8 @@ def extension_adjustment(arm: Arm, params: Parameters, readouts: np.ndarray,
     if not params.extensions:
         return None
     q = np.atleast_2d(np.asarray(readouts, dtype=float))
+    if q.ndim != 2 or q.shape[1] != arm.n_axes:  # as the model's kinematics say it, first
+        raise ValueError(f"readouts: need shape (N, {arm.n_axes}) in rad, got {np.shape(readouts)}")
     if samples is None or not samples.matches(q):
         samples = Samples(arm, q)
     return adjustment(params.extensions, samples, arm.n_axes)

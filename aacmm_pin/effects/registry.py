@@ -12,8 +12,10 @@ a one-line error naming the key and the plugin (:func:`check_extensions`).
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import sys
+import threading
 from collections.abc import Iterable, Mapping
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -45,6 +47,7 @@ LIBRARY: dict[str, Effect] = {}
 through :func:`library`, which loads the installed plugins first."""
 _SOURCE: dict[str, str] = {}
 _LOADED: list[bool] = []
+_LOCK = threading.RLock()
 
 
 class EffectNotFound(AacmmError, KeyError):
@@ -86,31 +89,49 @@ for _builtin in (Encoder, Compliance, Thermal, Backlash, Crosstalk, RTest, Tool)
     register_effect(_builtin, BUILTIN)
 
 
+def _is_effect(item: Any) -> bool:
+    return isinstance(item, Effect) or (isinstance(item, type) and issubclass(item, Effect))
+
+
 def _from_entry_point(value: Any, plugin: str) -> None:
+    """Register what an entry point loads: effects or classes, a list, or a function.
+
+    A function registers its effects itself, or returns them.
+    """
+    if callable(value) and not _is_effect(value):
+        value = value()
+        if value is None:
+            return
     items = value if isinstance(value, (list, tuple)) else [value]
     for item in items:
-        if isinstance(item, Effect) or (isinstance(item, type) and issubclass(item, Effect)):
-            register_effect(item, plugin)
-        elif callable(item):  # a function that registers its effects itself
-            item()
+        if not _is_effect(item):
+            raise AacmmError(f"an Effect, an Effect class, a list of them or a function expected, "
+                             f"got {item!r}")
+        register_effect(item, plugin)
 
 
 def load_plugins() -> None:
     """Register the effects of every installed package's ``aacmm_pin.effects`` entry point (once).
+
+    Thread-safe; a failure is raised again on the next call (the plugins count as loaded only
+    when all of them loaded).
 
     Raises:
         AacmmError: naming the entry point and its package when one fails to load.
     """
     if _LOADED:
         return
-    _LOADED.append(True)
-    for ep in entry_points(group=GROUP):
-        plugin = ep.dist.name if ep.dist is not None else ep.value.split(":")[0]
-        try:
-            _from_entry_point(ep.load(), plugin)
-        except Exception as exc:  # a broken plugin names itself, whatever it raised, in one line
-            raise AacmmError(f"effect plugin {plugin!r} (entry point {ep.name} = {ep.value}) "
-                             f"failed to load: {_one_line(exc)}") from exc
+    with _LOCK:
+        if _LOADED:
+            return
+        for ep in entry_points(group=GROUP):
+            plugin = ep.dist.name if ep.dist is not None else ep.value.split(":")[0]
+            try:
+                _from_entry_point(ep.load(), plugin)
+            except Exception as exc:  # a broken plugin names itself, whatever it raised
+                raise AacmmError(f"effect plugin {plugin!r} (entry point {ep.name} = {ep.value}) "
+                                 f"failed to load: {_one_line(exc)}") from exc
+        _LOADED.append(True)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -129,7 +150,8 @@ def load_effect_file(path: str | Path) -> list[str]:
     if not path.is_file():
         raise AacmmError(f"{path}: no such effects file")
     before = dict(LIBRARY)
-    name = f"aacmm_pin_user_effects_{abs(hash(str(path.resolve())))}"
+    digest = hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:16]
+    name = f"aacmm_pin_user_effects_{digest}"  # the same in every process: terms unpickle
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise AacmmError(f"{path}: not a Python file")
