@@ -14,16 +14,13 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from aacmm_pin.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
     from aacmm_pin.campaign import (
-        Campaign,
-        LengthBarLog,
-        SpatLog,
-        StatedNoise,
+        ArmNames,
         read_campaign,
-        read_noise,
         read_readouts,
         write_campaign,
         write_points,
     )
+    from aacmm_pin.columns import Column, register_column
     from aacmm_pin.discovery import discover
     from aacmm_pin.discovery_figures import write_discovery
     from aacmm_pin.discovery_results import Discovery
@@ -39,6 +36,7 @@ if TYPE_CHECKING:
     from aacmm_pin.export import write_calibration
     from aacmm_pin.identification import Calibration, IdentificationError, identify, measured_positions
     from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
+    from aacmm_pin.logs import Campaign, LengthBarLog, PointLog, SpatLog, StatedNoise, read_noise
     from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
     from aacmm_pin.planning import Plan, plan
     from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
@@ -57,7 +55,7 @@ __all__ = [
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",
-    "StatedNoise", "read_noise",
+    "StatedNoise", "read_noise", "PointLog", "ArmNames", "Column", "register_column",
     "StylusJacobians", "correct_readouts", "load_arm", "node_angles", "predict",
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
@@ -67,8 +65,9 @@ __all__ = [
 _PUBLIC: dict[str, tuple[str, ...]] = {
     # module -> the public names it defines (the same as the TYPE_CHECKING imports above)
     "arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
-    "campaign": ("Campaign", "LengthBarLog", "SpatLog", "StatedNoise", "read_campaign",
-                 "read_noise", "read_readouts", "write_campaign", "write_points"),
+    "campaign": ("ArmNames", "read_campaign", "read_readouts", "write_campaign", "write_points"),
+    "columns": ("Column", "register_column"),
+    "logs": ("Campaign", "LengthBarLog", "PointLog", "SpatLog", "StatedNoise", "read_noise"),
     "discovery": ("discover",),
     "discovery_results": ("Discovery",),
     "discovery_figures": ("write_discovery",),

@@ -52,6 +52,9 @@ class Column:
     """Whether the value must be above zero (a standard uncertainty)."""
     noun: str = ""
     """What a value is called in messages ("standard uncertainty"); empty: the range is given."""
+    min_spread: float = 0.0
+    """Smallest spread over the samples, file units, for which the column is a variable worth
+    testing (the residual scan, the effects' candidates): 0.05 deg C, 1 deg, 0.01 N m."""
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.strip() == self.name or "," in self.name:
@@ -59,8 +62,9 @@ class Column:
                              f"expected, got {self.name!r}")
         if not (math.isfinite(self.factor) and self.factor > 0):
             raise ValueError(f"factor: a positive finite number expected, got {self.factor!r}")
-        if not self.low <= self.high:
-            raise ValueError(f"low, high: low <= high expected, got {self.low!r}, {self.high!r}")
+        if not (self.low <= self.high and self.min_spread >= 0):
+            raise ValueError(f"low, high, min_spread: low <= high and min_spread >= 0 expected, "
+                             f"got {self.low!r}, {self.high!r}, {self.min_spread!r}")
 
     def check(self, value: float) -> str | None:
         """Return why a file value is not plausible (after the cell text), or None if it is."""
@@ -78,6 +82,11 @@ class Column:
             return f"{unit}is {bound} {self.unit}".rstrip()
         return f"{unit}is outside {self.low:g} to {self.high:g} {self.unit}".rstrip()
 
+    def varies(self, values: np.ndarray) -> bool:
+        """Tell whether SI values spread by more than :attr:`min_spread` (a variable to test)."""
+        shown = self.from_si(values)
+        return bool(shown.size and np.ptp(shown) > self.min_spread)
+
     def to_si(self, values: np.ndarray | list[float]) -> np.ndarray:
         """Return file values in SI, as floats."""
         out: np.ndarray = np.asarray(values, dtype=float) * self.factor
@@ -94,17 +103,19 @@ BUILT_IN: tuple[Column, ...] = (
            "stated standard uncertainty of a point per coordinate", positive=True,
            noun="standard uncertainty"),
     Column("t_s", "t", "s", 1.0, description="time of the sample"),
-    Column("temp_c", "temp", "deg C", 1.0, *TEMPERATURE_RANGE_C, "arm temperature"),
+    Column("temp_c", "temp", "deg C", 1.0, *TEMPERATURE_RANGE_C, "arm temperature",
+           min_spread=0.05),
 )
 """The per-sample columns the package itself reads (in this order when written)."""
 
 SUFFIXES: dict[str, Column] = {
-    "_c": Column("_c", "", "deg C", 1.0, *TEMPERATURE_RANGE_C, "a temperature"),
+    "_c": Column("_c", "", "deg C", 1.0, *TEMPERATURE_RANGE_C, "a temperature", min_spread=0.05),
     "_s": Column("_s", "", "s", 1.0, description="a time"),
     "_mm": Column("_mm", "", "mm", MM, -MAX_COORDINATE * 1e3, MAX_COORDINATE * 1e3, "a length"),
     "_um": Column("_um", "", "um", UM, -MAX_COORDINATE * 1e6, MAX_COORDINATE * 1e6, "a length"),
-    "_deg": Column("_deg", "", "deg", math.pi / 180.0, -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "an angle"),
-    "_nm": Column("_nm", "", "N m", 1.0, description="a torque"),
+    "_deg": Column("_deg", "", "deg", math.pi / 180.0, -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "an angle",
+                   min_spread=1.0),
+    "_nm": Column("_nm", "", "N m", 1.0, description="a torque", min_spread=1e-2),
     "_n": Column("_n", "", "N", 1.0, description="a force"),
 }
 """Unit of a column no table names, by the end of its name (longest suffix first when matched)."""

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from aacmm_pin.columns import column
 from aacmm_pin.identification import Calibration
 from aacmm_pin.samples import Samples
 
@@ -186,6 +187,10 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None
     out.append((OVERALL, "all", f"time ({unit})", t, "global"))
     if samples.temp is not None and np.ptp(samples.temp) > 0.05:
         out.append(("temperature", "all", "arm temperature (deg C)", samples.temp, "global"))
+    for name, values in samples.columns.items():  # every other per-sample column, by name
+        if name not in ("t_s", "temp_c", "sigma_um") and (col := column(name)).varies(values):
+            out.append((f"the column {name}", "all", f"{name} ({col.unit or 'as written'})",
+                        col.from_si(values), "global"))
     for a in range(1, samples.q.shape[1] + 1):
         q = samples.q[:, a - 1]
         if np.ptp(q) > np.radians(1.0):

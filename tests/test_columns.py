@@ -260,3 +260,17 @@ def test_the_readers_import_no_arm() -> None:
         imported |= {a.name for node in ast.walk(tree) if isinstance(node, ast.Import)
                      for a in node.names}
         assert not {m for m in imported if m.startswith("aacmm_pin")} - allowed, name
+
+
+def test_the_residual_scan_offers_every_varying_column(arm: ap.Arm) -> None:
+    """An extra column that varies beyond its min_spread is a scan variable, in its file unit."""
+    from aacmm_pin.residual_scan import _variables
+
+    q = np.random.default_rng(1).uniform(-1, 1, (30, 7))
+    samples = Samples(arm, q, columns={"temp_base_c": np.linspace(20, 21, 30),
+                                       "flat_c": np.full(30, 20.0) + np.linspace(0, 0.04, 30),
+                                       "tilt_deg": np.radians(np.linspace(0, 5, 30))})
+    found = {v[0]: v for v in _variables(samples)}
+    assert "the column temp_base_c" in found and "the column flat_c" not in found
+    np.testing.assert_allclose(found["the column tilt_deg"][3], np.linspace(0, 5, 30))
+    assert found["the column tilt_deg"][2] == "tilt_deg (deg)"
