@@ -14,7 +14,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -102,6 +102,8 @@ def read_noise(path: str | Path) -> StatedNoise:
     return StatedNoise(**{key: float(value) * UM for key, value in noise.items()})
 
 
+_L = TypeVar("_L", bound="_Log")
+
 
 class _Log:
     """Base of the logs: each field is a read-only array with one row per readout.
@@ -149,7 +151,7 @@ class _Log:
         """Arm temperature at each readout, shape (N,), in deg C, or None (column ``temp_c``)."""
         return self.columns.get("temp_c")
 
-    def take(self, rows: np.ndarray) -> Any:
+    def take(self: _L, rows: np.ndarray) -> _L:
         """Return the log with only these rows (a boolean mask or indices), columns included."""
         picked = {f.name: getattr(self, f.name) for f in fields(self)  # type: ignore[arg-type]
                   if f.name != "columns" and getattr(self, f.name) is not None}
