@@ -260,6 +260,8 @@ def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tup
             for name, k in head.index.items():
                 value, reason = _parse(cells[k], kinds[name], checks.get(name))
                 table.cols[name].append(value)
+                if reason and name in taken and value is None and reason.startswith("'"):
+                    reason += f"; {path.name}'s further columns hold numbers"
                 if reason:
                     add(line, name, reason)
     return table
