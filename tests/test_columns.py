@@ -274,3 +274,23 @@ def test_the_residual_scan_offers_every_varying_column(arm: ap.Arm) -> None:
     assert "the column temp_base_c" in found and "the column flat_c" not in found
     np.testing.assert_allclose(found["the column tilt_deg"][3], np.linspace(0, 5, 30))
     assert found["the column tilt_deg"][2] == "tilt_deg (deg)"
+
+
+def test_points_keep_sigma_and_extra_columns_in_their_order(tmp_path: Path) -> None:
+    """points.csv: sigma_um, t_s, temp_c keep their places; an extra column follows, all round trip."""
+    header = "group,q1_deg,q2_deg,q3_deg,x_mm,y_mm,z_mm,temp_base_c,sigma_um,t_s\n"
+    rows = "".join(f"1,{k},{2 * k},{3 * k},{k},{k % 3},0,{20 + k / 10},{10 + k},{k}\n"
+                   for k in range(6))
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "points.csv").write_text(header + rows)
+    points = read_campaign(tmp_path / "a").points
+    assert points is not None and points.sigma is not None
+    assert list(points.columns) == ["temp_base_c", "sigma_um", "t_s"]
+    np.testing.assert_allclose(points.sigma, (10 + np.arange(6)) * 1e-6, rtol=1e-15)
+    write_campaign(read_campaign(tmp_path / "a"), tmp_path / "b")
+    written = (tmp_path / "b" / "points.csv").read_text().splitlines()[0]
+    assert written == "group,q1_deg,q2_deg,q3_deg,x_mm,y_mm,z_mm,sigma_um,t_s,temp_base_c"
+    again = read_campaign(tmp_path / "b").points
+    assert again is not None
+    for name, values in points.columns.items():
+        np.testing.assert_allclose(again.columns[name], values, rtol=1e-12, err_msg=name)
