@@ -1,7 +1,7 @@
 """aacmm_pin: calibrate articulated arm CMMs on Pinocchio (Ibaraki & Saito, CIRP Annals 2023).
 
 The public names below are imported on first use (PEP 562): ``import aacmm_pin`` costs nothing,
-and ``aacmm_pin.identify`` imports :mod:`aacmm_pin.identification` (and Pinocchio, scipy) the
+and ``aacmm_pin.identify`` imports :mod:`aacmm_pin.fit.identification` (and Pinocchio, scipy) the
 first time it is read. ``from aacmm_pin import identify`` works as usual.
 """
 
@@ -12,19 +12,22 @@ import importlib.util
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from aacmm_pin.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
-    from aacmm_pin.campaign import (
+    from aacmm_pin.analyses.discovery import discover
+    from aacmm_pin.analyses.discovery_results import Discovery
+    from aacmm_pin.analyses.planning import Plan, plan
+    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.analyses.uncertainty import MonteCarloResult, monte_carlo
+    from aacmm_pin.analyses.validation import ValidationResult, validate
+    from aacmm_pin.data.campaign import (
         ArmNames,
         read_campaign,
         read_readouts,
         write_campaign,
         write_points,
     )
-    from aacmm_pin.columns import Column, register_column
-    from aacmm_pin.discovery import discover
-    from aacmm_pin.discovery_figures import write_discovery
-    from aacmm_pin.discovery_results import Discovery
-    from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles
+    from aacmm_pin.data.columns import Column, register_column
+    from aacmm_pin.data.logs import Campaign, LengthBarLog, PointLog, SpatLog, StatedNoise, read_noise
+    from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
     from aacmm_pin.errors import (
         AacmmError,
         ArmModelError,
@@ -33,17 +36,15 @@ if TYPE_CHECKING:
         FrameNotFound,
         Problem,
     )
-    from aacmm_pin.export import write_calibration
-    from aacmm_pin.identification import Calibration, IdentificationError, identify, measured_positions
-    from aacmm_pin.kinematics import StylusJacobians, predict, stylus_jacobians, stylus_positions
-    from aacmm_pin.logs import Campaign, LengthBarLog, PointLog, SpatLog, StatedNoise, read_noise
-    from aacmm_pin.parameters import Parameters, read_parameters, write_parameters
-    from aacmm_pin.planning import Plan, plan
-    from aacmm_pin.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
-    from aacmm_pin.sizes import Sizes, read_sizes, write_sizes
-    from aacmm_pin.uncertainty import MonteCarloResult, monte_carlo
-    from aacmm_pin.validation import ValidationResult, validate
-    from aacmm_pin.viewer import View, view
+    from aacmm_pin.fit.identification import Calibration, IdentificationError, identify, measured_positions
+    from aacmm_pin.model.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
+    from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles
+    from aacmm_pin.model.kinematics import StylusJacobians
+    from aacmm_pin.model.parameters import Parameters, read_parameters, write_parameters
+    from aacmm_pin.model.sizes import Sizes, read_sizes, write_sizes
+    from aacmm_pin.outputs.discovery_figures import write_discovery
+    from aacmm_pin.outputs.export import write_calibration
+    from aacmm_pin.outputs.viewer import View, view
 
 __version__ = "0.1.0"
 
@@ -91,7 +92,7 @@ _MODULE_OF = {name: module for module, names in _PUBLIC.items() for name in name
 def __getattr__(name: str) -> Any:
     """Import a public name from its module on first use (then it is a plain global).
 
-    A submodule's name (``aacmm_pin.parameters``) imports that submodule, as it was an attribute
+    A submodule's name (``aacmm_pin.model.parameters``) imports that submodule, as it was an attribute
     of the package when ``__init__`` imported every module.
     """
     module = _MODULE_OF.get(name)

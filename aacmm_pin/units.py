@@ -35,7 +35,7 @@ loose (the socket's own readouts and the bar's lengths determine it)."""
 RTEST_RANGE = 2e-3
 """Largest R-Test displacement accepted per coordinate, m: an R-Test's displacement sensors
 measure a few hundred um; a reading beyond 2 mm is a unit or sensor error (a 1 mm glitch within
-that range is left to the fit's outlier check, :mod:`aacmm_pin.robust`)."""
+that range is left to the fit's outlier check, :mod:`aacmm_pin.fit.robust`)."""
 BAR_LENGTH_MIN = 1e-3
 BAR_LENGTH_MAX = 10.0
 """Calibrated bar lengths accepted, m (1 mm to 10 m)."""
@@ -48,13 +48,13 @@ TEMPERATURE_RANGE_C = (-50.0, 150.0)
 """Arm temperatures accepted, deg C."""
 RADIAN_MIN_ROWS = 20
 """A readouts file of at least this many rows whose every readout column lies within +-2 pi and
-moves by 1 or more is taken for radians (see :mod:`aacmm_pin.campaign`)."""
+moves by 1 or more is taken for radians (see :mod:`aacmm_pin.data.campaign`)."""
 STEP_DEG = 5.0
 """Encoder map node step, deg (nodes at -180, -175, ..., 175 deg)."""
 REFERENCE_TEMPERATURE_C = 20.0
 """ISO 1 reference temperature, deg C: thermal terms are zero there."""
 
 SIMULATOR_EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
-"""Effects the simulator (:mod:`aacmm_pin.simulate`) can switch on."""
+"""Effects the simulator (:mod:`aacmm_pin.analyses.simulate`) can switch on."""
 DEFAULT_SIMULATOR_EFFECTS = ("dh", "encoder", "rtest")
 """Effects a simulated campaign has by default: the paper's model."""

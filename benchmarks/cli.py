@@ -61,7 +61,7 @@ package's bytecode is written first, as `pip install` does. Before a command imp
 `aacmm-pin` starts OpenBLAS with one thread (unless the user set a BLAS thread variable: every
 computation runs with one thread anyway); loading OpenBLAS with a thread pool, once in numpy and
 once in scipy, costs the difference between the third and fourth rows. No command imports
-yourdfpy (with trimesh ~0.3 s): the arm is read as an XML tree (`aacmm_pin.urdf_tree`).
+yourdfpy (with trimesh ~0.3 s): the arm is read as an XML tree (`aacmm_pin.model.urdf_tree`).
 
 | command | CPU (s) | vs the bare interpreter |
 |---|---|---|

@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import discover, identify, load_arm, simulate_campaign  # noqa: E402
-from aacmm_pin.simulate import DEFAULT_EFFECTS, SimulationConfig  # noqa: E402
+from aacmm_pin.analyses.simulate import DEFAULT_EFFECTS, SimulationConfig  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 
 REPEAT = 3

@@ -35,8 +35,8 @@ from aacmm_pin import (  # noqa: E402
     validate,
     write_campaign,
 )
-from aacmm_pin.identification import identify  # noqa: E402
-from aacmm_pin.simulate import SimulationConfig  # noqa: E402
+from aacmm_pin.analyses.simulate import SimulationConfig  # noqa: E402
+from aacmm_pin.fit.identification import identify  # noqa: E402
 from benchmarks._report import best_of as timed
 from benchmarks._report import compile_package, machine, write_section  # noqa: E402
 

@@ -16,7 +16,7 @@ import pinocchio as pin
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import Parameters, load_arm, stylus_jacobians, stylus_positions  # noqa: E402
 from aacmm_pin._blas import single_threaded_blas  # noqa: E402
-from aacmm_pin.kinematics import identification_configuration  # noqa: E402
+from aacmm_pin.model.kinematics import identification_configuration  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 from tests.helpers import paper_stylus  # noqa: E402
 
@@ -71,7 +71,7 @@ def main() -> None:
     body = f"""## Kinematics cost per sample (`python benchmarks/kinematics.py`)
 
 {machine()}; {n} random readouts of the default arm, CPU time, best of 5, one BLAS thread.
-`stylus_positions` / `stylus_jacobians` evaluate all samples at once (`aacmm_pin._chain`: the joint
+`stylus_positions` / `stylus_jacobians` evaluate all samples at once (`aacmm_pin.model._chain`: the joint
 placements and axes are read from Pinocchio's identification model once, the products along the
 chain and the Jacobian columns are vectorised over samples); the loop calls Pinocchio once per
 sample, as these functions did before.

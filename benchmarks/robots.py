@@ -22,7 +22,7 @@ from scipy.optimize import least_squares
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 import aacmm_pin as ap  # noqa: E402
-from aacmm_pin.unknowns import Unknowns  # noqa: E402
+from aacmm_pin.fit.unknowns import Unknowns  # noqa: E402
 from benchmarks._report import best_of, machine, write_section  # noqa: E402
 
 REPEAT = 5

@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/uncertainty.py`` (about a minute; writes its section of BENCHMARKS.md).
 Each trial perturbs the R-Test readings (2 um) and nest positions (3 um) of the paper-sized
-campaign (1,600 samples) and re-identifies from the nominal solution (`aacmm_pin.identification.refit`).
+campaign (1,600 samples) and re-identifies from the nominal solution (`aacmm_pin.fit.identification.refit`).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import identify, load_arm, simulate_campaign  # noqa: E402
-from aacmm_pin.simulate import SimulationConfig  # noqa: E402
-from aacmm_pin.uncertainty import monte_carlo  # noqa: E402
+from aacmm_pin.analyses.simulate import SimulationConfig  # noqa: E402
+from aacmm_pin.analyses.uncertainty import monte_carlo  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 
 

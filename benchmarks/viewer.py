@@ -14,7 +14,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import SimulationConfig, identify, load_arm, simulate_campaign  # noqa: E402
-from aacmm_pin.viewer import View, serve, view  # noqa: E402
+from aacmm_pin.outputs.viewer import View, serve, view  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 
 SAMPLES_PER_LOCATION = 2500  # x 4 locations = 10,000 SPAT samples

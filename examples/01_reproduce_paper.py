@@ -15,7 +15,7 @@ import argparse
 import shutil
 from pathlib import Path
 
-from aacmm_pin.demo import run_demo
+from aacmm_pin.outputs.demo import run_demo
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("out", nargs="?", default="aacmm-pin-demo", help="output folder of the demo")

@@ -23,7 +23,7 @@ import argparse
 import sys
 
 from aacmm_pin import SimulationConfig, discover, load_arm, simulate_campaign, write_discovery
-from aacmm_pin.bar_linear import covered_readouts
+from aacmm_pin.analyses.bar_linear import covered_readouts
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="discovery-example", help="output folder")

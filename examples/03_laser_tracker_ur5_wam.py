@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 import aacmm_pin as ap
+from aacmm_pin.analyses.validation import validate_points
 from aacmm_pin.cli import main
-from aacmm_pin.validation import validate_points
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"

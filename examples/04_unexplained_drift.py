@@ -25,7 +25,7 @@ import numpy as np
 
 from aacmm_pin import SimulationConfig, discover, load_arm, simulate_campaign, write_discovery
 from aacmm_pin.effects import Effect, Kind, Term, register_effect, register_term
-from aacmm_pin.samples import Samples
+from aacmm_pin.model.samples import Samples
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="unexplained-example", help="output folder")

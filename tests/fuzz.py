@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 import aacmm_pin as ap
-from aacmm_pin.parameters import check_against_arm
+from aacmm_pin.model.parameters import check_against_arm
 
 CAMPAIGN_FILES = ("spat.csv", "locations.csv", "lengthbar.csv", "bar.csv")
 

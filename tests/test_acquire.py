@@ -17,9 +17,9 @@ from aacmm_pin.acquire.nest import Nest, read_nest
 from aacmm_pin.acquire.pairing import Pairer
 from aacmm_pin.acquire.session import AcquisitionConfig
 from aacmm_pin.acquire.writer import SpatWriter, write_zero
-from aacmm_pin.campaign import read_campaign
 from aacmm_pin.cli.acquisition import add_parsers
 from aacmm_pin.cli.iso10360 import add_parsers as add_iso10360
+from aacmm_pin.data.campaign import read_campaign
 from aacmm_pin.errors import FileFormatError
 
 Q_DEG = [-35.063444, 78.282159, 171.07413, 35.139578, -135.639175, -78.001445, 128.347322]
@@ -263,7 +263,7 @@ def test_parsers_set_handlers():
 
 def test_angles_beyond_campaign_limit_are_faults():
     """The arm's angle limit matches the campaign reader's (+-720 deg)."""
-    from aacmm_pin.campaign import MAX_ANGLE_DEG
+    from aacmm_pin.data.campaign import MAX_ANGLE_DEG
 
     assert pr.MAX_ANGLE_DEG == MAX_ANGLE_DEG
     assert pr.parse_arm_line(pr.format_arm_line(1, [720.0]), 1)[1] == [math.radians(720.0)]

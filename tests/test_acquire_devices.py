@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aacmm_pin.campaign import read_campaign
 from aacmm_pin.cli.acquisition import add_parsers
+from aacmm_pin.data.campaign import read_campaign
 from tests.helpers import ENV, ROOT
 
 CLI = [sys.executable, "-m", "aacmm_pin"]
@@ -82,7 +82,7 @@ def recorded(fakes, tmp_path_factory):
 
 def test_acquired_campaign_is_identified(recorded):
     """fake-devices + acquire on ptys give a campaign that read_campaign and identify accept."""
-    from aacmm_pin.identification import identify
+    from aacmm_pin.fit.identification import identify
 
     folder, summaries = recorded
     campaign = read_campaign(folder)

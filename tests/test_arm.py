@@ -10,10 +10,10 @@ import pinocchio as pin
 import pytest
 import yourdfpy
 
-from aacmm_pin import kinematics
-from aacmm_pin.arm import load_arm
+from aacmm_pin.effects import calibrated as kinematics
 from aacmm_pin.errors import ArmModelError, FrameNotFound
-from aacmm_pin.parameters import Parameters
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import Parameters
 from tests.helpers import DH_NAMES, ENV, d_a, d_b, d_c, d_x, d_z
 
 TWO_AXIS = """<?xml version="1.0"?>

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.bar_linear import LinearBar, covered_readouts
+from aacmm_pin.analyses.bar_linear import LinearBar, covered_readouts
+from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.effects import compliance
-from aacmm_pin.encoder_map import touched_nodes
-from aacmm_pin.linear_scorer import LinearScorer
-from aacmm_pin.samples import Samples
+from aacmm_pin.model.encoder_map import touched_nodes
+from aacmm_pin.model.samples import Samples
 
 
 @pytest.fixture(scope="module")

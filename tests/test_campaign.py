@@ -1,4 +1,4 @@
-"""Tests of aacmm_pin.campaign: the campaign CSV format, its readers, writers and validation."""
+"""Tests of aacmm_pin.data.campaign: the campaign CSV format, its readers, writers and validation."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aacmm_pin.campaign import (
+from aacmm_pin.data.campaign import (
     Campaign,
     LengthBarLog,
     SpatLog,

@@ -9,10 +9,10 @@ import pinocchio as pin
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin import kinematics
-from aacmm_pin._chain import CHUNK, BatchedChain
-from aacmm_pin.encoder_map import EncoderMap, correct_readouts
-from aacmm_pin.samples import Samples
+from aacmm_pin.effects import calibrated as kinematics
+from aacmm_pin.model._chain import CHUNK, BatchedChain
+from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts
+from aacmm_pin.model.samples import Samples
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = ["aacmm7", "ur5", "wam7", str(ROOT / "urdf" / "torso.urdf")]

@@ -87,7 +87,7 @@ def test_help_shows_every_default(path, capsys):
 
 def test_effect_names_are_the_simulators():
     """The CLI offers the simulator's effects and defaults (one list, in aacmm_pin.units)."""
-    from aacmm_pin.simulate import DEFAULT_EFFECTS, SimulationConfig
+    from aacmm_pin.analyses.simulate import DEFAULT_EFFECTS, SimulationConfig
 
     assert SimulationConfig().effects == DEFAULT_EFFECTS
     assert cli.build_parser().parse_args(["simulate", "out"]).effects == ",".join(DEFAULT_EFFECTS)
@@ -166,7 +166,7 @@ def test_lazy_package_exports_every_public_name():
     for name in aacmm_pin.__all__:
         module = importlib.import_module(f"aacmm_pin.{aacmm_pin._MODULE_OF[name]}")
         assert getattr(aacmm_pin, name) is getattr(module, name), name
-    assert aacmm_pin.parameters is importlib.import_module("aacmm_pin.parameters")
+    assert aacmm_pin.model.parameters is importlib.import_module("aacmm_pin.model.parameters")
     with pytest.raises(AttributeError, match="no_such_name"):
         aacmm_pin.no_such_name
     from aacmm_pin import identify

@@ -1,4 +1,4 @@
-"""Tests of aacmm_pin.columns and the per-sample columns by name: readers, logs, samples, writers."""
+"""Tests of aacmm_pin.data.columns and the per-sample columns by name: readers, logs, samples, writers."""
 
 from __future__ import annotations
 
@@ -11,19 +11,19 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin import columns as columns_module
-from aacmm_pin.campaign import (
+from aacmm_pin.cli import main
+from aacmm_pin.data import columns as columns_module
+from aacmm_pin.data.campaign import (
     read_campaign,
     read_readout_columns,
     read_sample_columns,
     read_tool_column,
     write_campaign,
 )
-from aacmm_pin.cli import main
-from aacmm_pin.columns import Column, column, file_order, register_column
+from aacmm_pin.data.columns import Column, column, file_order, register_column
+from aacmm_pin.data.logs import LengthBarLog, SpatLog
 from aacmm_pin.errors import AacmmError, CampaignFormatError
-from aacmm_pin.logs import LengthBarLog, SpatLog
-from aacmm_pin.samples import Samples
+from aacmm_pin.model.samples import Samples
 from tests.test_campaign import GOOD, found, make, problems_of
 
 PACKAGE = Path(__file__).resolve().parents[1] / "aacmm_pin"
@@ -165,7 +165,7 @@ def test_readouts_files_carry_extra_columns_to_predict_samples(tmp_path: Path, a
     assert read_readout_columns(readouts)[1] is not None  # (q, temp, t) as before
     ap.write_parameters(ap.Parameters.nominal(arm), tmp_path / "parameters.json")
     seen: list[Samples] = []
-    import aacmm_pin.kinematics as kinematics
+    import aacmm_pin.model.kinematics as kinematics
 
     real = kinematics.predict
 
@@ -264,7 +264,7 @@ def test_the_readers_import_no_arm() -> None:
 
 def test_the_residual_scan_offers_every_varying_column(arm: ap.Arm) -> None:
     """An extra column that varies beyond its min_spread is a scan variable, in its file unit."""
-    from aacmm_pin.residual_scan import _variables
+    from aacmm_pin.analyses.residual_scan import _variables
 
     q = np.random.default_rng(1).uniform(-1, 1, (30, 7))
     samples = Samples(arm, q, columns={"temp_base_c": np.linspace(20, 21, 30),

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
+from aacmm_pin.analyses.discovery import discover
 from aacmm_pin.cli import main
-from aacmm_pin.discovery import discover
-from aacmm_pin.samples import Samples
+from aacmm_pin.model.samples import Samples
 
 SIGMA_RTEST = 2e-6
 
@@ -225,9 +225,10 @@ def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, mod
     locations, predict the left-out SPAT less its mean. The DH model is nearly linear (agreement
     to the linearisation error); with maps, the scoring's plausible-size prior and identify's
     held directions treat what the others cannot see slightly differently (measured 0.4-3 %)."""
-    from aacmm_pin.identification import measured_positions
-    from aacmm_pin.kinematics import stylus_positions
-    from aacmm_pin.linear_scorer import LinearScorer
+    from aacmm_pin.effects.calibrated import stylus_positions
+
+    from aacmm_pin.analyses.linear_scorer import LinearScorer
+    from aacmm_pin.fit.identification import measured_positions
 
     effects = ("dh", "encoder", "rtest") if model == "proposed" else ("dh", "rtest")
     campaign = _campaign(arm, seed, effects, n=80 if model == "dh" else 150).campaign

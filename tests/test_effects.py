@@ -7,12 +7,12 @@ import pickle
 
 import numpy as np
 import pytest
+from aacmm_pin.effects.calibrated import stylus_positions
 
 import aacmm_pin as ap
 from aacmm_pin import effects as fx
-from aacmm_pin.kinematics import stylus_positions
-from aacmm_pin.samples import Samples, motion_direction
-from aacmm_pin.unknowns import Unknowns
+from aacmm_pin.fit.unknowns import Unknowns
+from aacmm_pin.model.samples import Samples, motion_direction
 
 TERMS = (fx.compliance(2), fx.compliance(4), fx.thermal(), fx.backlash(3), fx.crosstalk(2, 3),
          fx.encoder_harmonic(5), fx.rtest())
@@ -99,7 +99,7 @@ def test_bad_extensions_are_named(sim: ap.Simulation, tmp_path, ext: dict, match
 
 
 def test_extension_on_a_missing_axis_is_named(arm: ap.Arm, sim: ap.Simulation) -> None:
-    from aacmm_pin.parameters import check_against_arm
+    from aacmm_pin.model.parameters import check_against_arm
 
     with pytest.raises(ap.FileFormatError, match=r"extensions\.compliance\[A9\]"):
         check_against_arm(sim.truth.replace(arm=arm.name, extensions={"compliance[A9]": [1e-6]}),

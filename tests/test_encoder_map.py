@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aacmm_pin.encoder_map import EncoderMap, correct_readouts, node_angles, node_count
+from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles, node_count
 from tests.helpers import map_error
 
 

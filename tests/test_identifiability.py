@@ -12,12 +12,12 @@ import pytest
 from scipy.special import chdtrc
 from scipy.stats import chi2
 
-from aacmm_pin import identifiability as ident
-from aacmm_pin import identification
-from aacmm_pin.identification import identify
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.solver import Problem
-from aacmm_pin.unknowns import BlockJacobian
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.fit import identifiability as ident
+from aacmm_pin.fit import identification
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.fit.solver import Problem
+from aacmm_pin.fit.unknowns import BlockJacobian
 
 
 def _svd_gauge_ratios(unknowns, jac) -> dict[int, float]:

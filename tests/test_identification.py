@@ -9,17 +9,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import yourdfpy
+from aacmm_pin.effects.calibrated import predict
 
 import aacmm_pin as ap
-from aacmm_pin.arm import load_arm
-from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.analyses.validation import validate
 from aacmm_pin.cli import main
-from aacmm_pin.export import write_calibration
-from aacmm_pin.identification import IdentificationError, identify
-from aacmm_pin.kinematics import predict
-from aacmm_pin.parameters import read_parameters
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.validation import validate
+from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.fit.identification import IdentificationError, identify
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import read_parameters
+from aacmm_pin.outputs.export import write_calibration
 from tests.helpers import SAMPLE
 
 SEEDS = (0, 1, 2, 3)
@@ -235,8 +235,8 @@ def _plain_dh_fixed_nests(arm, campaign):
     differences, from the nominal arm placed by a Kabsch fit of the location centres."""
     from scipy.optimize import least_squares
 
-    from aacmm_pin.identification import measured_positions
-    from aacmm_pin.parameters import Parameters
+    from aacmm_pin.fit.identification import measured_positions
+    from aacmm_pin.model.parameters import Parameters
 
     spat = campaign.spat
     measured = measured_positions(campaign)
@@ -322,8 +322,8 @@ def test_implausible_fit_rms_is_not_success(arm, small_sim):
 def test_every_residual_evaluation_is_counted_and_reported(arm, small_sim, monkeypatch, robust):
     """``nfev`` and the progress callback see every residual evaluation: the solves' and the
     Gauss-Newton step's that decides the held directions."""
+    from aacmm_pin.fit.solver import Problem
     from aacmm_pin.progress import Progress
-    from aacmm_pin.solver import Problem
 
     seen = {"fun": 0, "progress": 0}
     fun, update = Problem.fun, Progress.update
@@ -349,7 +349,7 @@ def test_a_solve_that_ends_on_the_step_test_is_at_the_solution(arm, small_sim, m
     tolerances instead (``STEP_TOL`` 1e-9) it reaches the same estimate to 1e-3 of its standard
     deviations (10x the test's size: the steps of these nearly linear problems shrink by more than
     half each), and the same fit. A loose ``STEP_TOL`` (10) misses it by 0.45 sigma."""
-    from aacmm_pin import solver
+    from aacmm_pin.fit import solver
 
     cal = identify(small_sim.campaign, arm, model=model, nests="estimate")
     assert cal.status == 1 and cal.success

@@ -1,4 +1,4 @@
-"""Tests of aacmm_pin.iso10360: sphere fit (NIST pairs), point articulation, P_Size/P_Form, L_Dia,
+"""Tests of aacmm_pin.analyses.iso10360: sphere fit (NIST pairs), point articulation, P_Size/P_Form, L_Dia,
 E_UNI, each against a hand-computed case, and the iso10360 subcommands."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aacmm_pin import iso10360 as iso
+from aacmm_pin.analyses import iso10360 as iso
 from aacmm_pin.cli.iso10360 import add_parsers
 from aacmm_pin.errors import FileFormatError
 
@@ -140,10 +140,10 @@ def test_e_uni_hand_case():
 @pytest.mark.skipif(not SAMPLE.is_dir(), reason="shared sample campaign not found")
 def test_figures_on_the_sample_campaign_with_its_truth(tmp_path):
     """With the true parameters, SPAT deviations are R-Test noise and E_UNI matches validate."""
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.parameters import read_parameters
-    from aacmm_pin.validation import validate
+    from aacmm_pin.analyses.validation import validate
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.model.parameters import read_parameters
 
     arm, truth = load_arm(), read_parameters(SAMPLE / "truth.json")
     campaign = read_campaign(SAMPLE)

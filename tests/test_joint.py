@@ -9,9 +9,9 @@ import pinocchio as pin
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.campaign import Campaign, PointLog
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.unknowns import FrameKey
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.data.campaign import Campaign, PointLog
+from aacmm_pin.fit.unknowns import FrameKey
 from tests.helpers import central_differences
 from tests.test_points import UR5, _truth
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aacmm_pin import kinematics
-from aacmm_pin.encoder_map import EncoderMap
-from aacmm_pin.parameters import Parameters
+from aacmm_pin.effects import calibrated as kinematics
+from aacmm_pin.model.encoder_map import EncoderMap
+from aacmm_pin.model.parameters import Parameters
 from tests.helpers import paper_stylus, paper_to_mt, random_dh
 
 

@@ -158,6 +158,6 @@ def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     """The import reader finds function-level imports and skips TYPE_CHECKING ones."""
     path = tmp_path / "probe.py"
     path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import aacmm_pin.cli\n"
-                    "def f():\n    from aacmm_pin.viewer import view\n")
+                    "def f():\n    from aacmm_pin.outputs.viewer import view\n")
     found = _imports(path, "probe")
-    assert "aacmm_pin.viewer" in found and "aacmm_pin.cli" not in found
+    assert "aacmm_pin.outputs.viewer" in found and "aacmm_pin.cli" not in found

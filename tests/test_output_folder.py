@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.arm import resolve_arm_path
 from aacmm_pin.cli import main
+from aacmm_pin.data.output_folder import OutputExistsError, output_folder
 from aacmm_pin.errors import ArmModelError, FileFormatError
-from aacmm_pin.output_folder import OutputExistsError, output_folder
+from aacmm_pin.model.arm import resolve_arm_path
 from tests.helpers import ENV
 
 
@@ -66,7 +66,7 @@ def test_output_folder_refuses_replaces_and_cleans_up(tmp_path):
 WRITER = """
 import shutil, sys
 from pathlib import Path
-from aacmm_pin.output_folder import output_folder
+from aacmm_pin.data.output_folder import output_folder
 refs, out = [Path(p) for p in sys.argv[1:3]], Path(sys.argv[3])
 k = 0
 while True:
@@ -182,7 +182,7 @@ def test_parameters_json_size_and_depth_are_capped(tmp_path):
 
 def test_campaign_header_width_and_file_size_are_capped(tmp_path, monkeypatch):
     """A q1000000_deg column, a 10,000-column header and an oversized file: one message each."""
-    from aacmm_pin import csv_table as cm
+    from aacmm_pin.data import csv_table as cm
 
     folder = tmp_path / "camp"
     folder.mkdir()

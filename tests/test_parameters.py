@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from aacmm_pin.arm import load_arm
-from aacmm_pin.encoder_map import EncoderMap
 from aacmm_pin.errors import FileFormatError
-from aacmm_pin.parameters import (
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.encoder_map import EncoderMap
+from aacmm_pin.model.parameters import (
     Parameters,
     check_against_arm,
     read_parameters,

@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from aacmm_pin.arm import load_arm
-from aacmm_pin.campaign import Campaign, SpatLog, write_campaign
+from aacmm_pin.analyses.planning import Candidate, map_uncertainty, plan
+from aacmm_pin.analyses.simulate import SimulationConfig, TrueArm, simulate_campaign, simulate_spat
 from aacmm_pin.cli import main
-from aacmm_pin.identification import identify
-from aacmm_pin.planning import Candidate, map_uncertainty, plan
-from aacmm_pin.simulate import SimulationConfig, TrueArm, simulate_campaign, simulate_spat
+from aacmm_pin.data.campaign import Campaign, SpatLog, write_campaign
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.model.arm import load_arm
 
 
 def _with_spat(sim, cand: Candidate, rng: np.random.Generator) -> Campaign:

@@ -1,4 +1,4 @@
-"""Tests of aacmm_pin.plots: the PNG figures of the R-Test profile, encoder maps and length errors."""
+"""Tests of aacmm_pin.outputs.plots: the PNG figures of the R-Test profile, encoder maps and length errors."""
 
 from __future__ import annotations
 
@@ -8,16 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import aacmm_pin.plots
-from aacmm_pin.campaign import Campaign, SpatLog, read_campaign
-from aacmm_pin.plots import (
+import aacmm_pin.outputs.plots
+from aacmm_pin.analyses.validation import ValidationResult
+from aacmm_pin.data.campaign import Campaign, SpatLog, read_campaign
+from aacmm_pin.outputs.plots import (
     _encoder_map_figure,
     _rtest_displacement_figure,
     plot_encoder_maps,
     plot_length_errors,
     plot_rtest_displacement,
 )
-from aacmm_pin.validation import ValidationResult
 from tests.helpers import SAMPLE
 
 N_NODES = 72  # 5 deg step
@@ -104,7 +104,7 @@ def test_rtest_unknown_location_names_the_argument(tmp_path):
 
 def test_rtest_without_spat_names_the_argument(tmp_path):
     """A campaign without SPAT raises ValueError naming `campaign`."""
-    from aacmm_pin.campaign import LengthBarLog
+    from aacmm_pin.data.campaign import LengthBarLog
 
     log = LengthBarLog(placement=[1, 1], socket=["A", "B"], q=np.zeros((2, 7)))
     campaign = Campaign(spat=None, locations={}, lengthbar=log, bar={("A", "B"): 0.3})
@@ -224,7 +224,7 @@ def test_length_error_figure_tolerates_missing_values(tmp_path):
 
 def test_length_error_table_aligns_placements_and_pairs():
     """Models with other placements and pair orders land in the right cells, in um."""
-    from aacmm_pin.plots import _length_table
+    from aacmm_pin.outputs.plots import _length_table
 
     a = ValidationResult([1, 2], [("A", "B"), ("A", "C")], np.array([[1.0, 2.0], [3.0, 4.0]]) * 1e-6)
     b = ValidationResult([2, 3], [("A", "C")], np.array([[5.0], [6.0]]) * 1e-6)
@@ -246,8 +246,8 @@ def test_length_error_bad_results_name_the_argument(tmp_path, results):
 
 
 def test_plots_module_does_not_import_matplotlib():
-    """aacmm_pin.plots imports matplotlib only inside functions (or under TYPE_CHECKING)."""
-    tree = ast.parse(Path(aacmm_pin.plots.__file__).read_text(encoding="utf-8"))
+    """aacmm_pin.outputs.plots imports matplotlib only inside functions (or under TYPE_CHECKING)."""
+    tree = ast.parse(Path(aacmm_pin.outputs.plots.__file__).read_text(encoding="utf-8"))
     top = [node for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))]
     names = [a.name for n in top if isinstance(n, ast.Import) for a in n.names]
     names += [n.module or "" for n in top if isinstance(n, ast.ImportFrom)]
@@ -258,7 +258,7 @@ def test_discovery_step_figure_draws_every_named_term():
     """A step that names compliance on six axes draws six panels (not the first four)."""
     from types import SimpleNamespace
 
-    from aacmm_pin.discovery_figures import _step_figure
+    from aacmm_pin.outputs.discovery_figures import _step_figure
 
     rng = np.random.default_rng(0)
     views = [{"term": f"compliance[A{a}]", "variable": f"gravity torque on A{a} (N m)",

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.campaign import PointLog
-from aacmm_pin.samples import Samples
-from aacmm_pin.validation import validate_points
+from aacmm_pin.analyses.validation import validate_points
+from aacmm_pin.data.campaign import PointLog
+from aacmm_pin.model.samples import Samples
 
 ROOT = Path(__file__).resolve().parents[1]
 UR5 = ROOT / "urdf" / "ur5.urdf"

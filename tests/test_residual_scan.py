@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.campaign import StatedNoise, read_campaign, read_noise
+from aacmm_pin.analyses.discovery import discover
+from aacmm_pin.analyses.discovery_results import Discovery
+from aacmm_pin.analyses.residual_scan import ALPHA_NOISE, ALPHA_STRUCTURE, TIME, Scan, Structure
 from aacmm_pin.cli import main
-from aacmm_pin.discovery import discover
-from aacmm_pin.discovery_results import Discovery
+from aacmm_pin.data.campaign import StatedNoise, read_campaign, read_noise
 from aacmm_pin.errors import CampaignFormatError
-from aacmm_pin.residual_scan import ALPHA_NOISE, ALPHA_STRUCTURE, TIME, Scan, Structure
 
 N_PER_LOCATION = 100
 DT_S = 2.0

@@ -12,9 +12,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from aacmm_pin import kinematics
-from aacmm_pin.arm import load_arm
-from aacmm_pin.parameters import Parameters
+from aacmm_pin.effects import calibrated as kinematics
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import Parameters
 
 URDF = Path(__file__).resolve().parents[1] / "urdf"
 DATA = Path(__file__).resolve().parents[2] / "shared/real-data/jacobi2025-laser-tracker"

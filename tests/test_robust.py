@@ -1,4 +1,4 @@
-"""Tests of aacmm_pin.robust and identify(..., robust=True): outliers rejected, listed, reported."""
+"""Tests of aacmm_pin.fit.robust and identify(..., robust=True): outliers rejected, listed, reported."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ import pytest
 import scipy.sparse as sp
 
 import aacmm_pin as ap
-from aacmm_pin import robust as rob
-from aacmm_pin.campaign import Campaign, PointLog, write_campaign
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.analyses.validation import validate_points
 from aacmm_pin.cli import main
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.validation import validate_points
+from aacmm_pin.data.campaign import Campaign, PointLog, write_campaign
+from aacmm_pin.fit import robust as rob
 from tests.test_points import UR5, _points_campaign, _truth
 
 

@@ -8,11 +8,11 @@ import filecmp
 import numpy as np
 import pytest
 
-from aacmm_pin.arm import load_arm
-from aacmm_pin.campaign import read_campaign, read_readouts
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.cli import main
-from aacmm_pin.parameters import read_parameters
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.data.campaign import read_campaign, read_readouts
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import read_parameters
 from tests.helpers import SAMPLE
 
 
@@ -106,7 +106,7 @@ def test_effects_switch_on_and_off():
         sim = simulate_campaign(arm, SimulationConfig(
             seed=1, effects=("dh", "encoder", "rtest", effect), **small))
         assert effect in sim.truth.extra["effects"]["switched_on"]
-        from aacmm_pin.kinematics import stylus_positions
+        from aacmm_pin.effects.calibrated import stylus_positions
         kin = stylus_positions(arm, sim.truth, sim.campaign.spat.q, "mt")
         gap = np.abs(kin - sim.sphere_mt).max()
         assert gap > 1e-6, effect  # the effect is not in the kinematic model: it must show
@@ -121,7 +121,7 @@ def test_predict_on_independent_sample_campaign(tmp_path):
     """With the sample's truth, predicted spheres match the R-Test within its noise, bars exactly."""
     truth = read_parameters(SAMPLE / "truth.json")
     camp = read_campaign(SAMPLE)
-    from aacmm_pin.kinematics import predict
+    from aacmm_pin.effects.calibrated import predict
     arm = load_arm(truth.arm)
     p_mt = predict(arm, truth, camp.spat.q) @ truth.rotation().T + truth.translation
     measured = np.array([camp.locations[m] for m in camp.spat.location]) + camp.spat.displacement

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.campaign import PointLog
+from aacmm_pin.analyses.linear_scorer import LinearScorer, size_factors
+from aacmm_pin.data.campaign import PointLog
 from aacmm_pin.effects import backlash, compliance, crosstalk, encoder_harmonic, thermal
-from aacmm_pin.identifiability import plausible_sizes
-from aacmm_pin.identification import measurements
-from aacmm_pin.linear_scorer import LinearScorer, size_factors
-from aacmm_pin.samples import Samples
-from aacmm_pin.sizes import DEFAULT, Sizes, read_sizes, sizes_path, write_sizes
+from aacmm_pin.fit.identifiability import plausible_sizes
+from aacmm_pin.fit.identification import measurements
+from aacmm_pin.fit.unknowns import Unknowns
+from aacmm_pin.model.samples import Samples
+from aacmm_pin.model.sizes import DEFAULT, Sizes, read_sizes, sizes_path, write_sizes
 from aacmm_pin.units import ARCSEC
-from aacmm_pin.unknowns import Unknowns
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"

@@ -12,12 +12,12 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin import cli, kinematics
-from aacmm_pin.campaign import PointLog, read_readout_columns
-from aacmm_pin.discovery import discover
+from aacmm_pin.analyses.discovery import discover
+from aacmm_pin.data.campaign import PointLog, read_readout_columns
 from aacmm_pin.effects import compliance
-from aacmm_pin.identification import check_points
-from aacmm_pin.parameters import check_against_arm, parameters_from_dict
-from aacmm_pin.samples import Samples
+from aacmm_pin.fit.identification import check_points
+from aacmm_pin.model.parameters import check_against_arm, parameters_from_dict
+from aacmm_pin.model.samples import Samples
 
 ROOT = Path(__file__).resolve().parents[1]
 TORSO = ROOT / "urdf" / "torso.urdf"

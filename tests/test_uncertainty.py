@@ -9,12 +9,12 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from aacmm_pin.arm import load_arm
-from aacmm_pin.campaign import write_campaign
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+from aacmm_pin.analyses.uncertainty import monte_carlo
 from aacmm_pin.cli import main
-from aacmm_pin.identification import identify
-from aacmm_pin.simulate import SimulationConfig, simulate_campaign
-from aacmm_pin.uncertainty import monte_carlo
+from aacmm_pin.data.campaign import write_campaign
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.model.arm import load_arm
 
 
 def _coverage_z(seed: int) -> np.ndarray:
@@ -150,7 +150,7 @@ def test_large_campaign_path_pickles_and_runs_monte_carlo(monkeypatch):
     """The LSMR (operator) path gives the dense path's estimate and its calibration runs MC in workers."""
     import pickle
 
-    from aacmm_pin import solver
+    from aacmm_pin.fit import solver
 
     arm = load_arm()
     sim = simulate_campaign(arm, SimulationConfig(seed=3, samples_per_location=80,

@@ -25,8 +25,8 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin import effects as fx
-from aacmm_pin.samples import Samples
-from aacmm_pin.unknowns import Unknowns
+from aacmm_pin.fit.unknowns import Unknowns
+from aacmm_pin.model.samples import Samples
 from tests.helpers import central_differences
 
 H, ATOL = 1e-5, 1e-8

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.bar_scatter import CAUSES, read_accuracy
+from aacmm_pin.analyses.bar_scatter import CAUSES, read_accuracy
 from aacmm_pin.cli import main
 from tests import fuzz
 from tests.conftest import SMALL

@@ -23,15 +23,15 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from aacmm_pin.effects.calibrated import predict
 
-from aacmm_pin.arm import load_arm
-from aacmm_pin.campaign import Campaign, read_campaign, write_campaign
 from aacmm_pin.cli.viewer import add_parsers
-from aacmm_pin.export import write_calibration
-from aacmm_pin.identification import identify
-from aacmm_pin.kinematics import predict
-from aacmm_pin.parameters import read_parameters
-from aacmm_pin.viewer import view
+from aacmm_pin.data.campaign import Campaign, read_campaign, write_campaign
+from aacmm_pin.fit.identification import identify
+from aacmm_pin.model.arm import load_arm
+from aacmm_pin.model.parameters import read_parameters
+from aacmm_pin.outputs.export import write_calibration
+from aacmm_pin.outputs.viewer import view
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
@@ -129,7 +129,7 @@ def _buffer(scene, path: str, attribute: str = "position") -> np.ndarray:
 
 def test_import_leaves_meshcat_and_matplotlib_out():
     """Importing the viewer imports neither meshcat nor matplotlib (they load inside functions)."""
-    code = ("import sys, aacmm_pin.viewer, aacmm_pin._viewer_scene; "
+    code = ("import sys, aacmm_pin.outputs.viewer, aacmm_pin.outputs._viewer_scene; "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'meshcat', 'matplotlib'}))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=Path(__file__).resolve().parents[1])
@@ -301,7 +301,7 @@ def _drawn_pixels(page, hide: list[str]) -> int:
 def test_auto_scale_shows_a_good_model_and_a_poor_one():
     """The default magnification draws the first model's RMS residual 10-20 mm long (1-2-5
     steps): 1.9 um -> 10000x, 26 um -> 500x; clamped to 100..100000."""
-    from aacmm_pin._viewer_scene import auto_scale
+    from aacmm_pin.outputs._viewer_scene import auto_scale
 
     def model(rms_um: float):
         return SimpleNamespace(rms=rms_um * 1e-6)

@@ -29,7 +29,7 @@ joint            kind      transform
 
 then the fixed joint ``tool`` (child link ``stylus``) holds the tool vector in DH frame n. All error
 frames are zero here, so the nominal model is exactly the published table. Error frame names follow
-``aacmm_pin.arm.ERROR_FRAME_PATTERN`` (``dth|dx|dy|dz|a|b|c`` + digits); the nominal joints
+``aacmm_pin.model.arm.ERROR_FRAME_PATTERN`` (``dth|dx|dy|dz|a|b|c`` + digits); the nominal joints
 (``theta<i>``, ``L<i>z``, ``L<i>x``, ``alpha<i>``) do not match it, the axes are ``A<i>`` (upper case:
 the error frame ``a<i>`` differs from the axis ``A<i>`` only in case).
 
@@ -117,7 +117,7 @@ class SerialArm:
     """Further lines for the URDF's header comment."""
     sizes: dict[str, object] = field(default_factory=dict)
     """Plausible sizes of its errors, SI, with their ``source`` (``<name>.sizes.json`` beside the
-    URDF, read by ``aacmm_pin.sizes``); empty: no sizes file (the default AACMM's sizes)."""
+    URDF, read by ``aacmm_pin.model.sizes``); empty: no sizes file (the default AACMM's sizes)."""
 
 
 def cylinder_inertia(mass: float, radius: float, length: float, axis: str

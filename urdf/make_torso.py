@@ -10,7 +10,7 @@ script. It is a made-up robot (no maker's data) for tests and examples of arms w
 * ``tool_left`` / ``tool_right``: fixed joints carrying each hand's marker (the tools ``left`` and
   ``right``), 0.1 m beyond the last axis and 0.03 m off it.
 
-Error frames, all zero (aacmm_pin's conventions, :mod:`aacmm_pin.arm`), named with the axis'
+Error frames, all zero (aacmm_pin's conventions, :mod:`aacmm_pin.model.arm`), named with the axis'
 position k in the tree (torso 1, left 2..8, right 9..15): ``dth<k>`` before every axis (the axis
 offset), and after it, but for the hands' last axes (the tool vector holds that), two translations
 and one rotation perpendicular to the axis (``dx<k>``, ``dy<k>``, ``a<k>`` after a z axis;

@@ -1,6 +1,6 @@
 """A virtual arm and R-Test gauges on pseudo-terminals, driven by the simulator.
 
-:class:`FakeDevices` simulates a campaign (:func:`aacmm_pin.simulate.simulate_campaign`: a virtual
+:class:`FakeDevices` simulates a campaign (:func:`aacmm_pin.analyses.simulate.simulate_campaign`: a virtual
 arm with DH, encoder and R-Test effects, IK postures at each R-Test location) and plays one
 location's SPAT on real pseudo-terminals (``os.openpty``), in the line formats of
 :mod:`aacmm_pin.acquire.protocols`:
@@ -45,7 +45,7 @@ from aacmm_pin.acquire.protocols import (
     format_heidenhain,
     format_mitutoyo,
 )
-from aacmm_pin.simulate import DEFAULT_EFFECTS
+from aacmm_pin.analyses.simulate import DEFAULT_EFFECTS
 
 OUT_OF_RANGE_MM = 9.9999
 """Value sent for an injected out-of-range gauge reading, mm."""
@@ -64,7 +64,7 @@ class FakeConfig:
     seed: int = 0
     """Seed of the simulated campaign."""
     effects: tuple[str, ...] = DEFAULT_EFFECTS
-    """Simulator effects (see :data:`aacmm_pin.simulate.EFFECTS`)."""
+    """Simulator effects (see :data:`aacmm_pin.analyses.simulate.EFFECTS`)."""
     postures: int = 40
     """Simulated postures per location."""
     rate: float = 1000.0
@@ -125,8 +125,8 @@ class FakeDevices:
     """
 
     def __init__(self, config: FakeConfig | None = None, arm: Any = None):
-        from aacmm_pin.arm import load_arm
-        from aacmm_pin.simulate import SimulationConfig, simulate_campaign
+        from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
+        from aacmm_pin.model.arm import load_arm
 
         self.config = config = config or FakeConfig()
         sim = simulate_campaign(arm or load_arm(), SimulationConfig(

@@ -93,7 +93,7 @@ def _acquire(args: argparse.Namespace) -> int:
 def _fake_devices(args: argparse.Namespace) -> int:
     from aacmm_pin.acquire.fake_devices import FakeConfig, FakeDevices
     from aacmm_pin.acquire.nest import Nest, read_nest
-    from aacmm_pin.arm import load_arm
+    from aacmm_pin.model.arm import load_arm
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     try:

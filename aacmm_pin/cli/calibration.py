@@ -27,14 +27,14 @@ from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
 
 if TYPE_CHECKING:
-    from aacmm_pin.identification import Calibration
+    from aacmm_pin.fit.identification import Calibration
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.output_folder import check_output
+    from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.progress import phase
-    from aacmm_pin.simulate import SimulationConfig, simulate_campaign, write_simulation
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     config = SimulationConfig(seed=args.seed, effects=effects,
@@ -56,16 +56,16 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import (
+    from aacmm_pin.data.campaign import (
         read_id_columns,
         read_sample_columns,
         read_tool_column,
         write_points,
     )
-    from aacmm_pin.kinematics import predict
-    from aacmm_pin.parameters import check_against_arm, read_parameters
-    from aacmm_pin.samples import Samples
+    from aacmm_pin.effects.calibrated import predict
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.model.parameters import check_against_arm, read_parameters
+    from aacmm_pin.model.samples import Samples
 
     params = read_parameters(args.params)
     arm = load_arm(args.arm or params.arm)
@@ -83,11 +83,11 @@ def _predict(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.export import write_calibration
-    from aacmm_pin.identification import identify
-    from aacmm_pin.output_folder import check_output
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.fit.identification import identify
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
     check_output(args.out, args.force)
@@ -109,7 +109,7 @@ def _identify(args: argparse.Namespace) -> int:
 
 def _print_calibration(cal: Calibration, out: Path) -> None:
     """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
-    from aacmm_pin.robust import OUTLIER_K
+    from aacmm_pin.fit.robust import OUTLIER_K
 
     state = "converged" if cal.success else "DID NOT CONVERGE"
     by_loc = ", ".join(f"{cal.group_label(m)}: {v * 1e6:.2f}"
@@ -138,11 +138,11 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
 
 
 def _discover(args: argparse.Namespace) -> int:
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import StatedNoise, read_campaign
-    from aacmm_pin.discovery import discover
-    from aacmm_pin.discovery_figures import write_discovery
-    from aacmm_pin.output_folder import check_output
+    from aacmm_pin.analyses.discovery import discover
+    from aacmm_pin.data.campaign import StatedNoise, read_campaign
+    from aacmm_pin.data.output_folder import check_output
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
 
     check_output(args.out, args.force)
@@ -187,11 +187,11 @@ def _discover(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     import json
 
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.bar_scatter import fitted_with_bar, read_accuracy
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.parameters import check_against_arm, read_parameters
-    from aacmm_pin.validation import validate, validate_points
+    from aacmm_pin.analyses.bar_scatter import fitted_with_bar, read_accuracy
+    from aacmm_pin.analyses.validation import validate, validate_points
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.model.parameters import check_against_arm, read_parameters
 
     params = read_parameters(args.caldir)
     arm = load_arm(params.arm)
@@ -221,13 +221,13 @@ def _uncertainty(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.export import write_calibration_files, write_maps_csv
-    from aacmm_pin.identification import identify
-    from aacmm_pin.output_folder import check_output, output_folder
-    from aacmm_pin.plots import plot_encoder_maps
-    from aacmm_pin.uncertainty import monte_carlo, uncertainty_report
+    from aacmm_pin.analyses.uncertainty import monte_carlo, uncertainty_report
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.data.output_folder import check_output, output_folder
+    from aacmm_pin.fit.identification import identify
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
+    from aacmm_pin.outputs.plots import plot_encoder_maps
 
     check_output(args.out, args.force)
     arm = load_arm(args.arm)
@@ -278,10 +278,10 @@ def _plan(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.identification import identify
-    from aacmm_pin.planning import plan
+    from aacmm_pin.analyses.planning import plan
+    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.fit.identification import identify
+    from aacmm_pin.model.arm import load_arm
 
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)
@@ -301,7 +301,7 @@ def _plan(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from aacmm_pin.demo import run_demo
+    from aacmm_pin.outputs.demo import run_demo
 
     run_demo(args.out, seed=args.seed)
     return 0
@@ -310,7 +310,7 @@ def _demo(args: argparse.Namespace) -> int:
 def _axes(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from aacmm_pin.arm import load_arm
+    from aacmm_pin.model.arm import load_arm
 
     arm = load_arm(args.arm)
     print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order "

@@ -1,6 +1,6 @@
 """The ``iso10360`` subcommand: acceptance figures ``spat``, ``sphere``, ``ldia`` and ``euni``.
 
-The formulas and their sources are in :mod:`aacmm_pin.iso10360`, imported inside the handlers.
+The formulas and their sources are in :mod:`aacmm_pin.analyses.iso10360`, imported inside the handlers.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from aacmm_pin.cli._options import (
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
     """Return (arm, parameters): from --params, else the nominal --arm."""
-    from aacmm_pin.arm import load_arm
-    from aacmm_pin.parameters import Parameters, check_against_arm, read_parameters
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.model.parameters import Parameters, check_against_arm, read_parameters
 
     if getattr(args, "params", None):
         params = read_parameters(args.params)
@@ -35,11 +35,11 @@ def _load(args: argparse.Namespace) -> tuple[Any, Any]:
 
 def _points(args: argparse.Namespace) -> tuple[Any, Any]:
     """Return (points (N, 3) in m, group column or None) of the POINTS file."""
-    from aacmm_pin.iso10360 import read_points
+    from aacmm_pin.analyses.iso10360 import read_points
 
     points, groups, readouts = read_points(args.points)
     if readouts is not None:
-        from aacmm_pin.kinematics import predict
+        from aacmm_pin.effects.calibrated import predict
 
         arm, params = _load(args)
         points = predict(arm, params, readouts)
@@ -54,8 +54,8 @@ def _finish(args: argparse.Namespace, text: str, data: dict[str, Any]) -> int:
 
 
 def _spat(args: argparse.Namespace) -> int:
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.iso10360 import point_articulation, spat_centres
+    from aacmm_pin.analyses.iso10360 import point_articulation, spat_centres
+    from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
     centres = spat_centres(arm, params, read_campaign(args.campaign), use_rtest=not args.no_rtest)
@@ -73,7 +73,7 @@ def _spat(args: argparse.Namespace) -> int:
 
 
 def _sphere(args: argparse.Namespace) -> int:
-    from aacmm_pin.iso10360 import probing_errors
+    from aacmm_pin.analyses.iso10360 import probing_errors
 
     points, _ = _points(args)
     r = probing_errors(points, args.diameter_mm * 1e-3)
@@ -86,7 +86,7 @@ def _sphere(args: argparse.Namespace) -> int:
 
 
 def _ldia(args: argparse.Namespace) -> int:
-    from aacmm_pin.iso10360 import articulated_location
+    from aacmm_pin.analyses.iso10360 import articulated_location
 
     points, groups = _points(args)
     r = articulated_location(points, groups=groups, group_size=args.group_size)
@@ -99,8 +99,8 @@ def _ldia(args: argparse.Namespace) -> int:
 
 
 def _euni(args: argparse.Namespace) -> int:
-    from aacmm_pin.campaign import read_campaign
-    from aacmm_pin.iso10360 import length_errors
+    from aacmm_pin.analyses.iso10360 import length_errors
+    from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
     r = length_errors(arm, params, read_campaign(args.campaign))
@@ -122,7 +122,7 @@ def add_parsers(subparsers: Any) -> None:
     iso = add_command(
         subparsers, "iso10360", "acceptance figures (ISO 10360-12 / ASME B89.4.22)",
         description="Point articulation (SPAT), P_Size/P_Form, L_Dia and E_UNI; formulas and "
-                    "sources in aacmm_pin.iso10360.")
+                    "sources in aacmm_pin.analyses.iso10360.")
     sub = iso.add_subparsers(dest="figure", required=True)
     common = [params_option(),
               arm_option(None, "URDF path or embedded arm name (default: the one the parameters "

@@ -1,4 +1,4 @@
-"""The ``view`` subcommand: :func:`aacmm_pin.viewer.view` live on localhost or as one HTML file."""
+"""The ``view`` subcommand: :func:`aacmm_pin.outputs.viewer.view` live on localhost or as one HTML file."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from aacmm_pin.cli._options import add_command
 
 def _view(args: argparse.Namespace) -> int:
     """Handler of ``aacmm-pin view``."""
-    from aacmm_pin.viewer import view
+    from aacmm_pin.outputs.viewer import view
 
     result = view(args.caldir, args.campaign, html=args.html, open_browser=args.open,
                   compare=args.compare, location=args.location, scale=args.scale)

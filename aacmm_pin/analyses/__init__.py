@@ -1,0 +1,1 @@
+"""Analyses of a calibration: validation, uncertainty, planning, discovery, simulation, ISO 10360."""

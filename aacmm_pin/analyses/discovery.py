@@ -1,0 +1,293 @@
+r"""Discovery of what a model is missing: score named effects on held-out data, add, refit, repeat.
+
+The loop (:func:`discover`):
+
+1. fit the current model (:func:`aacmm_pin.identify` with the current extension terms);
+2. linearise it at the solution and, for every candidate term of the effect library
+   (:mod:`aacmm_pin.effects`; one per axis where the effect is per-axis), fit the residuals with
+   the model's own directions plus the term's columns (each parameter with a Gaussian prior of its
+   plausible size, so terms the data cannot see are shrunk, not overfitted) and measure
+   * the held-out RMS: leave one R-Test location out, refit on the others, predict the left-out
+     SPAT (less its mean: its nest offset is unknown) and pool over the locations;
+   * the length-bar error, when the campaign has a bar: the candidate's linearised change of the bar
+     errors, normalised by their predicted covariance (:mod:`aacmm_pin.analyses.bar_linear`: what the SPATs
+     leave unknown, e.g. the nests' scale or map nodes only the bar visits, weighs little);
+   * an F test of the fit improvement against the noise level (Bonferroni over the candidates) and
+     the BIC change, with the term's effective number of parameters;
+3. the best term (largest held-out improvement: leave-one-location-out plus length bar, both in
+   chi-square units) that is significant, improves the BIC and the held-out score is named;
+   further axes of the same effect join it while they stay significant
+   given the ones already in (forward selection); the model is refitted with them (nonlinear);
+4. stop when no candidate is significant: "nothing is missing";
+5. scan the final model's residual (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`): against the
+   campaign's stated noise (:class:`aacmm_pin.data.campaign.StatedNoise`) and for structure along every
+   per-sample variable (time, temperature, angles, gravity torques, displacement, motion): what
+   no effect of the library explains (:attr:`Discovery.unexplained`).
+
+Held-out RMS after a step is measured on the refitted model, and so are the length-bar errors (when
+the campaign has a bar): their RMS (as :func:`aacmm_pin.validate`), their RMS over the bar readouts
+inside the SPATs' coverage, and their normalised size (at most about 1 when the model explains
+the bar).
+"""
+
+import dataclasses
+import time
+
+import numpy as np
+
+from aacmm_pin._blas import single_threaded_blas
+from aacmm_pin.analyses.bar_linear import LinearBar
+from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
+from aacmm_pin.analyses.linear_scorer import LinearScorer
+from aacmm_pin.analyses.residual_scan import scan_residuals
+from aacmm_pin.data.campaign import Campaign, StatedNoise
+from aacmm_pin.effects import LIBRARY, Kind, Term
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.fit.identification import Calibration, Measurements, identify, measurements
+from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.progress import Progress
+
+STARTS = ("dh", "proposed")
+ALPHA = 1e-3
+"""Family-wise error rate of one step's F tests (Bonferroni over the candidates)."""
+
+
+def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
+    if campaign.lengthbar is None or not campaign.bar:
+        return None
+    try:
+        bar = LinearBar(cal, campaign, arm)
+    except AacmmError:  # e.g. a thermal term and no temp_c in lengthbar.csv
+        return None
+    return bar if bar.n else None
+
+
+def _in_model(term: Term, terms: list[Term], map_axes: list[int], use_rtest: bool) -> bool:
+    if term.effect == "rtest":  # the measured displacement is used, or not
+        return use_rtest
+    if term.kind is Kind.MAP:  # a map may replace a harmonic term of its axis
+        return term.axis in map_axes
+    if term.effect == "encoder":
+        return term.axis in map_axes or any(t.effect == "encoder" and t.axes == term.axes
+                                            for t in terms)
+    return any(t.key == term.key for t in terms)
+
+
+def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
+             effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
+             alpha: float = ALPHA, max_nfev: int = 200, progress: bool = False,
+             noise: StatedNoise | None = None) -> Discovery:
+    """Find the effects the ``start`` model is missing on a campaign, add them and refit.
+
+    Args:
+        campaign: SPAT campaign (with ``temp_c`` / ``t_s`` columns where the effects need them;
+            a length bar, when present, joins the held-out score and is reported before and after
+            every step).
+        arm: the arm (default: the embedded default arm).
+        start: ``"dh"`` (DH errors, tool) or ``"proposed"`` (also every axis' encoder map).
+        effects: names of library effects to try (default: all of :data:`aacmm_pin.effects.LIBRARY`).
+        use_rtest: whether the start model uses each sample's R-Test displacement.
+        max_steps: most effects to add.
+        alpha: family-wise error rate of a step's significance tests (Bonferroni).
+        max_nfev: most residual evaluations of every fit (a cap: each stops at its tolerance).
+        progress: show progress bars.
+        noise: the measurement noise stated per kind (default: the campaign's ``campaign.json``,
+            else the paper's values); the nest offsets' prior is its ``location``, and the final
+            residual is judged against it (:attr:`Discovery.unexplained`).
+
+    Returns:
+        The steps, the final calibration, why the loop stopped and what the final residual shows
+        that no effect explains.
+
+    Raises:
+        ValueError: for an unknown start or effect name.
+        IdentificationError: if the campaign cannot be identified (see :func:`identify`).
+    """
+    if start not in STARTS:
+        raise ValueError(f"start: choose from {', '.join(STARTS)}, got {start!r}")
+    names = list(LIBRARY) if effects is None else list(effects)
+    if unknown := [n for n in names if n not in LIBRARY]:
+        raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(LIBRARY)}")
+    with single_threaded_blas():  # many small products: threads only spin
+        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, max_nfev,
+                         progress, noise or campaign.noise or StatedNoise())
+
+
+def stated_noise(campaign: Campaign, meas: Measurements, noise: StatedNoise) -> np.ndarray:
+    """Return the stated noise of every sample per coordinate, shape (N,), m.
+
+    SPAT samples: the R-Test's; tool points: their ``sigma_um`` column, else the instrument's;
+    length-bar readouts: the campaign's stated socket noise (``campaign.json`` ``socket``, else
+    :data:`aacmm_pin.units.SIGMA_SOCKET`).
+    """
+    if meas.sigma is None:
+        return np.full(len(meas.q), noise.rtest if campaign.spat is not None else noise.point)
+    points = campaign.points
+    stated = np.where(np.isnan(meas.sigma), noise.rtest, meas.sigma)
+    if points is not None and points.sigma is None:  # points without sigma_um: the instrument's
+        rows = meas.group < 0 if campaign.spat is not None else np.ones(len(stated), dtype=bool)
+        stated = np.where(rows, noise.point, stated)
+    out: np.ndarray = stated
+    return out
+
+
+def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
+              max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise
+              ) -> Discovery:
+    tic = time.perf_counter()
+    arm = arm or load_arm()
+    meas = measurements(campaign, arm, use_rtest)
+    samples = meas.samples
+    map_axes = list(range(1, arm.n_axes + 1)) if start == "proposed" else []
+    terms: list[Term] = []
+
+    def fit() -> Calibration:
+        cal = identify(campaign, arm, model="proposed" if map_axes else "dh", use_rtest=use_rtest,
+                       map_axes=tuple(map_axes) or None, extensions=tuple(terms),
+                       max_nfev=max_nfev, nests="estimate",  # one treatment for every model
+                       sigma_location=noise.location)
+        if not cal.success:
+            raise AacmmError(f"discovery: the fit with {', '.join(t.key for t in terms) or start} "
+                             f"did not converge: {cal.message}")
+        return cal
+
+    cal = first = fit()
+    bar_now = _linear_bar(arm, cal, campaign)
+    lin = LinearScorer(cal, samples, bar_now)
+    steps: list[Step] = []
+    held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [bar_now]
+    factors = [lin.size_factors]
+    n_candidates: list[int] = []
+    stopped, missing = "", []
+    ticker = Progress("discover", "step", total=max_steps, enabled=progress)
+    def candidates() -> list[Term]:
+        out = [t for n in names if not LIBRARY[n].in_start
+               for t in LIBRARY[n].candidates(arm, samples)
+               if not _in_model(t, terms, map_axes, use_rtest)]
+        n_candidates.append(len(out))
+        return out
+
+    for _ in range(max_steps):
+        terms_now = candidates()
+        if not terms_now:
+            stopped = ("no candidate to try: every effect asked for is in the model or has no "
+                       "term these data can show")
+            break
+        threshold = alpha / len(terms_now)
+        scores = _scored(lin, terms_now, threshold)
+        good = [s for s in scores if s.significant]
+        if not good:
+            best = scores[0]
+            stopped = (f"no candidate is significant against the noise "
+                       f"({lin.sigma * 1e6:.2f} um): the best, {best.term.key}, changes the held-out "
+                       f"RMS by {(best.heldout_rms - lin.heldout_rms) * 1e6:+.3f} um, "
+                       f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
+                       f"{best.bic_gain:.1f}")
+            break
+        chosen = _forward(lin, good[0], terms_now, threshold)
+        new_terms = [s.term for s in chosen]
+        map_axes += [t.axis for t in new_terms if t.kind is Kind.MAP]
+        terms = [t for t in terms if not (t.effect == "encoder" and t.axis in map_axes)]
+        terms += [t for t in new_terms if t.kind is not Kind.MAP and t.effect != "rtest"]
+        use_rtest = use_rtest or any(t.effect == "rtest" for t in new_terms)
+        new_cal = fit()
+        new_bar = _linear_bar(arm, new_cal, campaign)
+        new_lin = LinearScorer(new_cal, samples, new_bar)
+        views = []
+        for t in sorted(new_terms, key=lambda t: t.axes):
+            label, values = t.variable(samples)
+            res_label, before = lin.view(t)
+            views.append({"term": t.key, "variable": label, "x": values, "residual": res_label,
+                          "before": before, "after": new_lin.view(t)[1]})
+        effect = good[0].term.effect
+        step = Step(
+            effect=effect, terms=new_terms,
+            description="; ".join(t.describe() for t in new_terms),
+            fit_rms_before=cal.fit_rms, fit_rms_after=new_cal.fit_rms,
+            heldout_rms_before=lin.heldout_rms, heldout_rms_after=new_lin.heldout_rms,
+            bar_rms_before=None if bar_now is None else bar_now.rms,
+            bar_rms_after=None if new_bar is None else new_bar.rms,
+            score=good[0], runners_up=[s for s in scores if s.term.effect != effect][:5],
+            values={n: float(v) for t in new_terms if t.key in new_cal.parameters.extensions
+                    for n, v in zip(t.names, new_cal.parameters.extensions[t.key])},
+            views=views,
+            bar_covered_rms_before=None if bar_now is None else bar_now.covered_rms,
+            bar_covered_rms_after=None if new_bar is None else new_bar.covered_rms,
+            bar_normalised_before=None if bar_now is None else lin.bar_normalised(bar_now.errors),
+            bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors))
+        steps.append(step)
+        cal, lin, bar_now = new_cal, new_lin, new_bar
+        held.append(lin.heldout_rms)
+        factors.append(lin.size_factors)
+        fits.append(cal.fit_rms)
+        bars.append(bar_now)
+        ticker.update(1)
+    else:
+        terms_now = candidates()
+        still = _scored(lin, terms_now, alpha / max(len(terms_now), 1))
+        missing = [s.to_dict() for s in still if s.significant]
+        stopped = (f"reached max_steps = {max_steps}" + (
+            f"; {len(missing)} candidates are still significant (see missing)" if missing else
+            "; nothing else is significant"))
+    ticker.close()
+    tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
+    scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
+                          np.einsum("nij,j->ni", lin.stylus.tool, tools))
+    if scan.structure:  # library terms on a variable the residual follows, not named
+        labels = {s.label for s in scan.structure}
+        scan = dataclasses.replace(scan, suspects=tuple(
+            t.key for n in names if not LIBRARY[n].in_start
+            for t in LIBRARY[n].candidates(arm, samples)
+            if not _in_model(t, terms, map_axes, use_rtest) and t.variable(samples)[0] in labels))
+    return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
+                     calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
+                     bar_rms=[None if b is None else b.rms for b in bars],
+                     bar_covered_rms=[None if b is None else b.covered_rms for b in bars],
+                     bar_normalised=[None if b is None else lin.bar_normalised(b.errors) for b in bars],
+                     bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
+                     noise=cal.sigma, n_candidates=n_candidates,
+                     runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
+                     stated_noise=noise)
+
+
+def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float
+             ) -> list[Score]:
+    """Return the best term and the further axes of its effect that are significant given it.
+
+    Forward selection on the linearised model over every candidate of the effect (one masked by a
+    larger error at the start may be significant once that is explained); an encoder map may
+    replace a harmonic term of the same axis (the map holds every harmonic its nodes resolve).
+    """
+    chosen = [best]
+    pool = [t for t in candidates if t.effect == best.term.effect and t != best.term]
+    while True:
+        cols = np.hstack([lin.columns(c.term) for c in chosen])
+        taken = {c.term.axes: c.term for c in chosen}
+        pool = [t for t in pool if t.axes not in taken or (
+            t.kind is Kind.MAP and taken[t.axes].kind is not Kind.MAP)]
+        rescored = [s for s in _scored(lin, pool, threshold, (cols, lin.evaluate(cols)))
+                    if s.significant]
+        if not rescored:
+            return chosen
+        nxt = max(rescored, key=lambda s: s.total_gain)
+        chosen = [c for c in chosen if c.term.axes != nxt.term.axes] + [nxt]
+        pool = [t for t in pool if t != nxt.term]
+
+
+def _scored(lin: LinearScorer, terms: list[Term], threshold: float,
+            given: tuple[np.ndarray, dict[str, float]] | None = None) -> list[Score]:
+    """Return every term's score, marked significant or not, best held-out gain first."""
+    scores = [_mark(lin.score(t, given), threshold) for t in terms]
+    return sorted(scores, key=lambda s: -s.total_gain)
+
+
+MIN_K_EFF = 0.1
+"""A term the data determine less than this (effective parameters) is not named: its columns are
+(near) zero on these samples, e.g. an axis that does not move the measured point."""
+
+
+def _mark(score: Score, threshold: float) -> Score:
+    """Return the score marked significant: F test, BIC and held-out (locations plus bar) pass."""
+    ok = (score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
+          and score.k_eff >= MIN_K_EFF)
+    return dataclasses.replace(score, significant=bool(ok))

@@ -1,0 +1,286 @@
+"""Length-bar validation (paper Fig. 9): error of the mean socket distances per bar placement."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from aacmm_pin.analyses.bar_scatter import SocketScatter, socket_scatter
+from aacmm_pin.data.campaign import Campaign
+from aacmm_pin.effects.calibrated import predict, stylus_positions
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.model.samples import Samples
+from aacmm_pin.units import SIGMA_SOCKET
+
+
+@dataclass(frozen=True)
+class ValidationResult:
+    """Length errors of a calibrated arm on the length bar."""
+
+    placements: list[int]
+    """Bar placements, in file order of first appearance."""
+    pairs: list[tuple[str, str]]
+    """Calibrated socket pairs (from, to), as in bar.csv."""
+    errors: np.ndarray
+    """Measured minus calibrated distance, shape (n_placements, n_pairs), in m; NaN where a
+    placement did not measure both sockets of a pair."""
+    warnings: tuple[str, ...] = ()
+    """What makes these errors doubtful, each naming the file and line: a readout whose stylus
+    centre is far from the other readouts of its socket (a wrong readout, socket or placement, or
+    a posture the calibration's SPATs did not cover), a length error too large for a calibrated
+    arm (a wrong bar.csv length, e.g. its units), or readouts that scatter about their sockets far
+    more than the calibration's accuracy allows (:mod:`aacmm_pin.analyses.bar_scatter`: a readout column in
+    other units, another or a changed arm)."""
+    scatter: SocketScatter | None = None
+    """The readouts' scatter about their sockets against the calibration's accuracy (None: not
+    computed)."""
+
+    @property
+    def rms(self) -> float:
+        """RMS of all length errors, m (pairs not measured in a placement are left out)."""
+        return float(np.sqrt(np.nanmean(self.errors ** 2)))
+
+    @property
+    def max_abs(self) -> float:
+        """Largest absolute length error, m (pairs not measured in a placement are left out)."""
+        return float(np.nanmax(np.abs(self.errors)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form: ``{"placements": [{"placement": 1, "AB_um": ..}], "rms_um", ..}``."""
+        rows = [{"placement": int(k), **{f"{a}{b}_um": None if np.isnan(e) else float(e * 1e6)
+                                         for (a, b), e in zip(self.pairs, errs)}}
+                for k, errs in zip(self.placements, self.errors)]
+        return {"placements": rows, "rms_um": self.rms * 1e6, "max_abs_um": self.max_abs * 1e6,
+                "socket_scatter": None if self.scatter is None else self.scatter.to_dict(),
+                "warnings": list(self.warnings)}
+
+    def table(self) -> str:
+        """Return a plain-text table of the errors in um."""
+        head = "placement " + " ".join(f"{a + '-' + b + ' (um)':>12}" for a, b in self.pairs)
+        lines = [head] + [f"{k:>9} " + " ".join(f"{e * 1e6:>12.2f}" for e in errs)
+                          for k, errs in zip(self.placements, self.errors)]
+        lines.append(f"RMS {self.rms * 1e6:.2f} um, max |error| {self.max_abs * 1e6:.2f} um")
+        if self.scatter is not None:
+            lines.append(self.scatter.summary())
+        lines += [f"WARNING: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class BarPairs:
+    """Which readouts form each length error: the (placement, pair) entries measured in full."""
+
+    index: list[tuple[int, int]]
+    """Per error: its row (placement) and column (pair) in :attr:`ValidationResult.errors`."""
+    rows: list[tuple[np.ndarray, np.ndarray]]
+    """Per error: indices of the readouts in the first and in the second socket."""
+    length: np.ndarray
+    """Calibrated length of each error's pair, shape (n,), m."""
+    placements: list[int]
+    """Bar placements, in file order of first appearance."""
+    pairs: list[tuple[str, str]]
+    """Calibrated socket pairs (from, to), as in bar.csv."""
+
+
+def bar_pairs(campaign: Campaign, mask: np.ndarray | None = None) -> BarPairs:
+    """Return the length errors a campaign's bar log measures (readouts in ``mask``, shape (M,)).
+
+    Raises:
+        AacmmError: if the campaign has no length-bar data.
+    """
+    log = campaign.lengthbar
+    if log is None or not campaign.bar:
+        raise AacmmError("the campaign has no length-bar data (lengthbar.csv and bar.csv)")
+    keep = np.ones(len(log.q), dtype=bool) if mask is None else mask
+    placements = list(dict.fromkeys(int(k) for k in log.placement))
+    pairs = list(campaign.bar)
+    index, rows, length = [], [], []
+    for i, k in enumerate(placements):
+        here = (log.placement == k) & keep
+        for j, (a, b) in enumerate(pairs):
+            ra, rb = (np.flatnonzero(here & (log.socket == s)) for s in (a, b))
+            if ra.size and rb.size:
+                index.append((i, j))
+                rows.append((ra, rb))
+                length.append(campaign.bar[(a, b)])
+    return BarPairs(index, rows, np.array(length), placements, pairs)
+
+
+def pair_errors(points: np.ndarray, pairs: BarPairs) -> tuple[np.ndarray, np.ndarray]:
+    """Return each length error (n,), m, and the unit vector between its sockets (n, 3).
+
+    An error is the distance of the mean socket points less the calibrated length.
+
+    Args:
+        points: modelled stylus centres of the bar readouts, shape (M, 3), m (any one frame).
+        pairs: from :func:`bar_pairs`.
+    """
+    if not pairs.rows:
+        return np.zeros(0), np.zeros((0, 3))
+    d = np.array([points[rb].mean(axis=0) - points[ra].mean(axis=0) for ra, rb in pairs.rows])
+    dist = np.linalg.norm(d, axis=1)
+    return dist - pairs.length, d / dist[:, None]
+
+
+def pair_weights(pairs: BarPairs, unit: np.ndarray, n_readouts: int) -> np.ndarray:
+    """Return W, shape (n, 3M), with W @ d(points) = d(errors) (points flattened sample-major)."""
+    w = np.zeros((len(pairs.rows), 3 * n_readouts))
+    for i, ((ra, rb), u) in enumerate(zip(pairs.rows, unit)):
+        for sign, r in ((-1.0, ra), (1.0, rb)):
+            w[i, (3 * r[:, None] + np.arange(3)).ravel()] = sign * np.tile(u, r.size) / r.size
+    return w
+
+
+def as_table(pairs: BarPairs, values: np.ndarray) -> np.ndarray:
+    """Return per-error values (n, ...) laid out as (n_placements, n_pairs, ...), NaN elsewhere."""
+    out = np.full((len(pairs.placements), len(pairs.pairs), *values.shape[1:]), np.nan)
+    for (i, j), v in zip(pairs.index, values):
+        out[i, j] = v
+    return out
+
+
+@dataclass(frozen=True)
+class PointValidation:
+    """Errors of a calibrated arm at absolutely measured tool points (laser tracker, mocap)."""
+
+    errors: np.ndarray
+    """Predicted minus measured point in the instrument frame, shape (N, 3), m."""
+    lines: np.ndarray | None
+    """1-based line of each point in points.csv, shape (N,), or None."""
+
+    @property
+    def distances(self) -> np.ndarray:
+        """Length of every error, shape (N,), m."""
+        out: np.ndarray = np.linalg.norm(self.errors, axis=1)
+        return out
+
+    @property
+    def mean(self) -> float:
+        """Mean error length, m."""
+        return float(np.mean(self.distances))
+
+    @property
+    def rms(self) -> float:
+        """RMS error length, m."""
+        return float(np.sqrt(np.mean(self.distances ** 2)))
+
+    @property
+    def max(self) -> float:
+        """Largest error length, m."""
+        return float(np.max(self.distances))
+
+    def table(self) -> str:
+        """Return a one-line summary in mm."""
+        worst = int(np.argmax(self.distances))
+        where = f" (line {int(self.lines[worst])})" if self.lines is not None else ""
+        return (f"{len(self.errors)} points: mean error {self.mean * 1e3:.4f} mm, RMS "
+                f"{self.rms * 1e3:.4f} mm, max {self.max * 1e3:.4f} mm{where}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form (mm)."""
+        return {"n_points": int(len(self.errors)), "mean_mm": self.mean * 1e3,
+                "rms_mm": self.rms * 1e3, "max_mm": self.max * 1e3,
+                "errors_mm": (self.errors * 1e3).tolist()}
+
+
+def validate_points(arm: Arm, params: Parameters, campaign: Campaign) -> PointValidation:
+    """Compare the calibrated arm's tool points with a campaign's absolutely measured points.
+
+    The points are predicted in the instrument frame of the calibration (its ``base_to_mt``
+    transform): a test campaign must be measured with the same instrument set-up.
+
+    Raises:
+        AacmmError: if the campaign has no points.
+    """
+    points = campaign.points
+    if points is None:
+        raise AacmmError("the campaign has no absolute points (points.csv)")
+    pred = stylus_positions(arm, params, points.q, frame="mt", samples=Samples.of_log(arm, points))
+    return PointValidation(pred - points.point, points.lines)
+
+
+def validate(arm: Arm, params: Parameters, campaign: Campaign,
+             accuracy: float | None = None) -> ValidationResult:
+    """Compare the calibrated arm's mean socket distances with the calibrated bar.
+
+    For every placement, the mean stylus centre of the postures in each socket is taken (r-CS), and
+    the distance between the sockets of every pair of bar.csv is compared with its calibrated length.
+
+    Args:
+        arm: the arm the parameters belong to.
+        params: the calibration.
+        campaign: a campaign with length-bar data.
+        accuracy: the accuracy per coordinate the calibration claims, m
+            (:attr:`Calibration.accuracy <aacmm_pin.fit.identification.Calibration.accuracy>`, or
+            :func:`aacmm_pin.analyses.bar_scatter.read_accuracy` of its folder): the readouts' scatter about
+            their sockets is compared with it (a warning beyond the limit of
+            :mod:`aacmm_pin.analyses.bar_scatter`); None: the scatter is reported, not compared.
+
+    Raises:
+        AacmmError: if the campaign has no length-bar data.
+    """
+    pairs = bar_pairs(campaign)
+    log = campaign.lengthbar
+    assert log is not None
+    points = predict(arm, params, log.q, Samples.of_log(arm, log))
+    errors = pair_errors(points, pairs)[0]
+    scatter = socket_scatter(points, log.placement, log.socket, accuracy,
+                             campaign.noise.socket if campaign.noise else SIGMA_SOCKET)
+    warning = scatter.warning()
+    return ValidationResult(pairs.placements, pairs.pairs, as_table(pairs, errors),
+                            tuple(_socket_warnings(campaign, points)
+                                  + _length_warnings(campaign, pairs, errors)
+                                  + ([warning] if warning else [])), scatter)
+
+
+SOCKET_SCATTER_K = 40.0
+"""A bar readout is flagged beyond this many robust scatters of all readouts about their socket's
+median point (the scatter of a calibrated arm is posture-dependent, its tail long: on simulated
+campaigns the farthest readout lies up to 30 such scatters out)."""
+SOCKET_SCATTER_MIN = 20e-6
+SOCKET_SCATTER_MAX = 0.5e-3
+"""The flag limit is kept within these, m: a readout 0.5 mm from its socket's median point is
+flagged whatever the scatter (no arm, calibrated or not, should scatter that much)."""
+LENGTH_ERROR_MAX = 0.01
+"""Largest length error, as a fraction of the calibrated length, taken for an arm's error
+(a larger one is a wrong length in bar.csv, e.g. in other units, or a wrong calibration)."""
+
+
+def _socket_warnings(campaign: Campaign, points: np.ndarray) -> list[str]:
+    """Flag readouts far from the median point of their (placement, socket), file lines named.
+
+    The limit is :data:`SOCKET_SCATTER_K` times the robust scatter of all readouts about their
+    socket's median, within :data:`SOCKET_SCATTER_MIN` .. :data:`SOCKET_SCATTER_MAX`.
+    """
+    log = campaign.lengthbar
+    assert log is not None
+    dist = np.zeros(len(points))
+    for key in set(zip(log.placement.tolist(), log.socket.tolist())):
+        rows = np.flatnonzero((log.placement == key[0]) & (log.socket == key[1]))
+        dist[rows] = np.linalg.norm(points[rows] - np.median(points[rows], axis=0), axis=1)
+    if not dist.size:
+        return []
+    limit = min(SOCKET_SCATTER_MAX,
+                max(SOCKET_SCATTER_K * 1.4826 * float(np.median(dist)), SOCKET_SCATTER_MIN))
+    where = log.lines if log.lines is not None else np.arange(len(points)) + 2
+    return [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
+            f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
+            "a wrong readout, socket or placement, or a posture in an angular range the "
+            "calibration's SPATs did not cover (aacmm-pin plan names those ranges)"
+            for i in np.flatnonzero(dist > limit)]
+
+
+def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) -> list[str]:
+    """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length."""
+    out = []
+    for (i, j), e, length in zip(pairs.index, errors, pairs.length):
+        if abs(e) > LENGTH_ERROR_MAX * length:
+            a, b = pairs.pairs[j]
+            out.append(f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error "
+                       f"{e * 1e3:.4g} mm is over {LENGTH_ERROR_MAX:.0%} of the calibrated "
+                       f"{length * 1e3:.6g} mm: a wrong length (units?) or calibration")
+    return out

@@ -1,0 +1,1 @@
+"""Files and measurements: the column table, campaign and points readers and writers, the output folder."""

@@ -1,0 +1,465 @@
+"""The campaign files: read a folder of CSV files into a :class:`Campaign`, write one back.
+
+The folder holds ``spat.csv`` + ``locations.csv`` (R-Test SPAT), ``lengthbar.csv`` + ``bar.csv``
+(length bar) and/or ``points.csv`` (absolute tool points from a laser tracker or motion capture),
+comma separated with a header row, in mm and degrees (the columns are in
+``_FILES`` below). Readers check every cell and raise one :class:`CampaignFormatError` listing every
+problem of every file with its line and column. Inside the package everything is SI (m, rad, s).
+
+**Readout columns.** Either ``q1_deg..qn_deg`` (axis order) or, when the reader is told the arm's
+joint names, one ``<joint name>_deg`` column per axis (``A1_deg``, ``left_j3_deg``), in any column
+order; not both. **Tools.** ``points.csv`` may name the tool each point measures in a ``tool``
+column (e.g. ``left``): optional for a single-tool arm, needed for several tools; told the tool
+names, the reader checks it (else :func:`aacmm_pin.fit.identification.check_points` does).
+**Per-sample columns.** Any further numeric column of ``spat.csv``, ``lengthbar.csv``,
+``points.csv`` or a readouts file (``t_s``, ``temp_c``, a user's ``temp_base_c``) is read by name
+into the log's ``columns``, in SI, its cells checked against :mod:`aacmm_pin.data.columns`.
+
+The readers never load an arm: they are told its axis and tool names, by any object with
+``axis_names`` and ``tool_names`` (:class:`ArmNames`, e.g. an :class:`~aacmm_pin.model.arm.Arm`) or by
+the keywords ``axis_names=`` and ``tool_names=``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from aacmm_pin.data.columns import MAX_ANGLE_DEG, column, file_order
+from aacmm_pin.data.csv_table import (
+    MAX_COLUMNS,
+    MAX_FILE_BYTES,
+    POINT,
+    Q_COLUMN,
+    Table,
+    check_radians,
+    matrix,
+    per_sample_columns,
+    q_names,
+    read_table,
+    usable,
+)
+from aacmm_pin.data.logs import (
+    NOISE_FILE,
+    Campaign,
+    LengthBarLog,
+    PointLog,
+    SpatLog,
+    StatedNoise,
+    read_noise,
+)
+from aacmm_pin.errors import CampaignFormatError, Problem
+
+__all__ = ["MAX_ANGLE_DEG", "MAX_COLUMNS", "MAX_FILE_BYTES", "NOISE_FILE", "ArmNames", "Campaign",
+           "LengthBarLog", "PointLog", "SpatLog", "StatedNoise", "read_campaign", "read_id_columns",
+           "read_noise", "read_readout_columns", "read_readouts", "read_sample_columns",
+           "read_tool_column", "write_campaign", "write_points"]
+
+_XYZ = {"spat": ("dx_mm", "dy_mm", "dz_mm"), "loc": POINT}
+_OPTIONAL = ("t_s", "temp_c")
+# File -> (required columns besides q, has q1_deg..qn_deg, optional columns), in file order.
+_FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
+    "spat.csv": (("location", *_XYZ["spat"]), True, _OPTIONAL),
+    "locations.csv": (("location", *_XYZ["loc"]), False, ()),
+    "lengthbar.csv": (("placement", "socket"), True, _OPTIONAL),
+    "bar.csv": (("from", "to", "length_mm"), False, ()),
+    "points.csv": (_XYZ["loc"], True, ("group", "tool", "sigma_um", *_OPTIONAL)),
+}
+_LOGS = ("spat.csv", "lengthbar.csv", "points.csv")  # files whose extra numeric columns are read
+
+
+class ArmNames(Protocol):
+    """What a reader needs to know of an arm: its axis (joint) names and its tool names.
+
+    An :class:`~aacmm_pin.model.arm.Arm` is one; so is any object with these two attributes.
+    """
+
+    @property
+    def axis_names(self) -> Sequence[str]:
+        """Joint name of every axis, in axis order (readout columns ``<joint name>_deg``)."""
+
+    @property
+    def tool_names(self) -> Sequence[str]:
+        """Names of the tools, in tool order (``left`` for ``tool_left``; ``tool`` for one)."""
+
+
+def _names(arm: ArmNames | None, axis_names: Sequence[str] | None,
+           tool_names: Sequence[str] | None) -> tuple[list[str] | None, list[str] | None]:
+    """Return the axis and tool names a reader is told: the keywords', else the arm's."""
+    axes = axis_names if axis_names is not None else None if arm is None else arm.axis_names
+    tools = tool_names if tool_names is not None else None if arm is None else arm.tool_names
+    return (None if axes is None else list(axes)), (None if tools is None else list(tools))
+
+
+def _check_locations(spat: Table, locs: Table, min_samples: int, out: list[Problem]) -> None:
+    """Check duplicated ids, locations without zero position and locations with too few samples."""
+    zero_line: dict[int, int] = {}
+    for line, v in zip(locs.lines, locs.cols["location"]):
+        if v is not None and v in zero_line:
+            out.append(Problem(locs.path, line, "location",
+                               f"location {v} is duplicated (also on line {zero_line[v]})"))
+        zero_line.setdefault(v, line)
+    first_line = {v: line for line, v in reversed(list(zip(spat.lines, spat.cols["location"])))}
+    counts, least = Counter(spat.cols["location"]), max(min_samples, 1)
+    for v in sorted((set(first_line) | set(zero_line)) - {None}):
+        path, line = (spat.path, first_line[v]) if v in first_line else (locs.path, zero_line[v])
+        if v not in zero_line:
+            out.append(Problem(path, line, "location",
+                               f"location {v} has no zero position in locations.csv"))
+        elif counts[v] < least:
+            out.append(Problem(path, line, "location", f"location {v} has {counts[v]} samples "
+                                                       f"in spat.csv, fewer than {least}"))
+
+
+def _check_bar(log: Table, bar: Table, out: list[Problem]) -> None:
+    """Check that every measured socket is in bar.csv and every bar.csv pair is measured once."""
+    first_line = {s: line for line, s in reversed(list(zip(log.lines, log.cols["socket"])))}
+    together: dict[int, set[str]] = {}
+    for placement, s in zip(log.cols["placement"], log.cols["socket"]):
+        together.setdefault(placement, set()).add(s)
+    pair_line: dict[frozenset[str], int] = {}
+
+    def say(line: int, column: str | None, reason: str) -> None:
+        out.append(Problem(bar.path, line, column, reason))
+
+    for line, a, b in zip(bar.lines, bar.cols["from"], bar.cols["to"]):
+        if a is None or b is None:
+            continue  # an empty cell, reported already
+        pair = frozenset((a, b))
+        if a == b or pair in pair_line:
+            say(line, "to", f"a bar from socket '{a}' to itself" if a == b
+                else f"pair {a},{b} is also on line {pair_line[pair]}")
+        pair_line.setdefault(pair, line)
+        for side, s in (("from", a), ("to", b)):
+            if s not in first_line:
+                say(line, side, f"socket '{s}' is never measured in lengthbar.csv")
+        if {a, b} <= first_line.keys() and not any(pair <= both for both in together.values()):
+            say(line, None, f"sockets '{a}' and '{b}' are never measured in one placement")
+    named = {s for pair in pair_line for s in pair}
+    for s, line in first_line.items():
+        if s is not None and s not in named:
+            out.append(Problem(log.path, line, "socket", f"socket '{s}' is not named in bar.csv"))
+
+
+def _check_tools(points: Table, tool_names: list[str], out: list[Problem]) -> None:
+    """Check the ``tool`` column of points.csv against the arm's tools (names or tool joints)."""
+    names = set(tool_names) | {n if n == "tool" else f"tool_{n}" for n in tool_names}
+    listing = ", ".join(tool_names)
+    if "tool" not in points.cols:
+        if len(tool_names) > 1:
+            out.append(Problem(points.path, 1, "tool", f"missing column: the arm has "
+                                                       f"{len(tool_names)} tools ({listing}); say "
+                                                       "which one each point measures"))
+        return
+    for line, name in zip(points.lines, points.cols["tool"]):
+        if name is not None and name not in names:
+            out.append(Problem(points.path, line, "tool",
+                               f"unknown tool '{name}'; the arm's tools: {listing}"))
+
+
+def _log_fields(table: Table) -> dict[str, Any]:
+    """Return the q (rad), lines and per-sample columns (by file name, SI) of a log's table."""
+    return {"q": matrix(table, table.q_columns, math.pi / 180.0),
+            "lines": np.array(table.lines, dtype=np.int64), "columns": per_sample_columns(table)}
+
+
+def _logs(tables: dict[str, Table]) -> dict[str, Any]:
+    """Return the Campaign fields of checked tables (spat, locations, lengthbar, bar, points)."""
+    spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
+    log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
+    points = tables.get("points.csv")
+    return dict(
+        spat=None if not (spat and locs) else SpatLog(
+            location=np.array(spat.cols["location"], dtype=np.int64),
+            displacement=matrix(spat, _XYZ["spat"], 1e-3), **_log_fields(spat)),
+        locations={} if not locs else dict(zip(locs.cols["location"],
+                                                matrix(locs, _XYZ["loc"], 1e-3))),
+        lengthbar=None if not (log and bar) else LengthBarLog(
+            placement=np.array(log.cols["placement"], dtype=np.int64),
+            socket=np.array(log.cols["socket"], dtype=str), **_log_fields(log)),
+        bar={} if not bar else {(a, b): v * 1e-3 for a, b, v in zip(
+            bar.cols["from"], bar.cols["to"], bar.cols["length_mm"])},
+        points=None if not points else PointLog(
+            group=np.array(points.cols.get("group", [1] * len(points.lines)), dtype=np.int64),
+            point=matrix(points, _XYZ["loc"], 1e-3),
+            tool=np.array(points.cols["tool"], dtype=str) if "tool" in points.cols else None,
+            **_log_fields(points)))
+
+
+def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
+                  arm: ArmNames | None = None, axis_names: Sequence[str] | None = None,
+                  tool_names: Sequence[str] | None = None) -> Campaign:
+    """Read and validate a campaign folder.
+
+    Args:
+        folder: folder holding spat.csv + locations.csv, lengthbar.csv + bar.csv and/or
+            points.csv.
+        min_samples_per_location: fewest SPAT samples accepted at one R-Test location.
+        arm: the arm (any object with ``axis_names`` and ``tool_names``, :class:`ArmNames`), when
+            known: allows ``<joint name>_deg`` readout columns (put in axis order) and checks the
+            ``tool`` column of points.csv against its tools.
+        axis_names: the arm's joint names (instead of ``arm``, or overriding its).
+        tool_names: the arm's tool names (instead of ``arm``, or overriding its).
+
+    Returns:
+        The campaign in SI units (m, rad, s), with ``source`` set to the folder; every extra
+        numeric column of spat.csv, lengthbar.csv and points.csv in its log's ``columns``.
+
+    Raises:
+        CampaignFormatError: listing every problem of all files, each with file, line and column.
+    """
+    folder = Path(folder)
+    paths = {name: folder / name for name in _FILES}
+    present = {name for name, path in paths.items() if path.is_file()}
+    if not present & set(_LOGS):
+        why = ("does not exist" if not folder.exists() else "is not a folder"
+               if not folder.is_dir() else "holds neither spat.csv, lengthbar.csv nor points.csv")
+        raise CampaignFormatError([Problem(folder, None, None, f"the campaign folder {why}")])
+    problems: list[Problem] = []
+    for pair in (["spat.csv", "locations.csv"], ["lengthbar.csv", "bar.csv"]):
+        if len(found := [name for name in pair if name in present]) == 1:
+            problems.append(Problem(paths[(set(pair) - set(found)).pop()], None, None,
+                                    f"file not found; {found[0]} needs it (they come in a pair)"))
+    axes, tools = _names(arm, axis_names, tool_names)
+    tables = {name: read_table(paths[name], *_FILES[name], problems, axis_names=axes,
+                               extras="numbers" if name in _LOGS else "refuse")
+              for name in _FILES if name in present}
+    spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
+    log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
+    points = tables.get("points.csv")
+    if usable(spat, "location") and usable(locs, "location"):
+        _check_locations(spat, locs, min_samples_per_location, problems)
+    if usable(log, "placement", "socket") and usable(bar, "from", "to"):
+        _check_bar(log, bar, problems)
+    if points is not None and tools is not None and points.lines:
+        _check_tools(points, tools, problems)
+    for table in (spat, log, points):
+        if table is not None:
+            check_radians(table, problems)
+    first = next((t for t in (spat, log, points) if t and t.n_axes), None)
+    for other in (log, points):
+        if first and other and other is not first and other.n_axes and other.n_axes != first.n_axes:
+            problems.append(Problem(other.path, 1, None,
+                                    f"{other.n_axes} axes ({other.q_columns[0]}.."
+                                    f"{other.q_columns[-1]}), but "
+                                    f"{first.path.name} has {first.n_axes}"))
+    if problems:
+        order: dict[Path | str, int] = {path: k for k, path in enumerate(paths.values())}
+        raise CampaignFormatError(sorted(problems, key=lambda p: (order[p.path], p.line or 0)))
+    noise = read_noise(folder / NOISE_FILE) if (folder / NOISE_FILE).is_file() else None
+    return Campaign(**_logs({k: v for k, v in tables.items() if v is not None}), source=folder,
+                    noise=noise)
+
+
+def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | None,
+                   axis_names: Sequence[str] | None, tool_names: Sequence[str] | None = None,
+                   ) -> Table:
+    """Read a readouts file's q columns and per-sample columns; raise on any problem.
+
+    A ``tool`` column is read, and checked against the tool names, if ``optional`` names it.
+    """
+    problems: list[Problem] = []
+    axes, tools = _names(arm, axis_names, tool_names)
+    table = read_table(Path(path), (), True, optional, problems, extras="readouts",
+                       axis_names=axes)
+    if table is not None and tools is not None and "tool" in optional and table.lines:
+        _check_tools(table, tools, problems)
+    if problems or table is None:
+        raise CampaignFormatError(problems)
+    return table
+
+
+def read_readouts(path: str | Path, arm: ArmNames | None = None, *,
+                  axis_names: Sequence[str] | None = None) -> np.ndarray:
+    """Read encoder readouts from a CSV file with columns q1_deg..qn_deg, e.g. a lengthbar.csv.
+
+    Other columns are ignored; the q columns and cells are checked as in :func:`read_campaign`
+    (told the joint names, by ``arm`` or ``axis_names``, ``<joint name>_deg`` columns are read too).
+
+    Returns:
+        Encoder readouts, shape (N, n), in rad.
+
+    Raises:
+        CampaignFormatError: listing every problem in the q columns, with line and column.
+    """
+    return read_sample_columns(path, arm, axis_names=axis_names)[0]
+
+
+def read_sample_columns(path: str | Path, arm: ArmNames | None = None, *,
+                        axis_names: Sequence[str] | None = None
+                        ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Read encoder readouts and every per-sample column of a readouts file (e.g. predict's input).
+
+    A per-sample column is one of the column table (``t_s``, ``temp_c``, ``sigma_um``, a
+    registered one), one whose name ends with a unit suffix (``temp_base_c``), or one whose every
+    cell is a number; its cells are checked (:mod:`aacmm_pin.data.columns`). Text columns (a pose id, a
+    ``tool`` column) and ``x_mm``, ``y_mm``, ``z_mm`` are left out.
+
+    Returns:
+        ``(q, columns)``: readouts (N, n) rad, and each per-sample column (N,) in SI by file name.
+
+    Raises:
+        CampaignFormatError: listing every problem in these columns, with line and column.
+    """
+    table = _readout_table(path, _OPTIONAL, arm, axis_names)
+    fields = _log_fields(table)
+    return fields["q"], fields["columns"]
+
+
+def read_readout_columns(path: str | Path, arm: ArmNames | None = None, *,
+                         axis_names: Sequence[str] | None = None
+                         ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Read encoder readouts and, when present, the ``temp_c`` and ``t_s`` columns.
+
+    Told the joint names, the readouts may be ``<joint name>_deg`` columns (see
+    :func:`read_campaign`); every other per-sample column: :func:`read_sample_columns`.
+
+    Returns:
+        ``(q, temp, t)``: readouts (N, n) rad, temperature (N,) deg C or None, time (N,) s or None.
+
+    Raises:
+        CampaignFormatError: listing every problem in these columns, with line and column.
+    """
+    q, columns = read_sample_columns(path, arm, axis_names=axis_names)
+    return q, columns.get("temp_c"), columns.get("t_s")
+
+
+def read_tool_column(path: str | Path, arm: ArmNames | None = None, *,
+                     axis_names: Sequence[str] | None = None,
+                     tool_names: Sequence[str] | None = None) -> np.ndarray | None:
+    """Read the ``tool`` column of a readouts file (e.g. predict's input), checked against the arm.
+
+    Args:
+        path: the readouts file.
+        arm: the arm, or any object with ``axis_names`` and ``tool_names`` (:class:`ArmNames`).
+        axis_names: the arm's joint names (instead of ``arm``).
+        tool_names: the arm's tool names (instead of ``arm``).
+
+    Returns:
+        The tool name of each row, shape (N,), str, or None if the file has no ``tool`` column.
+
+    Raises:
+        CampaignFormatError: for an unknown tool (line and column), or no column while the arm has
+            several tools.
+        ValueError: if neither ``arm`` nor ``tool_names`` is given.
+    """
+    if arm is None and tool_names is None:
+        raise ValueError("arm, tool_names: give the arm or its tool names")
+    table = _readout_table(path, ("tool", *_OPTIONAL), arm, axis_names, tool_names)
+    return np.array(table.cols["tool"], dtype=str) if "tool" in table.cols else None
+
+
+def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
+    """Write named columns of cells (floats with 9 decimals) under a header row."""
+    cells = [[f"{v:.9f}" if isinstance(v, float) else str(v) for v in c] for c in columns.values()]
+    with path.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(columns)
+        writer.writerows(zip(*cells))
+
+
+def _file_columns(log: SpatLog | LengthBarLog | PointLog,
+                  before: Mapping[str, list[int] | list[float] | list[str]],
+                  after: Mapping[str, list[int] | list[float] | list[str]]) -> dict[str, Any]:
+    """Return a log's file columns: ``before``, q1_deg..qn_deg, ``after``, per-sample columns.
+
+    The per-sample columns in their file units: ``sigma_um``, ``t_s``, ``temp_c``, then the others
+    in the log's order.
+    """
+    q_deg = dict(zip(q_names(log.q.shape[1]), np.degrees(log.q).T.tolist()))
+    extra = {name: column(name).from_si(log.columns[name]).tolist()
+             for name in file_order(list(log.columns))}
+    return {**before, **q_deg, **after, **extra}
+
+
+def _mm(names: tuple[str, ...], xyz: Any) -> dict[str, list[float]]:
+    """Return points, shape (N, 3) in m, as named columns in mm."""
+    return dict(zip(names, (np.asarray(xyz, dtype=float).reshape(-1, 3) * 1e3).T.tolist()))
+
+
+def write_campaign(campaign: Campaign, folder: str | Path) -> None:
+    """Write ``campaign`` into ``folder`` (created if needed): the files of the parts present.
+
+    Lengths are written in mm and angles in degrees, with 9 decimals; every per-sample column of a
+    log (t_s, temp_c, sigma_um, any other) in its file unit; the stated noise, when set, in
+    ``campaign.json``.
+
+    Raises:
+        FileExistsError: if the folder holds a campaign file for a part that ``campaign`` lacks
+            (it would be read back with the new files; remove it or choose another folder).
+    """
+    folder = Path(folder)
+    parts = {"spat.csv": campaign.spat, "locations.csv": campaign.spat,
+             "lengthbar.csv": campaign.lengthbar, "bar.csv": campaign.lengthbar,
+             "points.csv": campaign.points}
+    if stale := [name for name, part in parts.items() if part is None and (folder / name).exists()]:
+        raise FileExistsError(f"{folder} already holds {', '.join(stale)}, which this campaign "
+                              "has no data for; remove it or write to another folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    if (spat := campaign.spat) is not None:
+        _write_csv(folder / "spat.csv", _file_columns(spat, {"location": spat.location.tolist()},
+                                                      _mm(_XYZ["spat"], spat.displacement)))
+        ids = sorted(campaign.locations)
+        _write_csv(folder / "locations.csv", {"location": ids, **_mm(
+            _XYZ["loc"], [campaign.locations[k] for k in ids])})
+    if (log := campaign.lengthbar) is not None:
+        before = {"placement": log.placement.tolist(), "socket": log.socket.tolist()}
+        _write_csv(folder / "lengthbar.csv", _file_columns(log, before, {}))
+        _write_csv(folder / "bar.csv", {"from": [a for a, _ in campaign.bar],
+                                        "to": [b for _, b in campaign.bar],
+                                        "length_mm": [v * 1e3 for v in campaign.bar.values()]})
+    if (pts := campaign.points) is not None:
+        first: dict[str, Any] = {"group": pts.group.tolist()}
+        if pts.tool is not None:
+            first["tool"] = pts.tool.tolist()
+        _write_csv(folder / "points.csv", _file_columns(pts, first, _mm(_XYZ["loc"], pts.point)))
+    if campaign.noise is not None:
+        (folder / NOISE_FILE).write_text(json.dumps({"noise_um": campaign.noise.to_um()},
+                                                    indent=2) + "\n")
+
+
+def write_points(path: str | Path, points: np.ndarray,
+                 keep: Mapping[str, list[str]] | None = None) -> None:
+    """Write points, shape (N, 3) in m, to a CSV file with columns x_mm,y_mm,z_mm (9 decimals).
+
+    ``keep``: further columns (name -> N cells, as read) written first, e.g. the id columns of
+    the readouts the points were predicted from (:func:`read_id_columns`).
+
+    Raises:
+        ValueError: if ``points`` does not have shape (N, 3) or a kept column another length.
+    """
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points: shape (N, 3) expected, got {points.shape}")
+    keep = dict(keep or {})
+    if bad := [k for k, v in keep.items() if len(v) != len(points)]:
+        raise ValueError(f"keep: columns {bad} do not have {len(points)} cells")
+    _write_csv(Path(path), {**keep, **_mm(_XYZ["loc"], points)})
+
+
+def read_id_columns(path: str | Path, arm: ArmNames | None = None, *,
+                    axis_names: Sequence[str] | None = None) -> dict[str, list[str]]:
+    """Return the columns of a readouts file that are neither readouts nor points, as read.
+
+    E.g. a pose id or a ``tool`` column: what a user wants to find again beside the predicted
+    points. Readout columns are ``q<n>_deg`` and, told the joint names (by ``arm`` or
+    ``axis_names``), ``<joint name>_deg``; ``x_mm``, ``y_mm``, ``z_mm`` are left out (the
+    prediction replaces them).
+    """
+    with Path(path).open(newline="", encoding="utf-8-sig") as f:
+        rows = [r for r in csv.reader(f) if r and any(c.strip() for c in r)]
+    if not rows:
+        return {}
+    header = [h.strip() for h in rows[0]]
+    axes, _ = _names(arm, axis_names, None)
+    joints = {f"{n}_deg" for n in axes or []}
+    skip = set(_XYZ["loc"]) | joints
+    return {h: [r[i].strip() if i < len(r) else "" for r in rows[1:]]
+            for i, h in enumerate(header) if h and not Q_COLUMN.fullmatch(h) and h not in skip}

@@ -1,0 +1,1 @@
+"""The fit: measurements, unknowns, the solver, identifiability, identification, robust fits."""

@@ -1,0 +1,488 @@
+"""The unknowns of an identification: layout of the parameter vector, residuals and Jacobian.
+
+Vector layout (paper Eq. 5-6, with the reference-sample differencing replaced by an unknown
+translation): ``[alpha0, beta0, gamma0, mt_x, mt_y, mt_z, <error frames>, tool_x, tool_y, tool_z,
+<extension terms' parameters>, <free nodes of map 1>, <free nodes of map 2>, ...]``; an arm with
+several tools has each tool's three entries instead of ``tool_x, tool_y, tool_z`` (``tool_left_x``
+..., :attr:`aacmm_pin.model.arm.Arm.tool_unknowns`). Any entry can be
+held fixed at its start value. Extension terms come from the effect library
+(:mod:`aacmm_pin.effects`); ``samples`` gives what they depend on for the identification's readouts.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass, field
+from typing import NamedTuple, TypeAlias
+
+import numpy as np
+import scipy.sparse as sp
+
+from aacmm_pin.effects import Term, measurement_shift, term_columns
+from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.encoder_map import EncoderMap, node_angles
+from aacmm_pin.model.kinematics import StylusJacobians, identification_configuration, tool_rows
+from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.model.samples import Samples
+
+BASE_NAMES = ("alpha0", "beta0", "gamma0", "mt_x", "mt_y", "mt_z")
+TOOL_NAMES = ("tool_x", "tool_y", "tool_z")
+"""The tool entries of a single-tool arm (``Arm.tool_unknowns`` in general)."""
+
+
+class NodeKey(NamedTuple):
+    """One encoder map node among the unknowns; ``str()`` gives its name, e.g. ``map3[-175]``."""
+
+    axis: int
+    """Axis of the map, 1-based."""
+    node_deg: float
+    """Node angle, deg (rounded to 1e-9 deg, so that keys built from radians compare equal)."""
+
+    @classmethod
+    def at(cls, axis: int, node_deg: float) -> NodeKey:
+        """Return the key of the node of ``axis`` at ``node_deg`` (deg)."""
+        return cls(int(axis), round(float(node_deg), 9))
+
+    def __str__(self) -> str:
+        return f"map{self.axis}[{self.node_deg:g}]"
+
+
+class NestKey(NamedTuple):
+    """One coordinate of an R-Test nest's offset; ``str()`` gives its name, e.g. ``location2_dx``."""
+
+    location: int
+    """R-Test location (or the id of another nest, e.g. a length-bar socket)."""
+    coordinate: str
+    """``"x"``, ``"y"`` or ``"z"`` (MT-CS)."""
+    label: str = ""
+    """Name of a nest that is not an R-Test location, e.g. ``bar3A`` (placement 3, socket A)."""
+
+    def __str__(self) -> str:
+        return f"{self.label or f'location{self.location}'}_d{self.coordinate}"
+
+
+class FrameKey(NamedTuple):
+    """One of an instrument frame's six unknowns; ``str()`` gives its name, e.g. ``group2_rx``."""
+
+    group: int
+    """Instrument group (``group`` column of points.csv)."""
+    component: str
+    """``rx``, ``ry``, ``rz`` (rotation vector, rad) or ``tx``, ``ty``, ``tz`` (translation, m)."""
+
+    def __str__(self) -> str:
+        return f"group{self.group}_{self.component}"
+
+
+UnknownKey: TypeAlias = "str | NodeKey | NestKey | FrameKey"
+"""What an estimated entry is: a named parameter (``dx21``, ``tool_x``, a term's parameter), a
+map node, a nest offset coordinate or an instrument frame's unknown. ``str(key)`` is its name in
+files and reports."""
+
+
+@dataclass(frozen=True)
+class Unknowns:
+    """Which parameters are estimated, and where each sits in the vector."""
+
+    arm: Arm
+    """The arm."""
+    start: Parameters
+    """Values at the start (and of every fixed entry)."""
+    map_axes: tuple[int, ...]
+    """Axes whose maps are estimated (empty for the DH-only model)."""
+    free: np.ndarray
+    """Mask over the full layout: True where the entry is estimated, shape (n_full,)."""
+    terms: tuple[Term, ...] = ()
+    """Extension terms (angle, scale or measurement kind) whose parameters are estimated."""
+    samples: Samples | None = field(default=None, compare=False)
+    """Temperature, motion and R-Test displacement of the identification's samples."""
+    _cache: tuple[bytes, np.ndarray, tuple[np.ndarray, BlockJacobian]] | None = field(
+        default=None, init=False, repr=False, compare=False)
+    """The last Jacobian: (x bytes, the readouts array it was for, result)."""
+
+    @classmethod
+    def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...],
+             terms: tuple[Term, ...] = (), samples: Samples | None = None) -> Unknowns:
+        """Return the layout with every parameter and every node of ``map_axes`` free."""
+        n = (6 + len(arm.error_names) + 3 * arm.n_tools + sum(len(t.names) for t in terms)
+             + sum(start.map(a).n_nodes for a in map_axes))
+        return cls(arm, start, tuple(map_axes), np.ones(n, dtype=bool), tuple(terms), samples)
+
+    # ------------------------------------------------------------ names and slices
+    @property
+    def n_terms(self) -> int:
+        """Number of extension parameters in the full layout."""
+        return sum(len(t.names) for t in self.terms)
+
+    @property
+    def n_dense(self) -> int:
+        """Number of non-map entries in the full layout (X0, translation, DH, tool, extensions)."""
+        return 6 + len(self.arm.error_names) + 3 * self.arm.n_tools + self.n_terms
+
+    def with_free(self, free: np.ndarray) -> Unknowns:
+        """Return the same layout with another free mask."""
+        return Unknowns(self.arm, self.start, self.map_axes, free, self.terms, self.samples)
+
+    def map_slice(self, axis: int) -> slice:
+        """Slice of one map's nodes in the full layout."""
+        start = self.n_dense
+        for a in self.map_axes:
+            n = self.start.map(a).n_nodes
+            if a == axis:
+                return slice(start, start + n)
+            start += n
+        raise KeyError(axis)
+
+    @property
+    def full_keys(self) -> list[UnknownKey]:
+        """Keys of every entry of the full layout."""
+        keys: list[UnknownKey] = [*BASE_NAMES, *self.arm.error_names, *self.arm.tool_unknowns]
+        keys += [n for t in self.terms for n in t.names]
+        for a in self.map_axes:
+            keys += [NodeKey.at(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
+        return keys
+
+    @property
+    def keys(self) -> list[UnknownKey]:
+        """Keys of the free entries, in vector order."""
+        return [k for k, f in zip(self.full_keys, self.free) if f]
+
+    @property
+    def full_names(self) -> list[str]:
+        """Names of every entry of the full layout."""
+        return [str(k) for k in self.full_keys]
+
+    @property
+    def names(self) -> list[str]:
+        """Names of the free entries, in vector order."""
+        return [str(k) for k in self.keys]
+
+    def with_fixed(self, fixed: np.ndarray) -> Unknowns:
+        """Return a layout in which the entries of the full-layout mask ``fixed`` are held."""
+        return self.with_free(self.free & ~fixed)
+
+    # ------------------------------------------------------------ vector <-> parameters
+    def full_vector(self, params: Parameters) -> np.ndarray:
+        """Return every entry of the full layout for these parameters."""
+        parts = [params.rotation_abc, params.translation,
+                 np.array([params.dh[n] for n in self.arm.error_names]),
+                 *params.tool_vectors(self.arm).values()]
+        parts += [params.extensions.get(t.key, np.zeros(len(t.names))) for t in self.terms]
+        parts += [params.map(a).values for a in self.map_axes]
+        return np.concatenate(parts)
+
+    def vector(self, params: Parameters) -> np.ndarray:
+        """Return the free entries for these parameters, shape (n_free,)."""
+        free: np.ndarray = self.full_vector(params)[self.free]
+        return free
+
+    def parameters(self, x: np.ndarray) -> Parameters:
+        """Return the parameters with the free entries set from ``x`` (others at start)."""
+        full = self.full_vector(self.start)
+        full[self.free] = x
+        n_err, n_tool = len(self.arm.error_names), 3 * self.arm.n_tools
+        maps = dict(self.start.encoder_maps)
+        for a in self.map_axes:
+            maps[a] = EncoderMap(full[self.map_slice(a)], self.start.step_deg)
+        extensions = dict(self.start.extensions)
+        at = 6 + n_err + n_tool
+        for t in self.terms:
+            extensions[t.key] = full[at:at + len(t.names)]
+            at += len(t.names)
+        tool = full[6 + n_err:6 + n_err + n_tool].reshape(-1, 3)
+        tools = ({} if self.arm.n_tools == 1 and not self.start.tools
+                 else dict(zip(self.arm.tool_joints, tool)))
+        return self.start.replace(
+            rotation_abc=full[0:3], translation=full[3:6],
+            dh=dict(zip(self.arm.error_names, full[6:6 + n_err])),
+            tool=tool[0], tools=tools, encoder_maps=maps, extensions=extensions)
+
+    def _samples(self, q: np.ndarray) -> Samples | None:
+        return self.samples if self.samples is not None and self.samples.matches(q) else None
+
+    def measurement_shift(self, params: Parameters, q: np.ndarray) -> np.ndarray:
+        """Return the measurement terms' change of the modelled point, shape (N, 3), m."""
+        samples = self._samples(q)
+        if samples is None:  # readouts other than the identification's: no measurement there
+            return np.zeros((q.shape[0], 3))
+        return measurement_shift(self.terms, params.extensions, samples)
+
+    def term_columns(self, params: Parameters, q: np.ndarray, jac: StylusJacobians) -> np.ndarray:
+        """Return d(model point)/d(extension parameters) at ``params``, shape (N, 3, n_terms).
+
+        ``jac`` are the stylus Jacobians at ``params`` (:func:`stylus_jacobians`).
+        """
+        samples = self._samples(q) or Samples(self.arm, q)
+        cols = [term_columns(t, samples, jac, params) for t in self.terms]
+        return np.concatenate(cols, axis=2) if cols else np.zeros((q.shape[0], 3, 0))
+
+    # ------------------------------------------------------------ model
+    def positions(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Return predicted MT-CS stylus centres for readouts q (N, n_axes), shape (N, 3), m."""
+        params = self.parameters(x)
+        pos = stylus_positions(self.arm, params, q, frame="mt", samples=self._samples(q))
+        return pos + self.measurement_shift(params, q) if self.terms else pos
+
+    def _chain_blocks(self, params: Parameters, q: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return positions, free non-map columns and map axes' angle columns, without terms.
+
+        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): views of one array the batched chain
+        writes, so no block is copied.
+        """
+        ident = self.arm.identification
+        fids = np.asarray(ident.tool_frames)[tool_rows(self.arm, q.shape[0], None,
+                                                       self._samples(q))]
+        config = identification_configuration(self.arm, params, q, "mt")
+        order = np.concatenate([ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.error_idx,
+                                ident.tool_idx])[self.free[:self.n_dense]]
+        maps = ident.axis_idx[[a - 1 for a in self.map_axes]]
+        pos, jac = ident.chain.jacobians(config, fids, np.concatenate([order, maps]))
+        k = order.size
+        return pos, jac.reshape(3 * q.shape[0], -1)[:, :k], jac[:, :, k:]
+
+    def _general_blocks(self, params: Parameters, q: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`_chain_blocks`, through :func:`stylus_jacobians` (terms, extensions)."""
+        jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
+        n = q.shape[0]
+        free = self.free[:self.n_dense]
+        dense: np.ndarray = np.empty((n, 3, int(free.sum())))  # the free columns, written once
+        at = col = 0
+        for part in (jac.rotation, jac.translation, jac.dh, jac.tool,
+                     self.term_columns(params, q, jac)):
+            sel = free[at:at + part.shape[2]]
+            k = int(sel.sum())
+            dense[:, :, col:col + k] = part if k == sel.size else part[:, :, sel]
+            at, col = at + sel.size, col + k
+        angles = jac.angles[:, :, [a - 1 for a in self.map_axes]]
+        return jac.position, dense.reshape(3 * n, -1), angles
+
+    def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
+        """Return predicted positions (N, 3) and d(positions)/d(free entries) as blocks.
+
+        Rows are sample-major (row 3 i + k is coordinate k of sample i). The last result is cached.
+        """
+        key = x.tobytes()
+        cache = self._cache  # read once: other threads may replace it
+        if cache is not None and cache[0] == key and cache[1] is q:
+            return cache[2]
+        _release_cached_jacobians()  # their memory is free for the new one
+        params = self.parameters(x)
+        if self.terms or params.extensions:
+            position, dense, angles = self._general_blocks(params, q)
+        else:  # straight from the chain into one array: no per-block copies
+            position, dense, angles = self._chain_blocks(params, q)
+        # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
+        axes, at = [], 0
+        for k, a in enumerate(self.map_axes):
+            keep = self.free[self.map_slice(a)]
+            axes.append(AxisNodes.build(params.map(a), q[:, a - 1], angles[:, :, k], keep, at))
+            at += int(keep.sum())
+        if self.terms:
+            position = position + self.measurement_shift(params, q)
+        out = (position, BlockJacobian(dense, tuple(axes), at))
+        object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
+        _CACHED.append(weakref.ref(self))
+        return out
+
+
+_CACHED: list[weakref.ref[Unknowns]] = []
+"""The layouts holding a cached Jacobian (a campaign's Jacobian can weigh hundreds of MB)."""
+
+
+def _release_cached_jacobians() -> None:
+    """Drop every layout's cached Jacobian (only one is kept in a process: the newest)."""
+    while _CACHED:
+        holder = _CACHED.pop()()
+        if holder is not None:
+            object.__setattr__(holder, "_cache", None)
+
+
+CHUNK = 16384
+"""Samples per block in the products over samples (keeps their temporaries in cache)."""
+
+
+class AxisNodes(NamedTuple):
+    """The map-node columns of one axis, per sample: two nodes, their weights and d(p)/d(angle).
+
+    Column ``offset + col[i, s]`` of the node block has the entries ``weight[i, s] * d[i, k]`` on
+    rows ``3 i + k``: the axis column times the interpolation weight (a held node or a zero
+    weight has weight 0).
+    """
+
+    col: np.ndarray
+    """Column of the lower and upper node within this axis' free nodes, shape (N, 2)."""
+    weight: np.ndarray
+    """Interpolation weight of each (0 where the node is held), shape (N, 2)."""
+    d: np.ndarray
+    """d(point)/d(true angle of the axis), rows weighted as the Jacobian's, shape (N, 3)."""
+    offset: int
+    """First column of this axis in the node block."""
+    size: int
+    """Number of this axis' columns (its free nodes)."""
+
+    @classmethod
+    def build(cls, emap: EncoderMap, readout: np.ndarray, d_angle: np.ndarray, keep: np.ndarray,
+              offset: int) -> AxisNodes:
+        """Return the columns of the free nodes ``keep`` (mask) of ``emap`` at these readouts."""
+        keep = np.asarray(keep, dtype=bool)
+        column = np.cumsum(keep) - 1
+        lower, upper, frac = emap.neighbours(readout)
+        node = np.column_stack([lower, upper])
+        held = ~keep[node]
+        weight = np.column_stack([1.0 - frac, frac])
+        weight[held] = 0.0
+        col = column[node]
+        col[held] = 0
+        return cls(col, weight, np.ascontiguousarray(d_angle, dtype=float), offset, int(keep.sum()))
+
+    def transposed_weights(self) -> sp.csr_matrix:
+        """Return W^T, shape (size, N): ``W^T @ s`` sums s (N, ...) onto the columns."""
+        n = self.col.shape[0]
+        return sp.csr_matrix((self.weight.ravel(), (self.col.ravel(), np.repeat(np.arange(n), 2))),
+                             shape=(self.size, n))
+
+
+@dataclass(frozen=True)
+class BlockJacobian:
+    """Jacobian w.r.t. the free entries, as two blocks (columns in this order).
+
+    A dense block (X0, translation, DH, tool) and the map nodes, kept per axis and sample
+    (:class:`AxisNodes`: two entries per sample, axis and coordinate); their products and the
+    normal matrix are computed from that structure, the sparse matrix only when asked
+    (:attr:`nodes`).
+    """
+
+    dense: np.ndarray
+    """d(positions)/d(non-map entries), shape (3N, n_dense)."""
+    axes: tuple[AxisNodes, ...]
+    """The map-node columns, one entry per map axis."""
+    n_nodes: int
+    """Number of node columns."""
+    _normal: list[np.ndarray] = field(default_factory=list, init=False, repr=False, compare=False)
+    """J^T J once computed (:meth:`normal`)."""
+    _csc: list[sp.csc_matrix] = field(default_factory=list, init=False, repr=False, compare=False)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(3N, n_free)."""
+        return self.dense.shape[0], self.dense.shape[1] + self.n_nodes
+
+    @property
+    def nodes(self) -> sp.csc_matrix:
+        """d(positions)/d(map nodes) as a sparse matrix, shape (3N, n_nodes) (built once)."""
+        if not self._csc:
+            rows, cols, vals = [], [], []
+            for ax in self.axes:
+                n = ax.col.shape[0]
+                v = ax.weight[:, :, None] * ax.d[:, None, :]                    # (N, 2, 3)
+                keep = v.reshape(-1) != 0.0
+                rows.append(np.broadcast_to(3 * np.arange(n)[:, None, None] + np.arange(3),
+                                            (n, 2, 3)).reshape(-1)[keep])
+                cols.append(np.repeat(ax.col.reshape(-1) + ax.offset, 3)[keep])
+                vals.append(v.reshape(-1)[keep])
+            cat = (lambda a: np.concatenate(a)) if self.axes else (lambda a: np.zeros(0))
+            self._csc.append(sp.csc_matrix((cat(vals), (cat(rows).astype(np.int64),
+                                                        cat(cols).astype(np.int64))),
+                                           shape=(self.dense.shape[0], self.n_nodes)))
+        return self._csc[0]
+
+    def sparse(self) -> sp.csr_matrix:
+        """Return the whole Jacobian as one sparse matrix (for small campaigns and tests)."""
+        return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
+
+    def node_rmatmul(self, u: np.ndarray) -> np.ndarray:
+        """Return (node block)^T @ u for u of shape (3N, k), shape (n_nodes, k)."""
+        out = np.zeros((self.n_nodes, u.shape[1]))
+        if not self.axes or not u.shape[1]:
+            return out
+        u3 = u.reshape(-1, 3, u.shape[1])
+        for ax in self.axes:
+            s = np.empty((u3.shape[0], u.shape[1]))
+            for lo in range(0, u3.shape[0], CHUNK):
+                s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], u3[lo:lo + CHUNK])
+            out[ax.offset:ax.offset + ax.size] = ax.transposed_weights() @ s
+        return out
+
+    def normal(self) -> np.ndarray:
+        """Return J^T J, shape (n_free, n_free), from the blocks (no dense 3N x n matrix).
+
+        The node-node part from the per-sample structure: samples touch two nodes per axis.
+        Computed once per Jacobian (the identifiability analysis and the solver both ask for it).
+        """
+        if self._normal:
+            cached: np.ndarray = self._normal[0].copy()
+            return cached
+        nd = self.dense.shape[1]
+        out = np.zeros((self.shape[1], self.shape[1]))
+        out[:nd, :nd] = self.dense.T @ self.dense
+        cross = self.node_rmatmul(self.dense)
+        out[nd:, :nd] = cross
+        out[:nd, nd:] = cross.T
+        for i, a in enumerate(self.axes):
+            for b in self.axes[i:]:
+                g = np.einsum("ik,ik->i", a.d, b.d)
+                flat = np.zeros(a.size * b.size)
+                for s in range(2):
+                    for t in range(2):
+                        flat += np.bincount(a.col[:, s] * b.size + b.col[:, t],
+                                             a.weight[:, s] * b.weight[:, t] * g,
+                                             minlength=a.size * b.size)
+                block = flat.reshape(a.size, b.size)
+                ra, rb = nd + a.offset, nd + b.offset
+                out[ra:ra + a.size, rb:rb + b.size] = block
+                if b is not a:
+                    out[rb:rb + b.size, ra:ra + a.size] = block.T
+        self._normal.append(out)
+        fresh: np.ndarray = out.copy()
+        return fresh
+
+    def scaled(self, row_weight: np.ndarray) -> BlockJacobian:
+        """Return diag(row_weight) @ J (row_weight shape (3N,))."""
+        w3 = row_weight.reshape(-1, 3)
+        return BlockJacobian(self.dense * row_weight[:, None],
+                             tuple(ax._replace(d=ax.d * w3) for ax in self.axes), self.n_nodes)
+
+    def matmul(self, m: np.ndarray) -> np.ndarray:
+        """Return J @ m for m of shape (n_free,) or (n_free, k)."""
+        nd = self.dense.shape[1]
+        out: np.ndarray = self.dense @ m[:nd]
+        if m.ndim == 1:
+            flat3 = out.reshape(-1, 3)
+            for ax in self.axes:
+                v = m[nd + ax.offset:nd + ax.offset + ax.size]
+                g = ax.weight[:, 0] * v[ax.col[:, 0]]
+                g += ax.weight[:, 1] * v[ax.col[:, 1]]
+                flat3 += ax.d * g[:, None]
+            return out
+        out3 = out.reshape(-1, 3, m.shape[1])
+        for ax in self.axes:
+            v = m[nd + ax.offset:nd + ax.offset + ax.size]
+            g = ax.weight[:, :1] * v[ax.col[:, 0]] + ax.weight[:, 1:] * v[ax.col[:, 1]]  # (N, k)
+            out3 += ax.d[:, :, None] * g[:, None, :]
+        return out
+
+    def rmatmul(self, u: np.ndarray) -> np.ndarray:
+        """Return J^T @ u for u of shape (3N,)."""
+        u3 = u.reshape(-1, 3)
+        nodes = np.zeros(self.n_nodes)
+        for ax in self.axes:
+            s = ax.d[:, 0] * u3[:, 0]
+            s += ax.d[:, 1] * u3[:, 1]
+            s += ax.d[:, 2] * u3[:, 2]
+            nodes[ax.offset:ax.offset + ax.size] = (
+                np.bincount(ax.col[:, 0], ax.weight[:, 0] * s, minlength=ax.size)
+                + np.bincount(ax.col[:, 1], ax.weight[:, 1] * s, minlength=ax.size))
+        return np.concatenate([self.dense.T @ u, nodes])
+
+    def columns_sum(self, cols: np.ndarray) -> np.ndarray:
+        """Return the sum of the given columns (free-vector indices), shape (3N,)."""
+        nd = self.dense.shape[1]
+        out: np.ndarray = self.dense[:, cols[cols < nd]].sum(axis=1)
+        node_cols = cols[cols >= nd] - nd
+        if node_cols.size:
+            sel = np.zeros(self.n_nodes)
+            sel[node_cols] = 1.0
+            out = out + self.matmul(np.concatenate([np.zeros(nd), sel]))
+        return out

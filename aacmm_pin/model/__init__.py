@@ -1,0 +1,1 @@
+"""The arm model: URDF, error frames, kinematics, encoder maps, parameters, sizes, samples."""

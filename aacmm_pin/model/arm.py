@@ -1,0 +1,532 @@
+r"""The arm: a URDF following aacmm_pin's conventions, read as an XML tree, run on Pinocchio.
+
+Conventions (the default arm ``urdf/aacmm7.urdf`` follows them; a user's arm is another URDF that
+does too):
+
+* **Tools.** A fixed joint named ``tool`` carries the stylus sphere centre (the tool vector
+  :math:`{}^7p`) in its parent frame (the last axis' frame); its child link is the stylus. A tree
+  (e.g. a torso with two arms, a marker on each hand) has several tools instead, fixed joints named
+  ``tool_<name>`` (``tool_left``, ``tool_right``): either one ``tool`` or ``tool_<name>`` joints. A
+  tool's *name* (``tool_names``, the ``tool`` column of ``points.csv``) is ``<name>``, or ``tool``
+  for the single ``tool`` joint; its vector's unknowns are ``<joint>_x``, ``<joint>_y``,
+  ``<joint>_z`` (``tool_x``, ``tool_left_x``).
+* **Axes.** The revolute (or continuous) joints on the union of the chains from the root link to
+  the tools are the encoder axes A1..An, in the depth-first order of the kinematic tree in which
+  Pinocchio numbers the joints of the URDF (for a serial arm: root to tool, chain order); this is
+  the order of the readout columns ``q1_deg..qn_deg`` (``aacmm-pin axes URDF`` prints it). Tools
+  are in that order too. Movable joints on no tool's chain are held fixed at zero in the models
+  below (they do not move any tool), so that the configuration is exactly the n readouts.
+* **Error frames.** A fixed joint named ``dx<ij>``, ``dy<ij>``, ``dz<ij>`` (translation along x/y/z of
+  its parent frame), ``a<ij>``, ``b<ij>``, ``c<ij>`` (right-handed rotation about x/y/z) or
+  ``dth<i>0`` (rotation about the axis of the next revolute joint down its branch, through the
+  rotations on the way: the axis offset; before a branch point, the same axis on every branch)
+  holds one elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
+  Error frames are the ones on the tools' chains, in the same depth-first order as the axes.
+* Every other fixed joint is nominal geometry (e.g. ``L2z``).
+
+Two Pinocchio views of one arm:
+
+* the *runtime* model (:meth:`Arm.runtime_model`): error frames fixed at given values, one
+  configuration entry per axis, for robotics stacks and prediction;
+* the *identification* model (:attr:`Arm.identification`): every error frame, the tool vector and
+  the r-CS -> MT-CS transform (paper Eq. 4, :math:`D_b(\beta_0) D_a(\alpha_0) D_c(\gamma_0)` plus a
+  translation) are 1-DOF joints, so that Pinocchio's frame Jacobian of the stylus gives
+  d(stylus)/d(every parameter) analytically (of each tool's frame: the joints not on its chain,
+  e.g. the other tools' vectors, have zero columns).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+from aacmm_pin.errors import ArmModelError, FrameNotFound
+from aacmm_pin.model._chain import BatchedChain
+from aacmm_pin.model.sizes import Sizes, sizes_of_urdf, sizes_path
+from aacmm_pin.model.urdf_tree import Joint, UrdfTree, read_urdf
+
+if TYPE_CHECKING:
+    import yourdfpy
+
+DEFAULT_ARM = "aacmm7"
+ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
+TOOL_JOINT = "tool"
+TOOL_PATTERN = re.compile(r"^tool(?:_([A-Za-z0-9][A-Za-z0-9_]*))?$")
+"""Names of the tool joints: ``tool`` or ``tool_<name>``."""
+_MOVABLE = ("revolute", "continuous")
+BASE_JOINTS = ("mt_x", "mt_y", "mt_z", "beta0", "alpha0", "gamma0")
+"""Identification-model joints of the r-CS -> MT-CS transform, root first (Eq. 4)."""
+TOOL_JOINTS = ("tool_x", "tool_y", "tool_z")
+"""Identification-model joints of the tool vector of the single ``tool`` joint."""
+_UNIT = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
+_ROT_LETTER = {"a": "x", "b": "y", "c": "z"}
+_TOL = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class ErrorFrame:
+    """One DH error parameter: a fixed joint holding one elementary transform."""
+
+    name: str
+    """Joint name, the paper's parameter name (e.g. ``dx21``, ``a21``, ``dth30``)."""
+    is_angle: bool
+    """True for a rotation (value in rad), False for a translation (value in m)."""
+    axis: np.ndarray
+    """Unit direction of the translation or rotation axis in the parent frame, shape (3,)."""
+    nominal: float
+    """The value the URDF holds (m or rad)."""
+
+    def transform(self, value: float) -> np.ndarray:
+        """Return the joint origin for this value, a 4x4 homogeneous transform."""
+        out = np.eye(4)
+        if self.is_angle:
+            out[:3, :3] = pin.exp3(self.axis * value)
+        else:
+            out[:3, 3] = self.axis * value
+        return out
+
+
+EMBEDDED = ("aacmm7", "ur5", "wam7")
+"""Arms shipped with the package, loadable by name: the default AACMM and the two robots of the
+public laser-tracker data (``urdf/make_serial_dh.py`` writes them from the makers' DH tables)."""
+
+
+def resolve_arm_path(arm: str | Path) -> Path:
+    """Return the URDF path of an arm given by path or by the name of an embedded arm.
+
+    Raises:
+        ArmModelError: if it is neither an existing file nor an embedded arm's name.
+    """
+    path = Path(arm)
+    if path.is_file():
+        return path
+    name = str(arm)
+    candidates = [resources.files("aacmm_pin") / "urdf" / f"{name}.urdf",
+                  Path(__file__).resolve().parents[2] / "urdf" / f"{name}.urdf"]
+    for candidate in candidates:
+        if candidate.is_file():
+            return Path(str(candidate))
+    raise ArmModelError(arm, f"no such URDF file, and no embedded arm named '{name}' "
+                             f"(embedded: {', '.join(EMBEDDED)})")
+
+
+def _chains(joints: list[Joint], path: Path | str) -> dict[str, list[Joint]]:
+    """Return tool joint name -> the joints from the root link to that tool joint, root first."""
+    by_child = {j.child: j for j in joints}
+    tools = [j for j in joints if j.type == "fixed" and TOOL_PATTERN.match(j.name)]
+    if not tools:
+        raise ArmModelError(path, f"no fixed joint named '{TOOL_JOINT}' (or 'tool_<name>') carrying "
+                                  f"the stylus (joints: {', '.join(j.name for j in joints)})")
+    if len(tools) > 1 and any(j.name == TOOL_JOINT for j in tools):
+        raise ArmModelError(path, f"tool joints {', '.join(j.name for j in tools)}: name one tool "
+                                  f"'{TOOL_JOINT}', or several 'tool_<name>', not both")
+    out = {}
+    for tool in tools:
+        chain = [tool]
+        while chain[-1].parent in by_child:
+            chain.append(by_child[chain[-1].parent])
+            if len(chain) > len(joints):
+                raise ArmModelError(path, "the joints form a loop")
+        out[tool.name] = chain[::-1]
+    return out
+
+
+def _next_axis(joints: list[Joint]) -> np.ndarray | None:
+    """Return the axis of the first revolute joint of ``joints`` in the frame before them.
+
+    The origins on the way (nominal geometry, and the revolute's own) rotate it.
+    """
+    rot = np.eye(3)
+    for joint in joints:
+        rot = rot @ joint.origin[:3, :3]
+        if joint.type in _MOVABLE:
+            axis: np.ndarray = rot @ joint.axis
+            return axis
+    return None
+
+
+def build_model(urdf: UrdfTree) -> pin.Model:
+    """Return Pinocchio's model of a URDF tree.
+
+    Raises:
+        ArmModelError: naming the file and what Pinocchio's URDF parser said.
+    """
+    try:
+        return pin.buildModelFromXML(urdf.xml())
+    except (RuntimeError, ValueError) as exc:
+        raise ArmModelError(urdf.path, f"Pinocchio cannot build a model from it: {exc}") from None
+
+
+def _tree_order(urdf: UrdfTree) -> dict[str, int]:
+    """Return joint name -> rank in the depth-first order in which Pinocchio numbers the tree."""
+    model = build_model(urdf)
+    kinds = (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)
+    return {f.name: k for k, f in enumerate(model.frames) if f.type in kinds}
+
+
+def _error_frame(joint: Joint, next_axis: np.ndarray | None, path: Path | str) -> ErrorFrame:
+    """Read one error frame from its fixed joint, checking it holds one elementary transform."""
+    match = ERROR_FRAME_PATTERN.match(joint.name)
+    assert match is not None
+    kind = match.group(1)
+    origin = joint.origin
+    if kind == "dth":
+        if next_axis is None:
+            raise ArmModelError(path, f"line {joint.line}: error frame '{joint.name}' has no "
+                                      "revolute joint after it")
+        axis, is_angle = next_axis, True
+    elif kind in _ROT_LETTER:
+        axis, is_angle = _UNIT[_ROT_LETTER[kind]], True
+    else:
+        axis, is_angle = _UNIT[kind[1]], False
+    if is_angle:
+        omega = pin.log3(origin[:3, :3])
+        value = float(omega @ axis)
+        bad = np.linalg.norm(omega - value * axis) > 1e-9 or np.linalg.norm(origin[:3, 3]) > _TOL
+    else:
+        value = float(origin[:3, 3] @ axis)
+        bad = (np.linalg.norm(origin[:3, 3] - value * axis) > _TOL
+               or np.linalg.norm(origin[:3, :3] - np.eye(3)) > 1e-9)
+    if bad:
+        what = "rotation about" if is_angle else "translation along"
+        raise ArmModelError(path, f"line {joint.line}: error frame '{joint.name}' must hold a pure {what} "
+                                  f"{np.round(axis, 6).tolist()} (its origin is {origin.tolist()})")
+    return ErrorFrame(joint.name, is_angle, axis, value)
+
+
+class Arm:
+    """An AACMM: its URDF, its axes, error frames and tool, and its Pinocchio models.
+
+    Use :func:`load_arm` to make one.
+    """
+
+    def __init__(self, urdf: UrdfTree, source: Path | str, name: str):
+        self.source = source
+        """Where the URDF came from (path)."""
+        self.name = name
+        """Arm name as given by the user: an embedded arm's name or a URDF path."""
+        self._urdf = urdf
+        all_joints = urdf.joints()
+        chains = _chains(all_joints, source)
+        rank = _tree_order(urdf)
+        on_chain = {j.name: j for chain in chains.values() for j in chain}
+        joints = sorted(on_chain.values(), key=lambda j: rank[j.name])
+        self._joints = {j.name: j for j in all_joints}
+        self.axis_names: list[str] = [j.name for j in joints if j.type in _MOVABLE]
+        """Encoder axes (revolute joints on the tools' chains) in tree order (see the module
+        docstring): axis n is ``axis_names[n - 1]``, readout column ``q<n>_deg``."""
+        if not self.axis_names:
+            raise ArmModelError(source, "no revolute joint between the root link and the tool")
+        self.tool_joints: list[str] = sorted(chains, key=rank.__getitem__)
+        """The tool joints (``tool`` or ``tool_<name>``), in tree order."""
+        self.off_chain: list[str] = [j.name for j in all_joints
+                                     if j.type != "fixed" and j.name not in on_chain]
+        """Movable joints on no tool's chain: held fixed at zero in the Pinocchio models."""
+        next_axis: dict[str, np.ndarray | None] = {}
+        for chain in chains.values():
+            for i, joint in enumerate(chain):
+                if joint.type == "fixed" and ERROR_FRAME_PATTERN.match(joint.name):
+                    is_dth = joint.name.startswith("dth")  # only its axis is the next one's
+                    axis = _next_axis(chain[i + 1:]) if is_dth else None
+                    seen = next_axis.setdefault(joint.name, axis)
+                    if (seen is None) != (axis is None) or (
+                            seen is not None and axis is not None and not np.allclose(seen, axis)):
+                        raise ArmModelError(source, f"line {joint.line}: error frame "
+                                                    f"'{joint.name}' sits before a branch whose "
+                                                    "next revolute axes differ")
+                elif joint.type not in ("fixed", *_MOVABLE):
+                    raise ArmModelError(source, f"line {joint.line}: joint '{joint.name}' is "
+                                                f"{joint.type}; an AACMM chain holds only "
+                                                "revolute and fixed joints")
+        self.error_frames: list[ErrorFrame] = [_error_frame(j, next_axis[j.name], source)
+                                               for j in joints if j.name in next_axis]
+        """The DH error parameters in tree order (chain order for a serial arm)."""
+        self.nominal_tools: dict[str, np.ndarray] = {
+            name: chains[name][-1].origin[:3, 3].copy() for name in self.tool_joints}
+        """Tool joint -> tool vector held by the URDF, shape (3,), in m, in its parent's frame."""
+        self.nominal_tool: np.ndarray = self.nominal_tools[self.tool_joints[0]]
+        """Tool vector of the first (for a serial arm: the only) tool, shape (3,), in m."""
+        self.tool_links: list[str] = [chains[name][-1].child for name in self.tool_joints]
+        """The tools' links (children of the tool joints), in tool order."""
+        self.stylus_link: str = self.tool_links[0]
+        """Name of the (first) stylus link (child of the tool joint)."""
+        self.root_link: str = joints[0].parent
+        """Name of the root link (the reference CS, r-CS)."""
+
+    def __reduce__(self) -> tuple[Callable[[str, str], Arm], tuple[str, str]]:
+        """Pickle as the URDF path and name (reloaded on the other side, e.g. in a worker)."""
+        return (_load_named, (str(self.source), self.name))
+
+    # ------------------------------------------------------------------ names
+    @property
+    def n_axes(self) -> int:
+        """Number of encoder axes."""
+        return len(self.axis_names)
+
+    @property
+    def n_tools(self) -> int:
+        """Number of tools (measured points)."""
+        return len(self.tool_joints)
+
+    @property
+    def tool_names(self) -> list[str]:
+        """The tools' names, in tool order: ``<name>`` of ``tool_<name>``, or ``tool``."""
+        return [m.group(1) or n for n in self.tool_joints if (m := TOOL_PATTERN.match(n))]
+
+    @property
+    def tool_unknowns(self) -> list[str]:
+        """Names of the tool vectors' entries, ``<tool joint>_x/_y/_z`` per tool, tool order."""
+        return [f"{name}_{c}" for name in self.tool_joints for c in "xyz"]
+
+    def tool_index(self, tool: str | int | np.ndarray | list[str] | list[int]) -> np.ndarray:
+        """Return the 0-based tool index of each entry of ``tool`` (names, joint names or indices).
+
+        Raises:
+            ValueError: naming an unknown tool and listing the arm's tools.
+        """
+        arr = np.atleast_1d(np.asarray(tool))
+        if arr.dtype.kind in "iu":
+            if arr.size and (arr.min() < 0 or arr.max() >= self.n_tools):
+                raise ValueError(f"tool: indices 0..{self.n_tools - 1} expected, got "
+                                 f"{sorted(set(arr.tolist()))}")
+            return arr.astype(np.int64)
+        lookup = {**{n: k for k, n in enumerate(self.tool_joints)},
+                  **{n: k for k, n in enumerate(self.tool_names)}}
+        if bad := sorted({str(v) for v in arr.tolist()} - lookup.keys()):
+            raise ValueError(f"tool: unknown tool {', '.join(map(repr, bad))}; the arm's tools: "
+                             f"{', '.join(self.tool_names)}")
+        return np.array([lookup[str(v)] for v in arr.tolist()], dtype=np.int64)
+
+    @property
+    def error_names(self) -> list[str]:
+        """Names of the DH error parameters, chain order."""
+        return [f.name for f in self.error_frames]
+
+    @property
+    def nominal_errors(self) -> dict[str, float]:
+        """Values the URDF holds in its error frames (m or rad)."""
+        return {f.name: f.nominal for f in self.error_frames}
+
+    def error_frame(self, name: str) -> ErrorFrame:
+        """Return the error frame of this name.
+
+        Raises:
+            FrameNotFound: if the arm has no such error frame.
+        """
+        for frame in self.error_frames:
+            if frame.name == name:
+                return frame
+        raise FrameNotFound(name, self.error_names)
+
+    @cached_property
+    def sizes(self) -> Sizes:
+        """Plausible sizes of the arm's errors (:mod:`aacmm_pin.model.sizes`), read once.
+
+        From the sizes file beside the URDF (``<name>.sizes.json``); the default AACMM's where
+        there is none.
+
+        Raises:
+            FileFormatError: if the sizes file is malformed (naming the file and the key).
+        """
+        return sizes_of_urdf(self.source)
+
+    @cached_property
+    def joint_limits(self) -> np.ndarray:
+        """Lower and upper readout limits of each axis, shape (n_axes, 2), in rad.
+
+        A revolute joint's ``<limit lower upper>``; -pi / pi where the URDF states none (and for
+        continuous joints).
+        """
+        out = np.tile([-np.pi, np.pi], (self.n_axes, 1))
+        for i, name in enumerate(self.axis_names):
+            joint = self._joints[name]
+            if joint.type == "revolute":
+                out[i] = [v if v is not None else d
+                          for v, d in zip((joint.lower, joint.upper), out[i])]
+        return out
+
+    # ------------------------------------------------------------------ URDF views
+    def urdf_tree(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                  tools: dict[str, np.ndarray] | None = None) -> UrdfTree:
+        """Return a copy of the URDF's tree with error frames and tools set to these values.
+
+        Everything else in the file is kept as written (see :mod:`aacmm_pin.model.urdf_tree`).
+
+        Args:
+            dh: error frame name -> value (m or rad); missing names keep the URDF's values.
+            tool: the first (for a serial arm: the only) tool's vector, shape (3,), in m; None
+                keeps the URDF's.
+            tools: tool joint name -> tool vector, shape (3,), in m (any tools; over ``tool``).
+
+        Raises:
+            FrameNotFound: if ``dh`` or ``tools`` names a parameter the arm does not have.
+        """
+        dh = dict(dh or {})
+        for name in dh:
+            if name not in self.error_names:
+                raise FrameNotFound(name, self.error_names)
+        vectors = {} if tool is None else {self.tool_joints[0]: tool}
+        for name, value in (tools or {}).items():
+            if name not in self.tool_joints:
+                raise FrameNotFound(name, self.tool_joints)
+            vectors[name] = value
+        tree = self._urdf.copy()
+        for name, entry in dh.items():
+            frame = self.error_frame(name)
+            # a translation's rotation text stays as written
+            tree.set_origin(name, frame.transform(float(entry)), keep_rotation=not frame.is_angle)
+        for name, vector in vectors.items():
+            origin = np.eye(4)
+            origin[:3, 3] = np.asarray(vector, dtype=float).reshape(3)
+            tree.set_origin(name, origin, keep_rotation=True)
+        return tree
+
+    def urdf_string(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                    tools: dict[str, np.ndarray] | None = None) -> str:
+        """Return the URDF text with error frames and tools set to these values.
+
+        The rest of the file stays as written: visuals, transmissions, ``<gazebo>``, comments.
+        """
+        return self.urdf_tree(dh, tool, tools).xml()
+
+    def urdf_robot(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                   tools: dict[str, np.ndarray] | None = None) -> yourdfpy.Robot:
+        """Return yourdfpy's description of :meth:`urdf_string` (links, joints, visuals as written).
+
+        Read without a base folder, scene graph or meshes: to load meshes, write the text next to
+        them and load it with yourdfpy.
+
+        Raises:
+            FrameNotFound: if ``dh`` or ``tools`` names a parameter the arm does not have.
+        """
+        import io
+
+        import yourdfpy  # its import (trimesh, scipy.spatial) costs ~0.3 s: only here
+
+        text = self.urdf_string(dh, tool, tools).encode()
+        urdf = yourdfpy.URDF.load(io.BytesIO(text), build_scene_graph=False, load_meshes=False,
+                                  build_collision_scene_graph=False, load_collision_meshes=False)
+        return urdf.robot
+
+    def runtime_model(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
+                      tools: dict[str, np.ndarray] | None = None) -> pin.Model:
+        """Return the runtime Pinocchio model: error frames fixed at these values.
+
+        Its configuration is the n_axes true joint angles in axis order (readouts already corrected
+        by the encoder maps, see :func:`aacmm_pin.model.encoder_map.correct_readouts`); the frames
+        ``tool_links`` are the tool points. Movable joints on no tool's chain are fixed at zero.
+        """
+        tree = self.urdf_tree(dh, tool, tools)
+        for name in self.off_chain:
+            tree.make_fixed(name)
+        return build_model(tree)
+
+    @cached_property
+    def identification(self) -> IdentificationModel:
+        """The identification model (built once)."""
+        return IdentificationModel(self)
+
+
+class IdentificationModel:
+    """Pinocchio model in which every parameter is a 1-DOF joint along its own axis.
+
+    Joint order (root first): the r-CS -> MT-CS translation ``mt_x, mt_y, mt_z`` and rotation
+    ``beta0, alpha0, gamma0`` (Eq. 4), then the arm's tree with axes and error frames, then each
+    tool's vector (``tool_x, tool_y, tool_z``; ``tool_left_x`` ...). Every joint has one
+    configuration entry, so ``nq == nv``.
+    """
+
+    def __init__(self, arm: Arm):
+        tree = arm._urdf.copy()
+        for frame in arm.error_frames:
+            tree.make_one_dof(frame.name, "revolute" if frame.is_angle else "prismatic", frame.axis,
+                              zero_origin=True)
+        for name in arm.axis_names:
+            tree.make_one_dof(name, "revolute", arm._joints[name].axis, zero_origin=False)
+        for name in arm.off_chain:
+            tree.make_fixed(name)
+        for tool_name in arm.tool_joints:
+            tool = arm._joints[tool_name]
+            tree.remove_joint(tool_name)
+            parent = tool.parent
+            for i, c in enumerate("xyz"):
+                name = f"{tool_name}_{c}"
+                child = tool.child if i == 2 else f"{name}_frame"
+                if i < 2:
+                    tree.add_link(child)
+                tree.add_joint(name, "prismatic", parent, child, np.eye(3)[i])
+                parent = child
+        parent = "mt"
+        tree.add_link("mt")
+        for i, name in enumerate(BASE_JOINTS):
+            child = arm.root_link if i == 5 else f"{name}_frame"
+            if i < 5:
+                tree.add_link(child)
+            tree.add_joint(name, "prismatic" if i < 3 else "revolute", parent, child,
+                           np.eye(3)[[0, 1, 2, 1, 0, 2][i]])
+            parent = child
+        self.model: pin.Model = build_model(tree)
+        """The Pinocchio model."""
+        self._local = threading.local()
+        self.tool_frames: list[int] = [self.model.getFrameId(link) for link in arm.tool_links]
+        """Pinocchio frame ids of the tool points, in tool order."""
+        self.stylus_frame: int = self.tool_frames[0]
+        """Pinocchio frame id of the (first) stylus sphere centre."""
+        idx = {name: self.model.joints[self.model.getJointId(name)].idx_q
+               for name in self.model.names[1:]}
+        self.base_idx: np.ndarray = np.array([idx[n] for n in BASE_JOINTS])
+        """Configuration indices of (mt_x, mt_y, mt_z, beta0, alpha0, gamma0)."""
+        self.axis_idx: np.ndarray = np.array([idx[n] for n in arm.axis_names])
+        """Configuration indices of the axes A1..An."""
+        self.error_idx: np.ndarray = np.array([idx[n] for n in arm.error_names], dtype=int)
+        """Configuration indices of the error frames, in ``arm.error_names`` order."""
+        self.tool_idx: np.ndarray = np.array([idx[n] for n in arm.tool_unknowns])
+        """Configuration indices of the tool vectors (x, y, z per tool, tool order)."""
+        assert self.model.nq == self.model.nv == len(idx)
+        self.chain: BatchedChain = BatchedChain(self.model)
+        """The model's kinematics vectorised over samples (positions and frame Jacobians)."""
+
+    @property
+    def data(self) -> pin.Data:
+        """The model's workspace, one per thread (Pinocchio's Data is not shared safely)."""
+        data = getattr(self._local, "data", None)
+        if data is None:
+            data = self._local.data = self.model.createData()
+        return data
+
+
+def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
+    """Load an arm from a URDF path or an embedded arm's name (default: ``aacmm7``).
+
+    Raises:
+        ArmModelError: if the file cannot be read or breaks the conventions (message names the
+            file, and the line and column for XML syntax errors).
+    """
+    path = resolve_arm_path(arm)
+    urdf = read_urdf(path)
+    return Arm(urdf, path, str(arm))
+
+
+_LOADED: dict[tuple[str, str, str], Arm] = {}
+
+
+def _load_named(path: str, name: str) -> Arm:
+    """Load (once per process) the arm of a URDF path and keep the user's name for it."""
+    sizes = sizes_path(path)  # an edited URDF or sizes file reloads
+    data = Path(path).read_bytes() + (sizes.read_bytes() if sizes.is_file() else b"")
+    key = (path, name, hashlib.sha1(data).hexdigest())
+    if key not in _LOADED:
+        arm = load_arm(path)
+        arm.name = name
+        _LOADED[key] = arm
+    return _LOADED[key]

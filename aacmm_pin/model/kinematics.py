@@ -1,0 +1,319 @@
+r"""Batch kinematics: stylus centres and their Jacobians for N readouts at once.
+
+Positions and Jacobians are those of Pinocchio's models: forward kinematics and the frame Jacobian
+(``LOCAL_WORLD_ALIGNED``) of the identification model (:class:`aacmm_pin.model.arm.IdentificationModel`),
+in which every parameter is a joint, so every column is analytic. They are evaluated for all samples
+at once (:class:`aacmm_pin.model._chain.BatchedChain`: the joint placements and axes come from the
+Pinocchio model, the products along the chain are vectorised over samples with numpy; the tests
+check them against Pinocchio's per-sample functions). Map nodes enter through the chain rule:
+:math:`\partial p / \partial \Delta\theta_{n,map}(k) = \partial p / \partial \theta_n \cdot w_k(\theta^*_n)`
+with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple, TypeAlias
+
+import numpy as np
+import scipy.sparse as sp
+
+from aacmm_pin.effects import apply_terms
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.model._chain import BatchedChain
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.encoder_map import correct_readouts
+from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.model.samples import Samples
+
+
+class StylusJacobians(NamedTuple):
+    """Stylus centres and their derivatives for N samples (frame chosen by the caller)."""
+
+    position: np.ndarray
+    """Stylus centres, shape (N, 3), in m."""
+    readouts: np.ndarray
+    """d(position)/d(encoder readout), shape (N, 3, n_axes), in m/rad (map slopes included)."""
+    angles: np.ndarray
+    """d(position)/d(true joint angle), shape (N, 3, n_axes), in m/rad."""
+    dh: np.ndarray
+    """d(position)/d(error frame value), shape (N, 3, n_errors), in m/m or m/rad."""
+    tool: np.ndarray
+    """d(position)/d(tool vectors), shape (N, 3, 3 n_tools), dimensionless (zero for the tools a
+    sample does not measure)."""
+    rotation: np.ndarray
+    """d(position)/d(alpha0, beta0, gamma0), shape (N, 3, 3), in m/rad (zero-sized use in r-CS)."""
+    translation: np.ndarray
+    """d(position)/d(translation), shape (N, 3, 3), dimensionless."""
+    q_readout: np.ndarray
+    """The readouts used, shape (N, n_axes), in rad (for :meth:`nodes`)."""
+
+    def nodes(self, params: Parameters, axis: int) -> sp.csr_matrix:
+        """Return d(position)/d(map nodes of one axis), sparse, shape (3N, n_nodes), m/rad.
+
+        Rows are ordered sample-major: row ``3 * i + k`` is coordinate k of sample i.
+        """
+        return sp.csr_matrix(params.map(axis).node_columns(self.q_readout[:, axis - 1],
+                                                           self.angles[:, :, axis - 1]))
+
+
+def _readouts_2d(readouts: np.ndarray, arm: Arm) -> np.ndarray:
+    q = np.atleast_2d(np.asarray(readouts, dtype=float))
+    if q.ndim != 2 or q.shape[1] != arm.n_axes:
+        raise ValueError(f"readouts: need shape (N, {arm.n_axes}) in rad, got {np.shape(readouts)}")
+    return q
+
+
+ToolIndex: TypeAlias = "str | int | np.ndarray | list[str] | list[int] | None"
+"""Which tool each sample measures: one name / index for all, or one per sample; None: the
+samples' own (:attr:`Samples.tool`), else the arm's only tool."""
+
+
+def tool_rows(arm: Arm, n: int, tool: ToolIndex = None, samples: Samples | None = None
+              ) -> np.ndarray:
+    """Return the 0-based tool index of each of n samples, shape (n,).
+
+    Args:
+        arm: the arm.
+        n: number of samples.
+        tool: see :data:`ToolIndex`.
+        samples: the samples, whose ``tool`` is used when ``tool`` is None.
+
+    Raises:
+        ValueError: for an unknown tool, a length other than n, or no tool given for an arm with
+            several tools.
+    """
+    if tool is None and samples is not None and samples.tool is not None and samples.n == n:
+        return samples.tool
+    if tool is None:
+        if arm.n_tools > 1:
+            raise ValueError(f"tool: the arm has {arm.n_tools} tools ({', '.join(arm.tool_names)}); "
+                             "say which one each sample measures")
+        return np.zeros(n, dtype=np.int64)
+    idx = arm.tool_index(tool)
+    if idx.size == 1:
+        return np.full(n, idx[0], dtype=np.int64)
+    if idx.size != n:
+        raise ValueError(f"tool: one tool or one per sample ({n}) expected, got {idx.size}")
+    return idx
+
+
+def _tool_values(arm: Arm, params: Parameters) -> np.ndarray:
+    """Return the tool vectors of the identification model's tool joints, shape (3 n_tools,)."""
+    return np.concatenate(list(params.tool_vectors(arm).values()))
+
+
+def extension_effects(arm: Arm, params: Parameters, q_read: np.ndarray,
+                      samples: Samples | None) -> tuple[np.ndarray, np.ndarray]:
+    """Return the extensions' angle offsets (N, n_axes) rad and length scale (N,).
+
+    ``samples`` gives what the terms depend on (temperature, motion); None builds it from the
+    readouts alone (row order as time order, no temperature).
+    """
+    if not params.extensions:
+        return np.zeros_like(q_read), np.ones(q_read.shape[0])
+    if samples is None or not samples.matches(q_read):
+        samples = Samples(arm, q_read)
+    return apply_terms(params.extensions, samples, arm.n_axes)
+
+
+def _matching(samples: Samples | None, q: np.ndarray) -> Samples | None:
+    """Return the samples if they describe readouts q, else None."""
+    return samples if samples is not None and samples.matches(q) else None
+
+
+def _scaled(pos: np.ndarray, scale: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Return positions scaled about the r-CS origin (at ``origin`` in the output frame)."""
+    scaled: np.ndarray = origin + scale[:, None] * (pos - origin)
+    return scaled
+
+
+def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndarray,
+                                 frame: str = "mt", offsets: np.ndarray | None = None
+                                 ) -> np.ndarray:
+    """Return the identification model's configurations, shape (N, nq).
+
+    Args:
+        arm: the arm.
+        params: DH values, tool, X0, translation and maps.
+        readouts: encoder readouts, shape (N, n_axes), in rad.
+        frame: ``"mt"`` to include the r-CS -> MT-CS transform, ``"r"`` for the r-CS.
+        offsets: further angle errors (extensions), shape (N, n_axes), rad.
+    """
+    if frame not in ("r", "mt"):
+        raise ValueError(f"frame: choose 'r' or 'mt', got {frame!r}")
+    ident = arm.identification
+    q_read = _readouts_2d(readouts, arm)
+    q = np.zeros((q_read.shape[0], ident.model.nq))
+    if frame == "mt":
+        alpha, beta, gamma = params.rotation_abc
+        q[:, ident.base_idx] = [*params.translation, beta, alpha, gamma]
+    q[:, ident.axis_idx] = correct_readouts(q_read, params.encoder_maps)
+    if offsets is not None:
+        q[:, ident.axis_idx] += offsets
+    q[:, ident.error_idx] = [params.dh.get(n, f.nominal) for n, f in
+                             zip(arm.error_names, arm.error_frames)]
+    q[:, ident.tool_idx] = _tool_values(arm, params)
+    return q
+
+
+def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r",
+                     samples: Samples | None = None, *, tool: ToolIndex = None) -> np.ndarray:
+    """Return stylus sphere centres for N readouts, shape (N, 3), in m.
+
+    Args:
+        arm: the arm.
+        params: calibrated parameters (maps, DH values, tool, X0 for the MT-CS, extensions).
+        readouts: encoder readouts, shape (N, n_axes), in rad.
+        frame: ``"r"`` (r-CS, the arm's own frame) or ``"mt"`` (the R-Test's MT-CS).
+        samples: temperature and motion of the samples, for extensions that need them.
+        tool: which tool each sample measures (see :data:`ToolIndex`).
+    """
+    ident = arm.identification
+    q_read = _readouts_2d(readouts, arm)
+    fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
+    offsets, scale = extension_effects(arm, params, q_read, samples)
+    q = identification_configuration(arm, params, q_read, frame, offsets)
+    out = ident.chain.positions(q, fids)
+    if params.extensions:
+        out = _scaled(out, scale, params.translation if frame == "mt" else np.zeros(3))
+    return out
+
+
+def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "mt",
+                     samples: Samples | None = None, *, tool: ToolIndex = None) -> StylusJacobians:
+    """Return stylus centres and their analytic Jacobians for N readouts.
+
+    Args:
+        arm: the arm.
+        params: parameters at which to linearise.
+        readouts: encoder readouts, shape (N, n_axes), in rad.
+        frame: ``"mt"`` (MT-CS, with X0 and translation) or ``"r"`` (r-CS).
+        samples: temperature and motion of the samples, for extensions that need them.
+        tool: which tool each sample measures (see :data:`ToolIndex`); each sample's Jacobian is
+            that of its own tool's frame.
+    """
+    ident = arm.identification
+    q_read = _readouts_2d(readouts, arm)
+    fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
+    offsets, scale = extension_effects(arm, params, q_read, samples)
+    q = identification_configuration(arm, params, q_read, frame, offsets)
+    # one array, its column blocks in field order: rotation, translation, angles, dh, tool (views)
+    order = [ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.axis_idx, ident.error_idx,
+             ident.tool_idx]
+    ends = np.cumsum([0] + [len(o) for o in order])
+    pos, jac = ident.chain.jacobians(q, fids, np.concatenate(order))
+    if params.extensions:  # every length scaled about the r-CS origin: all but the translation
+        origin = params.translation if frame == "mt" else np.zeros(3)
+        pos = _scaled(pos, scale, origin)
+        jac *= scale[:, None, None]
+        jac[:, :, ends[1]:ends[2]] /= scale[:, None, None]
+    rotation, translation, angles, dh, tools = (jac[:, :, a:b] for a, b in zip(ends, ends[1:]))
+    slope = np.ones_like(q_read)
+    for axis in params.encoder_maps:
+        slope[:, axis - 1] += params.encoder_maps[axis].slope(q_read[:, axis - 1])
+    return StylusJacobians(
+        position=pos,
+        readouts=angles * slope[:, None, :],
+        angles=angles,
+        dh=dh,
+        tool=tools,
+        rotation=rotation,
+        translation=translation,
+        q_readout=q_read,
+    )
+
+
+def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples | None = None,
+            *, tool: ToolIndex = None) -> np.ndarray:
+    """Return stylus centres in the r-CS for N readouts with the *runtime* model, shape (N, 3), m.
+
+    This is what a robotics stack does with a calibrated arm: wrap the readouts with the encoder
+    maps (and the angle terms of the extensions), then run forward kinematics of the URDF whose
+    error frames hold the calibrated values (and scale by a thermal term, if any).
+
+    Args:
+        arm: the nominal arm.
+        params: calibrated parameters.
+        readouts: encoder readouts, shape (N, n_axes), in rad.
+        samples: temperature and motion of the samples, for extensions that need them.
+        tool: which tool each sample measures (see :data:`ToolIndex`).
+    """
+    model = arm.runtime_model(params.dh, tools=params.tool_vectors(arm))
+    q_read = _readouts_2d(readouts, arm)
+    fids = np.array([model.getFrameId(link) for link in arm.tool_links])[
+        tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
+    offsets, scale = extension_effects(arm, params, q_read, samples)
+    q = correct_readouts(q_read, params.encoder_maps) + offsets
+    positions: np.ndarray = BatchedChain(model).positions(q, fids) * scale[:, None]
+    return positions
+
+
+PositionJacobian = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""``(q, rows) -> (positions (M, 3), d(positions)/d(q) (M, 3, n_axes))`` for readouts q (M, n_axes)
+of the targets ``rows`` (M,) (so that per-target inputs such as temperature can be selected)."""
+
+
+def solve_ik(position_jacobian: PositionJacobian, targets: np.ndarray, limits: np.ndarray,
+             rng: np.random.Generator, iterations: int = 25, starts: np.ndarray | None = None,
+             q_init: np.ndarray | None = None) -> np.ndarray:
+    """Return readouts (N, n_axes) putting the modelled point on each target (N, 3).
+
+    Random starts within the joint limits (or within ``starts``, to favour a posture family),
+    damped Newton steps projected on the limits, and restarts for the targets not reached to
+    1e-12 m.
+
+    Args:
+        position_jacobian: the model's positions and their Jacobian (see :data:`PositionJacobian`).
+        targets: target points in the model's frame, shape (N, 3), m.
+        limits: joint limits, shape (n_axes, 2), rad.
+        rng: random generator of the starts.
+        iterations: most Newton steps per start.
+        starts: box of the random starts, shape (n_axes, 2), rad (clipped to the limits).
+        q_init: readouts for the first start, shape (N, n_axes), rad.
+
+    Raises:
+        AacmmError: if some target is not reached from 100 starts.
+    """
+    box = limits if starts is None else np.clip(starts, limits[:, :1], limits[:, 1:])
+    n_axes = limits.shape[0]
+    q = np.empty((targets.shape[0], n_axes))
+    todo = np.arange(targets.shape[0])
+    for attempt in range(100):
+        qs = rng.uniform(box[:, 0], box[:, 1], size=(todo.size, n_axes))
+        if attempt == 0 and q_init is not None:
+            qs = q_init.copy()
+        active = np.arange(todo.size)
+        for _ in range(iterations):
+            sel = todo[active]
+            pos, jac = position_jacobian(qs[active], sel)
+            err = targets[sel] - pos
+            moving = np.linalg.norm(err, axis=1) > 1e-12
+            active, err, jac = active[moving], err[moving], jac[moving]
+            if active.size == 0:
+                break
+            jjt = jac @ jac.transpose(0, 2, 1) + 1e-8 * np.eye(3)
+            step = (jac.transpose(0, 2, 1) @ np.linalg.solve(jjt, err[:, :, None]))[:, :, 0]
+            scale = np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))
+            qs[active] = np.clip(qs[active] + scale[:, None] * step, limits[:, 0], limits[:, 1])
+        ok = np.ones(todo.size, dtype=bool)
+        ok[active] = False
+        q[todo[ok]] = qs[ok]
+        todo = todo[~ok]
+        if todo.size == 0:
+            return q
+    raise AacmmError(f"IK found no posture within the joint limits for {todo.size} targets, "
+                     f"e.g. {targets[todo[0]].round(4).tolist()} m")
+
+
+def stylus_ik(arm: Arm, params: Parameters, targets: np.ndarray, rng: np.random.Generator,
+              starts: np.ndarray | None = None, iterations: int = 25) -> np.ndarray:
+    """Return readouts (N, n_axes) putting the stylus centre of ``params`` on targets in the r-CS.
+
+    See :func:`solve_ik` (the same arguments); targets shape (N, 3), m.
+    """
+    def position_jacobian(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        jac = stylus_jacobians(arm, params, q, frame="r")
+        return jac.position, jac.readouts
+
+    return solve_ik(position_jacobian, targets, arm.joint_limits, rng, iterations, starts)

@@ -1,0 +1,282 @@
+r"""A URDF as its XML tree: the joints aacmm_pin reads from it and the edits it makes to a copy.
+
+The arm's models and the exported ``calibrated.urdf`` are the user's own URDF with a few joints
+edited (an error frame's or a tool's origin set, joints made fixed or 1-DOF, joints and links
+added), so every other element and comment in the file is kept: visuals, meshes, materials,
+inertias, ``<transmission>``, ``<gazebo>``, ``<ros2_control>`` (lxml writes them back: a DOCTYPE
+is dropped, CDATA and character references come back as plain text). lxml parses strictly (no recovery
+from broken XML, no entities, no network) and remembers each element's line, so that a bad joint
+is named with its file and line. Pinocchio builds the models from the edited text; it is the
+reference for the kinematics, this module only reads the joints' names, links, origins, axes and
+limits that :mod:`aacmm_pin.model.arm` needs to find the axes, error frames and tools.
+
+Units as in URDF: m and rad.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from lxml import etree
+
+from aacmm_pin.errors import ArmModelError
+
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+"""The joint types of the URDF specification."""
+
+
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """One ``<joint>`` element as read (its values; edits go through :class:`UrdfTree`)."""
+
+    name: str
+    type: str
+    """One of :data:`JOINT_TYPES`."""
+    parent: str
+    """Parent link name."""
+    child: str
+    """Child link name."""
+    origin: np.ndarray
+    """Joint origin (parent link frame -> joint frame), 4x4 homogeneous transform, m."""
+    axis: np.ndarray
+    """Unit axis in the joint frame, shape (3,) (the URDF default x when absent)."""
+    lower: float | None
+    """Lower limit (rad or m), None when the joint has no ``<limit lower=...>``."""
+    upper: float | None
+    """Upper limit (rad or m), None when the joint has no ``<limit upper=...>``."""
+    line: int | None
+    """Line of the ``<joint>`` element in its file (None for a joint built in memory)."""
+
+
+NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+"""A number as URDF parsers read it (not Python's ``float``: ``1_0``, ``inf``, other digits)."""
+
+
+def _numbers(text: str | None, count: int, what: str, where: str, path: Path | str
+             ) -> np.ndarray:
+    """Parse ``count`` finite numbers separated by spaces (None: zeros)."""
+    if text is None:
+        return np.zeros(count)
+    parts = text.split(" ")
+    parts = [p for p in parts if p]
+    good = all(NUMBER.fullmatch(p) for p in parts)
+    values = np.array([float(p) for p in parts]) if good else np.zeros(0)
+    if values.size != count or not np.all(np.isfinite(values)):
+        raise ArmModelError(path, f"{where}: {what}: {count} finite numbers expected, got {text!r}")
+    return values
+
+
+def _number(element: etree._Element, attribute: str, where: str, path: Path | str) -> float | None:
+    text = element.get(attribute)
+    return None if text is None else float(_numbers(text, 1, attribute, where, path)[0])
+
+
+def origin_matrix(xyz: np.ndarray, rpy: np.ndarray) -> np.ndarray:
+    """Return the 4x4 transform of a URDF origin: translation xyz (m), fixed-axis roll-pitch-yaw (rad)."""
+    out = np.eye(4)
+    out[:3, :3] = pin.rpy.rpyToMatrix(*rpy)
+    out[:3, 3] = xyz
+    return out
+
+
+def _text(values: np.ndarray) -> str:
+    """Numbers as URDF attribute text, each to full double precision."""
+    return " ".join(repr(float(v) + 0.0) for v in values)
+
+
+class UrdfTree:
+    """A parsed URDF (lxml tree) with its joints read; edits change this tree only.
+
+    Use :func:`read_urdf` to make one, :meth:`copy` before editing a shared one.
+    """
+
+    def __init__(self, tree: etree._ElementTree, path: Path | str):
+        self._tree = tree
+        self.path = path
+        """Where the URDF came from (for messages)."""
+        self.root: etree._Element = tree.getroot()
+        if self.root.tag != "robot":
+            raise ArmModelError(path, f"line {self.root.sourceline}: the root element is "
+                                      f"<{self.root.tag}>, a URDF's is <robot>")
+
+    def copy(self) -> UrdfTree:
+        """Return a deep copy to edit."""
+        out = copy.copy(self)
+        out._tree = copy.deepcopy(self._tree)
+        out.root = out._tree.getroot()
+        return out
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def links(self) -> list[str]:
+        """Names of the ``<link>`` elements, in file order."""
+        return [str(e.get("name")) for e in self.root.findall("link")]
+
+    def joints(self) -> list[Joint]:
+        """Read every ``<joint>`` element, in file order.
+
+        Raises:
+            ArmModelError: for a joint without name, type, parent or child, an unknown type,
+                a duplicate name, a link that is not declared, or numbers that do not parse
+                (naming the file and the joint's line).
+        """
+        path, links, out = self.path, set(self.links), []
+        names: set[str] = set()
+        for element in self.root.findall("joint"):
+            where = f"line {element.sourceline}: joint '{element.get('name')}'"
+            name, kind = element.get("name"), element.get("type")
+            if not name:
+                raise ArmModelError(path, f"line {element.sourceline}: a <joint> without a name")
+            if name in names:
+                raise ArmModelError(path, f"{where}: a second joint of this name")
+            names.add(name)
+            if kind not in JOINT_TYPES:
+                raise ArmModelError(path, f"{where}: type {kind!r}; a URDF joint is one of "
+                                          f"{', '.join(JOINT_TYPES)}")
+            ends = {}
+            for end in ("parent", "child"):
+                node = element.find(end)
+                link = None if node is None else node.get("link")
+                if not link:
+                    raise ArmModelError(path, f"{where}: no <{end} link=\"...\"/>")
+                if link not in links:
+                    raise ArmModelError(path, f"{where}: {end} link '{link}' is not declared "
+                                              "as a <link>")
+                ends[end] = link
+            node = element.find("origin")
+            origin = np.eye(4) if node is None else origin_matrix(
+                _numbers(node.get("xyz"), 3, "origin xyz", where, path),
+                _numbers(node.get("rpy"), 3, "origin rpy", where, path))
+            node = element.find("axis")
+            axis = np.array([1.0, 0, 0]) if node is None else _numbers(
+                node.get("xyz"), 3, "axis xyz", where, path)
+            if kind != "fixed" and not np.linalg.norm(axis) > 0:
+                raise ArmModelError(path, f"{where}: axis xyz is zero")
+            axis = axis / (np.linalg.norm(axis) or 1.0)
+            node = element.find("limit")
+            lower = None if node is None else _number(node, "lower", where, path)
+            upper = None if node is None else _number(node, "upper", where, path)
+            out.append(Joint(name, str(kind), ends["parent"], ends["child"], origin, axis, lower,
+                             upper, element.sourceline))
+        return out
+
+    # ------------------------------------------------------------------ editing
+    def _joint(self, name: str) -> etree._Element:
+        for element in self.root.findall("joint"):
+            if element.get("name") == name:
+                return element
+        raise KeyError(name)
+
+    def _child(self, joint: etree._Element, tag: str) -> etree._Element:
+        node = joint.find(tag)
+        return etree.SubElement(joint, tag) if node is None else node
+
+    def set_origin(self, name: str, origin: np.ndarray, *, keep_rotation: bool = False) -> None:
+        """Set a joint's origin (4x4, m).
+
+        ``keep_rotation`` sets only its translation, the rotation's text (``rpy``) kept as written.
+        """
+        node = self._child(self._joint(name), "origin")
+        node.set("xyz", _text(origin[:3, 3]))
+        if not keep_rotation:
+            node.set("rpy", _text(pin.rpy.matrixToRpy(np.asarray(origin[:3, :3], float))))
+
+    def make_fixed(self, name: str) -> None:
+        """Turn a joint into a fixed joint at zero (its origin kept)."""
+        joint = self._joint(name)
+        joint.set("type", "fixed")
+        for tag in ("axis", "limit", "mimic", "dynamics", "safety_controller", "calibration"):
+            for node in joint.findall(tag):
+                joint.remove(node)
+
+    def make_one_dof(self, name: str, kind: str, axis: np.ndarray, zero_origin: bool) -> None:
+        """Turn a joint into a ``revolute`` or ``prismatic`` joint along ``axis`` (unit, (3,)).
+
+        Its limits are wide (identification models: every value reachable); ``zero_origin``
+        replaces its origin by the identity.
+        """
+        joint = self._joint(name)
+        joint.set("type", kind)
+        for node in joint.findall("mimic"):
+            joint.remove(node)
+        self._child(joint, "axis").set("xyz", _text(axis))
+        limit = self._child(joint, "limit")
+        for key, value in (("lower", "-1000"), ("upper", "1000"), ("effort", "0"),
+                           ("velocity", "1")):
+            limit.set(key, value)
+        if zero_origin:
+            self.set_origin(name, np.eye(4))
+
+    def remove_joint(self, name: str) -> None:
+        """Remove a joint (its child link stays)."""
+        self.root.remove(self._joint(name))
+
+    def add_link(self, name: str) -> None:
+        """Add an empty link."""
+        etree.SubElement(self.root, "link", name=name)
+
+    def add_joint(self, name: str, kind: str, parent: str, child: str, axis: np.ndarray) -> None:
+        """Add a 1-DOF joint (``revolute`` or ``prismatic``) at the identity along ``axis``."""
+        joint = etree.SubElement(self.root, "joint", name=name, type=kind)
+        etree.SubElement(joint, "parent", link=parent)
+        etree.SubElement(joint, "child", link=child)
+        self.make_one_dof(name, kind, axis, zero_origin=True)
+
+    def xml(self) -> str:
+        """Return the URDF text (the document's comments and every element kept)."""
+        root = self.root
+        nodes = [*reversed(list(root.itersiblings(preceding=True))), root, *root.itersiblings()]
+        return "<?xml version='1.0' encoding='UTF-8'?>\n" + "".join(
+            etree.tostring(node, encoding="unicode", with_tail=False) + "\n" for node in nodes)
+
+
+def read_urdf(path: str | Path) -> UrdfTree:
+    """Parse a URDF file strictly; return its tree.
+
+    Raises:
+        ArmModelError: for a file that cannot be read, broken XML (naming line and column), an
+            XML entity declaration (entities are not expanded: an entity could move a link
+            unseen; naming its line and column) or a root that is not ``<robot>``.
+    """
+    _refuse_entities(path)
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
+                             huge_tree=False)
+    try:
+        tree = etree.parse(str(path), parser)
+    except etree.XMLSyntaxError as exc:
+        line, column = exc.position
+        raise ArmModelError(path, f"line {line}, column {column}: invalid XML: {exc.msg}") from None
+    except OSError as exc:
+        raise ArmModelError(path, f"cannot read the file: {exc}") from None
+    return UrdfTree(tree, path)
+
+
+def _refuse_entities(path: str | Path) -> None:
+    """Raise if the URDF declares an XML entity.
+
+    Raises:
+        ArmModelError: naming the entity, its line and column.
+    """
+    from xml.parsers import expat
+
+    parser = expat.ParserCreate()
+
+    def declared(name: str, *_: object) -> None:
+        raise ArmModelError(path, f"line {parser.CurrentLineNumber}, column "
+                                  f"{parser.CurrentColumnNumber + 1}: the XML entity '{name}' is "
+                                  "declared; entities are not expanded: write the values out")
+
+    parser.EntityDeclHandler = declared
+    try:
+        with open(path, "rb") as f:
+            parser.ParseFile(f)
+    except expat.ExpatError:
+        pass  # broken XML: lxml names it next, with its line and column
+    except OSError as exc:
+        raise ArmModelError(path, f"cannot read the file: {exc}") from None
+

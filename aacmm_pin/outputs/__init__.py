@@ -1,0 +1,1 @@
+"""Outputs: the calibration folder, figures, the MeshCat viewer, the demo."""

@@ -1,0 +1,155 @@
+"""What a discovery run writes: ``discovery.json``, its figures and the final model as a CALDIR.
+
+Figures: residuals against a named effect's variable before and after each step, the gap per
+step, and, when the final residual is unexplained, the residual against the variable it follows.
+"""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from aacmm_pin.analyses.discovery_results import Discovery, Step
+from aacmm_pin.analyses.residual_scan import Scan
+from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.outputs.export import write_calibration_files
+from aacmm_pin.outputs.plots import DPI, MODEL_COLOURS, _new_figure
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+
+def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """Return bin centres and bin means of y over x (bins with >= 3 samples)."""
+    values = np.unique(x)
+    if values.size <= 3:  # a discrete variable (e.g. a direction of motion)
+        return values, np.array([y[x == v].mean() for v in values])
+    edges = np.linspace(x.min(), x.max(), bins + 1)
+    which = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
+    keep = [b for b in range(bins) if np.sum(which == b) >= 3]
+    if not keep:
+        return np.zeros(0), np.zeros(0)
+    return (0.5 * (edges[np.array(keep, dtype=int)] + edges[np.array(keep, dtype=int) + 1]),
+            np.array([y[which == b].mean() for b in keep]))
+
+
+def step_figure(step: Step, k: int, path: str | Path) -> None:
+    """Write the residuals against each named term's variable, before and after step ``k``."""
+    _step_figure(step, k).savefig(path, dpi=DPI)
+
+
+def _step_figure(step: Step, k: int) -> Figure:
+    """Build the figure of :func:`step_figure`: one panel per named term (up to 3 per row)."""
+    views: list[dict[str, Any]] = step.views
+    ncols = min(max(len(views), 1), 3)
+    nrows = max(1, -(-len(views) // ncols))
+    fig = _new_figure(4.2 * ncols, 0.6 + 3.0 * nrows)
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes[len(views):]:
+        ax.remove()
+    for ax, view in zip(axes, views):  # every named term, one panel each
+        x = np.asarray(view["x"], dtype=float)
+        for key, colour, label in (("before", MODEL_COLOURS[0], "before"),
+                                   ("after", MODEL_COLOURS[3], "after")):
+            y = np.asarray(view[key], dtype=float)
+            ax.plot(x, y, ".", ms=2, alpha=0.35, color=colour)
+            bx, by = _binned(x, y)
+            ax.plot(bx, by, "-o", ms=3, color=colour, label=f"{label} (bin means)")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(view["variable"])
+        ax.set_ylabel(view["residual"])
+        ax.set_title(view["term"], fontsize=9)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"step {k}: {step.effect} {step.axes or ''} - held-out RMS "
+                 f"{step.heldout_rms_before * 1e6:.2f} -> {step.heldout_rms_after * 1e6:.2f} um",
+                 fontsize=10)
+    return fig
+
+
+def gap_figure(result: Discovery, path: str | Path) -> None:
+    """Write the held-out RMS, fit RMS and length-bar errors of the start model and every step."""
+    fig = _new_figure(6.4, 3.6)
+    ax = fig.subplots()
+    labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
+                                            for s in result.steps]
+    x = np.arange(len(labels))
+    ax.plot(x, np.array(result.heldout_rms) * 1e6, "-o", color=MODEL_COLOURS[2],
+            label="held-out RMS (leave one location out)")
+    ax.plot(x, np.array(result.fit_rms) * 1e6, "-s", color=MODEL_COLOURS[3], label="fit RMS")
+    handles: list[Any] = []
+    if all(v is not None for v in result.bar_rms):
+        ax.plot(x, np.array(result.bar_rms, dtype=float) * 1e6, "-^", color=MODEL_COLOURS[4],
+                label="length-bar RMS")
+    if all(v is not None for v in result.bar_covered_rms):
+        ax.plot(x, np.array(result.bar_covered_rms, dtype=float) * 1e6, "--^", mfc="none",
+                color=MODEL_COLOURS[4], label="length-bar RMS inside the SPAT coverage")
+    ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8, label="noise (sigma)")
+    if all(v is not None for v in result.bar_normalised):
+        right = ax.twinx()
+        handles = right.plot(x, np.array(result.bar_normalised, dtype=float), "-D", ms=4,
+                             color=MODEL_COLOURS[1], label="length-bar error / its predicted "
+                             "uncertainty (right)")
+        right.set_ylabel("normalised length-bar error")
+        right.set_ylim(0.0, None)
+    ax.set_xticks(x, labels, rotation=15, fontsize=8)
+    ax.set_ylabel("um")
+    ax.set_ylim(0.0, None)
+    ax.set_title("gap per step (stopped: " + "\n".join(textwrap.wrap(result.stopped_because, 90))
+                 + ")", fontsize=7)
+    lines, labels_ = ax.get_legend_handles_labels()
+    ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7)
+    fig.savefig(path, dpi=DPI)
+
+
+def unexplained_figure(scan: Scan, path: str | Path) -> None:
+    """Write the final residual (less each location's mean) against the variable it follows most.
+
+    One panel per coordinate: the residual of every sample and its binned means, with the stated
+    noise as a band; the variable is the scan's top structure (else its best-ranked variable).
+    """
+    top = (scan.structure or scan.variables)[0]
+    fig = _new_figure(11.0, 3.4)
+    x = np.asarray(top.values, dtype=float)
+    noise = scan.noise * 1e6
+    for c, ax in enumerate(fig.subplots(1, 3, sharey=True)):
+        y = scan.residual[:, c] * 1e6
+        ax.plot(x, y, ".", ms=2, alpha=0.35, color=MODEL_COLOURS[0])
+        bx, by = _binned(x, y)
+        ax.plot(bx, by, "-o", ms=3, color=MODEL_COLOURS[3], label="bin means")
+        ax.axhspan(-noise, noise, color="0.85", zorder=0, label="stated noise (+- sigma)")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(top.label or top.variable)
+        ax.set_title(f"{'xyz'[c]} residual", fontsize=9)
+        if c == 0:
+            ax.set_ylabel("residual less its location's mean (um)")
+            ax.legend(fontsize=7)
+    fig.suptitle("\n".join(textwrap.wrap(scan.hint(), 130)), fontsize=8)
+    fig.savefig(path, dpi=DPI)
+
+
+def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False) -> Path:
+    """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
+
+    Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
+    the named effect's variable before and after), ``discovery_unexplained.png`` (when the final
+    residual is unexplained: against the variable it follows most), and the CALDIR files of
+    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...). The folder
+    is written whole (:func:`~aacmm_pin.data.output_folder.output_folder`).
+
+    Raises:
+        OutputExistsError: if ``folder`` holds files and not ``force``.
+    """
+    with output_folder(folder, force) as tmp:
+        write_calibration_files(result.calibration, arm, tmp)
+        (tmp / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        gap_figure(result, tmp / "discovery_gap.png")
+        for k, step in enumerate(result.steps, start=1):
+            step_figure(step, k, tmp / f"discovery_step{k}.png")
+        if result.scan is not None and result.scan.unexplained and result.scan.variables:
+            unexplained_figure(result.scan, tmp / "discovery_unexplained.png")
+    return Path(folder)

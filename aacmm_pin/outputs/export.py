@@ -1,0 +1,70 @@
+"""A calibration folder (CALDIR): parameters, calibrated URDF, maps CSV and report.
+
+``CALDIR/parameters.json`` names ``calibrated.urdf`` beside it, so the folder is self-contained;
+``calibrated.urdf`` holds the identified DH values in its error frames and the identified tool vector
+of every tool (it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json``
+maps first); ``calibrated.sizes.json`` beside it carries the arm's plausible sizes, if it has any.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.fit.identification import Calibration
+from aacmm_pin.model.arm import Arm
+from aacmm_pin.model.parameters import write_parameters
+from aacmm_pin.model.sizes import sizes_path, write_sizes
+from aacmm_pin.units import ARCSEC
+
+
+def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray] | None = None
+                   ) -> None:
+    """Write ``axis,node_deg,error_arcsec,identifiable,std_arcsec`` for every estimated map.
+
+    Args:
+        cal: the calibration.
+        path: CSV to write.
+        std: axis -> node standard uncertainty (rad) to write instead of the linearised one
+            (e.g. from Monte Carlo).
+    """
+    rows = ["axis,node_deg,error_arcsec,identifiable,std_arcsec"]
+    for axis, ok in sorted(cal.node_identifiable.items()):
+        emap = cal.parameters.map(axis)
+        node_std = std[axis] if std is not None else cal.node_std(axis)
+        for node, value, good, s in zip(np.degrees(emap.nodes), emap.values, ok, node_std):
+            s_text = f"{s / ARCSEC:.4f}" if good and np.isfinite(s) else ""
+            rows.append(f"{axis},{node:g},{value / ARCSEC:.4f},{int(good)},{s_text}")
+    Path(path).write_text("\n".join(rows) + "\n")
+
+
+def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: bool = False) -> Path:
+    """Write a calibration folder whole (:func:`~aacmm_pin.data.output_folder.output_folder`); return it.
+
+    Files: ``parameters.json``, ``calibrated.urdf``, ``encoder_maps.csv``, ``report.json``, and
+    ``calibrated.sizes.json`` when the arm has a sizes file (:mod:`aacmm_pin.model.sizes`), so that the
+    folder's arm keeps its plausible sizes.
+
+    Raises:
+        OutputExistsError: if ``folder`` holds files and not ``force``.
+    """
+    with output_folder(folder, force) as tmp:
+        write_calibration_files(cal, arm, tmp)
+    return Path(folder)
+
+
+def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
+    """Write the files of a calibration folder into an existing ``folder`` (not atomically)."""
+    params = cal.parameters
+    (folder / "calibrated.urdf").write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
+                                          encoding="utf-8")
+    if sizes_path(arm.source).is_file():
+        write_sizes(arm.sizes, sizes_path(folder / "calibrated.urdf"))
+    write_parameters(params.replace(arm="calibrated.urdf"), folder / "parameters.json")
+    write_maps_csv(cal, folder / "encoder_maps.csv")
+    report = cal.report()
+    report["arm"] = arm.name
+    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
