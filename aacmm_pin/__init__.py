@@ -19,16 +19,14 @@ if TYPE_CHECKING:
     from aacmm_pin.analyses.uncertainty import MonteCarloResult, monte_carlo
     from aacmm_pin.analyses.validation import ValidationResult, validate
     from aacmm_pin.data.campaign import (
-        Campaign,
-        LengthBarLog,
-        SpatLog,
-        StatedNoise,
+        ArmNames,
         read_campaign,
-        read_noise,
         read_readouts,
         write_campaign,
         write_points,
     )
+    from aacmm_pin.data.columns import Column, register_column
+    from aacmm_pin.data.logs import Campaign, LengthBarLog, PointLog, SpatLog, StatedNoise, read_noise
     from aacmm_pin.effects.base import (
         AngleTerm,
         BasisTerm,
@@ -78,7 +76,7 @@ __all__ = [
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",
-    "StatedNoise", "read_noise",
+    "StatedNoise", "read_noise", "PointLog", "ArmNames", "Column", "register_column",
     "StylusJacobians", "correct_readouts", "load_arm", "node_angles", "predict",
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
@@ -91,8 +89,9 @@ __all__ = [
 _PUBLIC: dict[str, tuple[str, ...]] = {
     # module -> the public names it defines (the same as the TYPE_CHECKING imports above)
     "model.arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
-    "data.campaign": ("Campaign", "LengthBarLog", "SpatLog", "StatedNoise", "read_campaign",
-                      "read_noise", "read_readouts", "write_campaign", "write_points"),
+    "data.campaign": ("ArmNames", "read_campaign", "read_readouts", "write_campaign", "write_points"),
+    "data.columns": ("Column", "register_column"),
+    "data.logs": ("Campaign", "LengthBarLog", "PointLog", "SpatLog", "StatedNoise", "read_noise"),
     "analyses.discovery": ("discover",),
     "analyses.discovery_results": ("Discovery",),
     "outputs.discovery_figures": ("write_discovery",),

@@ -118,16 +118,6 @@ def test_04_unexplained_drift_reports_time_then_names_the_users_effect(tmp_path:
     assert second["steps"][0]["effect"] == "fixture_creep" and second["unexplained"] is None
 
 
-def _columns_api() -> bool:
-    """Whether ``Samples`` hands the effects the campaign's extra columns (``samples.column``)."""
-    from aacmm_pin.model.samples import Samples
-
-    return hasattr(Samples, "column")
-
-
-@pytest.mark.xfail(not _columns_api(), strict=False,
-                   reason="the campaign's extra columns reach the samples (Samples.column) in "
-                          "another branch; until it is merged temp_base_c is an unknown column")
 def test_05_plugin_is_discovered_and_applied_in_fresh_processes(tmp_path: Path) -> None:
     """Example 05: the plugin's effect on a column the package never heard of is named on A1 by
     discover (held-out gap shrinks); parameters.json names the plugin; predict and validate apply

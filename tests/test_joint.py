@@ -97,8 +97,7 @@ def _split_bar(campaign: Campaign) -> tuple[Campaign, Campaign]:
     assert log is not None
 
     def keep(mask: np.ndarray) -> Campaign:
-        rows = {k: v[mask] for k, v in vars(log).items() if v is not None}
-        return replace(campaign, lengthbar=replace(log, **rows))
+        return replace(campaign, lengthbar=log.take(mask))
 
     odd = log.placement % 2 == 1
     return keep(odd), keep(~odd)

@@ -182,7 +182,7 @@ def test_parameters_json_size_and_depth_are_capped(tmp_path):
 
 def test_campaign_header_width_and_file_size_are_capped(tmp_path, monkeypatch):
     """A q1000000_deg column, a 10,000-column header and an oversized file: one message each."""
-    from aacmm_pin.data import campaign as cm
+    from aacmm_pin.data import csv_table as cm
 
     folder = tmp_path / "camp"
     folder.mkdir()

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from aacmm_pin.data.columns import column
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Variable
 from aacmm_pin.effects.registry import library
 from aacmm_pin.fit.identification_result import Calibration
@@ -188,6 +189,11 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None) -> list[Varia
            Variable(OVERALL, "all", f"time ({unit})", t, "global")]
     for effect in library().values():
         out += effect.variables(samples.arm, samples)
+    read = {c for effect in library().values() for c in effect.reads} | {"t_s", "sigma_um"}
+    for name, values in samples.columns.items():  # every other per-sample column, by name
+        if name not in read and (col := column(name)).varies(values):
+            out.append(Variable(f"the column {name}", "all", f"{name} ({col.unit or 'as written'})",
+                                col.from_si(values)))
     if stylus is not None:  # the stylus' inclination from pointing down, and its azimuth
         unit_vec = stylus / np.maximum(np.linalg.norm(stylus, axis=1, keepdims=True), 1e-12)
         tilt = np.degrees(np.arccos(np.clip(-unit_vec[:, 2], -1.0, 1.0)))

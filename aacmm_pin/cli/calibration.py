@@ -59,7 +59,7 @@ def _simulate(args: argparse.Namespace) -> int:
 def _predict(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import (
         read_id_columns,
-        read_readout_columns,
+        read_sample_columns,
         read_tool_column,
         write_points,
     )
@@ -72,10 +72,11 @@ def _predict(args: argparse.Namespace) -> int:
     params = folder.parameters
     arm = load_arm(args.arm or params.arm)
     folder.check(arm)
-    q, temp, t = read_readout_columns(args.readouts, arm)
+    q, columns = read_sample_columns(args.readouts, arm)
     tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
         args.readouts, arm)
-    points = predict(arm, params, q, Samples(arm, q, temp, t), tool=tool)
+    samples = Samples(arm, q, columns=columns, files=(Path(args.readouts).name,))
+    points = predict(arm, params, q, samples, tool=tool)
     keep = read_id_columns(args.readouts, arm)
     write_points(args.out, points, keep)
     kept = f" after the input's {', '.join(keep)} columns" if keep else ""

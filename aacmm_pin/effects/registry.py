@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import inspect
 import sys
 import threading
 from collections.abc import Iterable, Mapping
@@ -143,6 +144,9 @@ def _one_line(exc: BaseException) -> str:
 def load_effect_file(path: str | Path) -> list[str]:
     """Run a Python file that registers effects; return the names it registered.
 
+    A file that registers nothing itself (a plugin's module, written for its entry point) has
+    every :class:`Effect` subclass it defines registered.
+
     Raises:
         AacmmError: if the file does not exist or fails to run (naming the file).
     """
@@ -162,6 +166,11 @@ def load_effect_file(path: str | Path) -> list[str]:
     except Exception as exc:
         raise AacmmError(f"{path}: the effects file failed: {_one_line(exc)}") from exc
     new = [n for n, e in LIBRARY.items() if before.get(n) is not e]
+    if not new:
+        for cls in vars(module).values():
+            if isinstance(cls, type) and issubclass(cls, Effect) and cls.__module__ == name \
+                    and cls.name and not inspect.isabstract(cls):
+                new.append(register_effect(cls).name)
     for n in new:
         _SOURCE[n] = str(path.resolve())
     return new

@@ -195,17 +195,10 @@ def _join(parts: list[Measurements], arm: Arm) -> Measurements:
     sigma = np.concatenate([p.sigma if p.sigma is not None else
                             np.full(k, np.nan if p.nest is not None else SIGMA_POINT)
                             for k, p in zip(n, parts)])
-    s = [p.samples for p in parts]
-    temp = None if any(x.temp is None for x in s) else np.concatenate([x.temp for x in s])
-    t = None if any(x.t is None for x in s) else np.concatenate([x.t for x in s])
-    disp = np.concatenate([np.zeros((x.n, 3)) if x.displacement is None else x.displacement
-                           for x in s])
-    tool = None if all(x.tool is None for x in s) else np.concatenate(
-        [np.zeros(x.n, dtype=np.int64) if x.tool is None else x.tool for x in s])
     q = np.concatenate([p.q for p in parts])
     return Measurements(q, np.concatenate([p.measured for p in parts]),
                         np.concatenate([p.group for p in parts]),
-                        Samples(arm, q, temp, t, disp, tool=tool), sigma, np.concatenate(nest),
+                        Samples.concatenate([p.samples for p in parts]), sigma, np.concatenate(nest),
                         np.concatenate([p.nest_sigma for p in parts]),
                         tuple(k for p in parts for k in p.nest_keys), np.concatenate(frame),
                         tuple(frames), np.concatenate(lengths))

@@ -1,18 +1,24 @@
 """What the model and its effects may depend on, per sample: readouts, temperature, time, motion.
 
-:class:`Samples` bundles one log's readouts with the columns beside them (``temp_c``, ``t_s``, the
-R-Test displacement) and what follows from them (the gravity torque on every axis, each axis'
-direction of motion). Build it from a campaign log with :meth:`Samples.of_log` or, for SPATs with
-their displacement, :meth:`Samples.of_spat`.
+:class:`Samples` bundles one log's readouts with the columns beside them (``temp_c``, ``t_s`` and
+every other per-sample column by its file name, the R-Test displacement) and what follows from
+them (the gravity torque on every axis, each axis' direction of motion). Build it from a campaign
+log with :meth:`Samples.of_log` or, for SPATs with their displacement, :meth:`Samples.of_spat`;
+join several with :meth:`Samples.concatenate`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.data.campaign import LengthBarLog, PointLog, SpatLog
+from aacmm_pin.data.logs import LengthBarLog, PointLog, SpatLog
+from aacmm_pin.errors import AacmmError
 from aacmm_pin.model.arm import Arm
+
+_FILE_OF = {SpatLog: "spat.csv", LengthBarLog: "lengthbar.csv", PointLog: "points.csv"}
 
 
 class Samples:
@@ -21,37 +27,46 @@ class Samples:
     Args:
         arm: the arm (its URDF inertias give the gravity torques).
         q: encoder readouts, shape (N, n_axes), rad.
-        temp: arm temperature, shape (N,), deg C, or None.
-        t: time stamps, shape (N,), s, or None (row order is then the time order).
+        temp: arm temperature, shape (N,), deg C, or None (the ``temp_c`` column).
+        t: time stamps, shape (N,), s, or None (row order is then the time order; ``t_s``).
         displacement: R-Test displacement less its location's mean, shape (N, 3), m, or None.
         tool: 0-based index (in ``arm.tool_joints``) of the tool each sample measures, shape (N,),
             or None (the arm's only tool).
         location: R-Test location (or instrument group) of each sample, shape (N,), or None.
+        columns: per-sample columns by file name, each shape (N,), SI (``temp`` and ``t``, when
+            given, override its ``temp_c`` and ``t_s``).
+        files: the files the samples were read from, named when a column is missing.
     """
 
     def __init__(self, arm: Arm, q: np.ndarray, temp: np.ndarray | None = None,
                  t: np.ndarray | None = None, displacement: np.ndarray | None = None,
-                 tool: np.ndarray | None = None, location: np.ndarray | None = None):
+                 tool: np.ndarray | None = None, location: np.ndarray | None = None, *,
+                 columns: Mapping[str, np.ndarray] | None = None, files: Sequence[str] = ()):
         self.arm = arm
         self.location = None if location is None else np.asarray(location, dtype=np.int64)
         self.tool = None if tool is None else np.asarray(tool, dtype=np.int64)
         self.q = np.atleast_2d(np.asarray(q, dtype=float))
-        self.temp = None if temp is None else np.asarray(temp, dtype=float)
-        self.t = None if t is None else np.asarray(t, dtype=float)
+        merged = dict(columns or {})
+        merged.update((name, v) for name, v in (("temp_c", temp), ("t_s", t)) if v is not None)
+        self.columns: dict[str, np.ndarray] = {name: np.asarray(v, dtype=float)
+                                               for name, v in merged.items()}
+        """Per-sample columns by file name (``t_s``, ``temp_c``, ``temp_wrist_c``), shape (N,), SI."""
+        self.files = tuple(files)
+        """The files the samples come from (``spat.csv``, a readouts file), or empty."""
         self.displacement = displacement
         self._gravity: np.ndarray | None = None
         self._direction: np.ndarray | None = None
 
     @classmethod
     def of_log(cls, arm: Arm, log: SpatLog | LengthBarLog | PointLog) -> Samples:
-        """Return the samples of a log's readouts with its temperature, time and tool columns.
+        """Return the samples of a log's readouts with its per-sample columns and tool column.
 
         Raises:
             ValueError: if a point names a tool the arm does not have.
         """
         tool = getattr(log, "tool", None)
-        return cls(arm, log.q, log.temp, log.t,
-                   tool=None if tool is None else arm.tool_index(tool))
+        return cls(arm, log.q, tool=None if tool is None else arm.tool_index(tool),
+                   columns=log.columns, files=(_FILE_OF[type(log)],))
 
     @classmethod
     def of_spat(cls, arm: Arm, spat: SpatLog) -> Samples:
@@ -60,7 +75,56 @@ class Samples:
         for m in np.unique(spat.location):
             sel = spat.location == m
             dev[sel] -= dev[sel].mean(axis=0)
-        return cls(arm, spat.q, spat.temp, spat.t, dev, location=spat.location)
+        return cls(arm, spat.q, displacement=dev, location=spat.location, columns=spat.columns,
+                   files=("spat.csv",))
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[Samples]) -> Samples:
+        """Return the samples of several parts (of one arm), rows stacked in order.
+
+        A column is kept when every part has it; a missing displacement is zero, a missing tool
+        the first one; locations are dropped.
+        """
+        names = [n for n in parts[0].columns if all(n in p.columns for p in parts)]
+        disp = np.concatenate([np.zeros((x.n, 3)) if x.displacement is None else x.displacement
+                               for x in parts])
+        tool = None if all(x.tool is None for x in parts) else np.concatenate(
+            [np.zeros(x.n, dtype=np.int64) if x.tool is None else x.tool for x in parts])
+        return cls(parts[0].arm, np.concatenate([p.q for p in parts]), displacement=disp, tool=tool,
+                   columns={n: np.concatenate([p.columns[n] for p in parts]) for n in names},
+                   files=tuple(dict.fromkeys(f for p in parts for f in p.files)))
+
+    def select(self, rows: np.ndarray) -> Samples:
+        """Return the samples of these rows (a boolean mask or indices), every column with them."""
+        return Samples(self.arm, self.q[rows], None, None,
+                       None if self.displacement is None else self.displacement[rows],
+                       None if self.tool is None else self.tool[rows],
+                       None if self.location is None else self.location[rows],
+                       columns={k: v[rows] for k, v in self.columns.items()}, files=self.files)
+
+    @property
+    def temp(self) -> np.ndarray | None:
+        """Arm temperature, shape (N,), deg C, or None (the ``temp_c`` column)."""
+        return self.columns.get("temp_c")
+
+    @property
+    def t(self) -> np.ndarray | None:
+        """Time stamps, shape (N,), s, or None (the ``t_s`` column)."""
+        return self.columns.get("t_s")
+
+    def column(self, name: str) -> np.ndarray:
+        """Return a per-sample column by its file name, shape (N,), in SI.
+
+        Raises:
+            AacmmError: if the samples have no such column (one line, naming it and the files that
+                could hold it).
+        """
+        if (values := self.columns.get(name)) is not None:
+            return values
+        where = " or ".join(self.files) or "the readouts file"
+        have = ", ".join(self.columns) or "none"
+        raise AacmmError(f"no column '{name}' in the samples: add it to {where} (columns there: "
+                         f"{have})")
 
     @property
     def n(self) -> int:
