@@ -226,7 +226,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
     scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
                           np.einsum("nij,j->ni", lin.stylus.tool, tools),
-                          [library()[n] for n in names])
+                          [library()[n] for n in dict.fromkeys(default_effects() + names)])
     if scan.structure:  # library terms on a variable the residual follows, not named
         followed = {s.variable for s in scan.structure}
         scan = dataclasses.replace(scan, suspects=tuple(

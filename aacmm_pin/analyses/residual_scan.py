@@ -299,7 +299,7 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         stylus: the stylus vector (last joint to stylus centre) of every sample in the residual's
             frame, shape (N, 3), m, or None: its inclination and azimuth are variables too.
         effects: the effects whose variables are tested (default: those tried by default,
-            :attr:`aacmm_pin.effects.Effect.by_default`).
+            :attr:`aacmm_pin.effects.Effect.by_default`; discovery adds those it was asked to try).
 
     Returns:
         The scan (see the module doc); :attr:`Scan.unexplained` says whether something is missing.
