@@ -54,7 +54,8 @@ STEP_DEG = 5.0
 REFERENCE_TEMPERATURE_C = 20.0
 """ISO 1 reference temperature, deg C: thermal terms are zero there."""
 
-SIMULATOR_EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash")
+SIMULATOR_EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash",
+                     "lateral_compliance")
 """Effects the simulator (:mod:`aacmm_pin.analyses.simulate`) can switch on."""
 DEFAULT_SIMULATOR_EFFECTS = ("dh", "encoder", "rtest")
 """Effects a simulated campaign has by default: the paper's model."""

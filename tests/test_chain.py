@@ -180,3 +180,67 @@ def test_predict_matches_pinocchio_runtime_model(any_arm):
     ref = _pinocchio(model, q, fids)[0] * scale[:, None]
     np.testing.assert_allclose(kinematics.predict(any_arm, params, samples.q, samples), ref,
                                rtol=0, atol=TOL)
+
+
+def _tilted_positions(model: pin.Model, joint: int, rotation: np.ndarray, q: np.ndarray,
+                      frames: np.ndarray) -> np.ndarray:
+    """Pinocchio's frame origins with joint ``joint``'s child side turned by ``rotation`` (its
+    joint frame): every child joint's and frame's placement premultiplied by it."""
+    tilted = model.copy()
+    turn = pin.SE3(rotation, np.zeros(3))
+    for child in range(1, tilted.njoints):
+        if tilted.parents[child] == joint:
+            tilted.jointPlacements[child] = turn * tilted.jointPlacements[child]
+    for frame in tilted.frames:
+        if frame.parentJoint == joint:
+            frame.placement = turn * frame.placement
+    data = tilted.createData()
+    out = np.empty((len(q), 3))
+    for i, (qi, fid) in enumerate(zip(q, frames)):
+        pin.forwardKinematics(tilted, data, qi)
+        out[i] = pin.updateFramePlacement(tilted, data, int(fid)).translation
+    return out
+
+
+@pytest.mark.parametrize("which", ["aacmm7", "torso"])
+@pytest.mark.parametrize("model_kind", ["identification", "runtime"])
+def test_tilt_columns_equal_pinocchio_central_differences(which, model_kind):
+    """tilt_columns equal central differences of Pinocchio's forward kinematics with each joint's
+    child side turned by exp(eps u) about its lateral axes (u: x, y of the joint's basis), to
+    1e-9 relative, and are zero for the joints not supporting the frame."""
+    arm = ap.load_arm(ARMS[0] if which == "aacmm7" else ARMS[3])
+    rng = np.random.default_rng(11)
+    n = 12
+    tool_index = np.arange(n) % arm.n_tools
+    if model_kind == "identification":
+        ident = arm.identification
+        model, chain = ident.model, ident.chain
+        q = np.tile(rng.uniform(-0.01, 0.01, model.nq), (n, 1))
+        q[:, ident.axis_idx] = rng.uniform(-2.0, 2.0, (n, arm.n_axes))
+        frames = np.asarray(ident.tool_frames)[tool_index]
+        axes = ident.axis_idx
+    else:
+        model = arm.runtime_model()
+        chain = BatchedChain(model)
+        q = rng.uniform(-2.0, 2.0, (n, model.nq))
+        frames = np.array([model.getFrameId(link) for link in arm.tool_links])[tool_index]
+        axes = np.array([model.joints[model.getJointId(a)].idx_q for a in arm.axis_names])
+    cols = chain.tilt_columns(q, frames, axes)
+    assert cols.shape == (n, 3, axes.size, 2)
+    eps = 1e-6
+    scale = np.abs(cols).max()
+    for col, idx_q in enumerate(axes):
+        joint = next(j for j in range(1, model.njoints) if model.joints[j].idx_q == idx_q)
+        for k in range(2):
+            u = chain.basis(joint)[:, k]
+            plus = _tilted_positions(model, joint, pin.exp3(eps * u), q, frames)
+            minus = _tilted_positions(model, joint, pin.exp3(-eps * u), q, frames)
+            fd = (plus - minus) / (2 * eps)
+            # central differences: truncation ~eps^2, rounding ~1e-16 m / eps = 1e-10 of O(1 m)
+            np.testing.assert_allclose(cols[:, :, col, k], fd, rtol=0, atol=1e-9 * scale,
+                                       err_msg=f"{model.names[joint]} lateral {'xy'[k]}")
+    if arm.n_tools > 1:  # the other arm's joints do not move a tool
+        for tool, other in (("left", "R"), ("right", "L")):
+            rows = tool_index == arm.tool_names.index(tool)
+            cols_other = [c for c, name in enumerate(arm.axis_names) if name.startswith(other)]
+            assert rows.any() and not cols[rows][:, :, cols_other].any()

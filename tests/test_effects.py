@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,8 +17,9 @@ from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.samples import Samples, motion_direction
 
+ROOT = Path(__file__).resolve().parents[1]
 TERMS = (fx.compliance(2), fx.compliance(4), fx.thermal(), fx.backlash(3), fx.crosstalk(2, 3),
-         fx.encoder_harmonic(5), fx.rtest())
+         fx.encoder_harmonic(5), fx.rtest(), fx.lateral_compliance(3))
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +33,17 @@ def _with_extensions(params: ap.Parameters, rng: np.random.Generator) -> ap.Para
     return params.replace(extensions=ext)
 
 
-def test_term_columns_equal_central_differences(arm: ap.Arm, sim: ap.Simulation) -> None:
+@pytest.mark.parametrize("tilted", [False, True])
+def test_term_columns_equal_central_differences(arm: ap.Arm, sim: ap.Simulation, tilted: bool
+                                                ) -> None:
+    """Every term's columns equal central differences of the modelled points. With a lateral tilt
+    in the model (``tilted``) only the tilt term's columns are checked: they are exact (the tilt
+    moves the point linearly in its values), while the other columns leave out the tilt's own
+    change with the angles, O(tilt) ~ 1e-4 relative (a Gauss-Newton approximation)."""
     params = _with_extensions(sim.truth, np.random.default_rng(0))
+    if not tilted:
+        params = params.replace(extensions={**params.extensions, "lateral_compliance[A3]":
+                                            np.zeros(2)})
     samples = Samples.of_spat(arm, sim.campaign.spat)
     q = samples.q
     u = Unknowns.full(arm, params, (), TERMS, samples)
@@ -42,6 +53,8 @@ def test_term_columns_equal_central_differences(arm: ap.Arm, sim: ap.Simulation)
     analytic = jac.dense[:, u.n_dense - n_terms:u.n_dense]
     plausible = np.concatenate([t.plausible for t in TERMS])
     for j in range(n_terms):
+        if tilted and not u.full_names[u.n_dense - n_terms + j].startswith("lateral"):
+            continue
         h = 1e-4 * plausible[j]
         e = np.zeros_like(x)
         e[u.n_dense - n_terms + j] = h
@@ -192,3 +205,41 @@ def test_terms_pickle_and_parse_from_their_keys(arm: ap.Arm) -> None:
             np.testing.assert_array_equal(back.basis(samples), term.basis(samples))
     with pytest.raises(KeyError):
         fx.term_from_key("nonsense")
+
+
+@pytest.mark.parametrize("which", ["aacmm7", "torso"])
+def test_positive_lateral_compliance_makes_the_arm_sag(which: str) -> None:
+    """Gravity pulls the arm down: a joint that gives way laterally (kx, ky > 0) lets the centre of
+    mass of the whole arm drop (Pinocchio's centre of mass, every body turned about the joint's
+    lateral axes by the term's tilts on its child side: independent of the moment's sign
+    convention); the moment's third component, about the axis, is Samples.gravity."""
+    import pinocchio as pin
+
+    from aacmm_pin.model._chain import BatchedChain
+
+    arm = ap.load_arm("aacmm7" if which == "aacmm7" else ROOT / "urdf" / "torso.urdf")
+    model = arm.runtime_model()
+    chain = BatchedChain(model)
+    rng = np.random.default_rng(5)
+    checked = 0
+    for q in rng.uniform(-1.5, 1.5, (5, arm.n_axes)):
+        samples = Samples(arm, q[None, :])
+        qs = np.zeros(model.nq)
+        qs[[model.joints[model.getJointId(n)].idx_q for n in arm.axis_names]] = q
+        for axis in range(1, arm.n_axes + 1):
+            if np.linalg.norm(samples.lateral_gravity[0, axis - 1]) < 0.5:  # N m: hardly loaded
+                continue
+            ext = {f"lateral_compliance[A{axis}]": np.array([1e-4, 1e-4])}
+            tilt = fx.registry.adjustment(ext, samples, arm.n_axes).tilts[0, axis - 1]
+            joint = model.getJointId(arm.axis_names[axis - 1])
+            tilted = model.copy()
+            turn = pin.SE3(pin.exp3(chain.basis(joint)[:, :2] @ tilt), np.zeros(3))
+            for child in range(1, tilted.njoints):
+                if tilted.parents[child] == joint:
+                    tilted.jointPlacements[child] = turn * tilted.jointPlacements[child]
+            tilted.inertias[joint] = turn.act(tilted.inertias[joint])
+            z_before = pin.centerOfMass(model, model.createData(), qs)[2]
+            z_after = pin.centerOfMass(tilted, tilted.createData(), qs)[2]
+            assert z_after < z_before, (axis, tilt)
+            checked += 1
+    assert checked >= 10

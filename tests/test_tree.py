@@ -61,12 +61,13 @@ def _campaign(arm: ap.Arm, truth: ap.Parameters, n: int, seed: int, sigma: float
 
 # ------------------------------------------------------------------------------- the model
 def test_generator_writes_the_committed_torso():
-    """urdf/make_torso.py writes exactly the committed urdf/torso.urdf."""
+    """urdf/make_torso.py writes exactly the committed urdf/torso.urdf and its sizes file."""
     spec = importlib.util.spec_from_file_location("make_torso", ROOT / "urdf" / "make_torso.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.make_urdf() == TORSO.read_text()
+    assert module.make_sizes() == TORSO.with_name("torso.sizes.json").read_text()
 
 
 def test_tree_axes_tools_and_error_frames(torso):

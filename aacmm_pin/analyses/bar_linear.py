@@ -30,7 +30,7 @@ import numpy as np
 from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.base import Term
-from aacmm_pin.effects.calibrated import stylus_jacobians
+from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians
 from aacmm_pin.fit.identifiability import plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.unknowns import Unknowns
@@ -187,6 +187,9 @@ class LinearBar:
         Raises:
             AacmmError: if the term needs a column the bar readouts lack (e.g. ``temp_c``).
         """
+        if self.stylus.tilts is None and needs_tilts([term]):  # computed once, when first needed
+            self.stylus = stylus_jacobians(self.arm, self.cal.parameters, self.samples.q,
+                                           frame="mt", samples=self.samples, tilts=True)
         cols = scaled_columns(term, self.samples, self.stylus, self.cal.parameters, touched,
                               self.arm.sizes)
         out: np.ndarray = self.w @ cols.reshape(3 * self.samples.n, -1)

@@ -42,7 +42,7 @@ from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.analyses.residual_scan import TIME, scan_residuals
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, ModelSpec, Term
-from aacmm_pin.effects.registry import library
+from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
@@ -78,8 +78,9 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
             every step).
         arm: the arm (default: the embedded default arm).
         start: ``"dh"`` (DH errors, tool) or ``"proposed"`` (also every axis' encoder map).
-        effects: names of library effects to try (default: every registered effect,
-            :func:`aacmm_pin.effects.library`).
+        effects: names of library effects to try (default: every registered effect tried by
+            default, :attr:`aacmm_pin.effects.Effect.by_default`, i.e. all but
+            ``lateral_compliance``; ``["all"]``: every registered effect).
         use_rtest: whether the start model uses each sample's R-Test displacement.
         max_steps: most effects to add.
         alpha: family-wise error rate of a step's significance tests (Bonferroni).
@@ -100,7 +101,9 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     if start not in STARTS:
         raise ValueError(f"start: choose from {', '.join(STARTS)}, got {start!r}")
     known = library()
-    names = list(known) if effects is None else list(effects)
+    names = default_effects() if effects is None else list(effects)
+    if names == ["all"]:
+        names = list(known)
     if unknown := [n for n in names if n not in known]:
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(known)}")
     with single_threaded_blas():  # many small products: threads only spin
@@ -205,7 +208,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     ticker.close()
     tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
     scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
-                          np.einsum("nij,j->ni", lin.stylus.tool, tools))
+                          np.einsum("nij,j->ni", lin.stylus.tool, tools),
+                          [library()[n] for n in dict.fromkeys(default_effects() + names)])
     if scan.structure:  # library terms on a variable the residual follows, not named
         followed = {s.variable for s in scan.structure}
         if TIME in followed:  # the scan reports time once: either of its two variables

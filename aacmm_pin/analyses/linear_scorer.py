@@ -19,7 +19,7 @@ from scipy import stats
 from aacmm_pin.analyses.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.analyses.discovery_results import Score
 from aacmm_pin.effects.base import Term
-from aacmm_pin.effects.calibrated import stylus_jacobians
+from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identifiability import plausible_groups, plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
@@ -142,6 +142,14 @@ class LinearScorer:
     def _empty(self) -> np.ndarray:
         return np.zeros((len(self.r) + (0 if self.bar is None else self.bar.n), 0))
 
+    def _stylus(self, term: Term) -> StylusJacobians:
+        """Return the stylus Jacobians, with the tilt columns (computed once) if the term needs them."""
+        if self.stylus.tilts is None and needs_tilts([term]):
+            self.stylus = stylus_jacobians(self.cal.unknowns.arm, self.cal.parameters,
+                                           self.samples.q, frame="mt", samples=self.samples,
+                                           tilts=True)
+        return self.stylus
+
     def bar_normalised(self, errors: np.ndarray) -> float | None:
         """Return sqrt(e^T C^-1 e / n) for bar errors e (n,) with this model's bar covariance C."""
         if self._bar_white is None:
@@ -155,7 +163,7 @@ class LinearScorer:
         Rows: the residual's (data, then prior), then the whitened bar errors (with a bar).
         """
         factor = self.size_factors.get(term.size_key, 1.0)
-        cols = factor * scaled_columns(term, self.samples, self.stylus, self.cal.parameters,
+        cols = factor * scaled_columns(term, self.samples, self._stylus(term), self.cal.parameters,
                                        self.touched, self.cal.unknowns.arm.sizes)
         out = np.zeros((len(self._empty()), cols.shape[2]))
         out[:self.n_data] = cols.reshape(self.n_data, -1)
@@ -251,5 +259,5 @@ class LinearScorer:
 
         See :meth:`aacmm_pin.effects.Term.residual_along`.
         """
-        return term.residual_along(self.cal.fun, self.samples, self.stylus,
+        return term.residual_along(self.cal.fun, self.samples, self._stylus(term),
                               self.cal.parameters.translation)

@@ -26,6 +26,7 @@ The residual is *unexplained* when its chi-square exceeds the stated noise's (le
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,8 +34,8 @@ import numpy as np
 from scipy import stats
 
 from aacmm_pin.data.columns import column
-from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Variable
-from aacmm_pin.effects.registry import library
+from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Effect, Variable
+from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.samples import Samples
 
@@ -170,7 +171,8 @@ OVERALL = TIME_OVERALL
 TIME = "time"
 
 
-def _variables(samples: Samples, stylus: np.ndarray | None = None) -> list[Variable]:
+def _variables(samples: Samples, stylus: np.ndarray | None = None,
+               effects: Iterable[Effect] | None = None) -> list[Variable]:
     """Return every variable worth a test: time, what each registered effect follows, the stylus.
 
     The effects declare their variables (:meth:`aacmm_pin.effects.Effect.variables`: each axis'
@@ -187,7 +189,8 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None) -> list[Varia
     out = [Variable(WITHIN, "within each location", f"time within its location ({unit})",
                     samples.time_in_location(), "within"),
            Variable(OVERALL, "all", f"time ({unit})", t, "global")]
-    for effect in library().values():
+    chosen = effects if effects is not None else [library()[n] for n in default_effects()]
+    for effect in chosen:
         out += effect.variables(samples.arm, samples)
     read = {c for effect in library().values() for c in effect.reads} | {"t_s", "sigma_um"}
     for name, values in samples.columns.items():  # every other per-sample column, by name
@@ -289,7 +292,8 @@ def _merge_time(ranked: list[Structure], within_better: bool) -> list[Structure]
 
 
 def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray,
-                   stylus: np.ndarray | None = None) -> Scan:
+                   stylus: np.ndarray | None = None, effects: Iterable[Effect] | None = None
+                   ) -> Scan:
     """Judge a calibration's residual against the stated noise and test it for structure.
 
     Args:
@@ -300,6 +304,8 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
             their RMS).
         stylus: the stylus vector (last joint to stylus centre) of every sample in the residual's
             frame, shape (N, 3), m, or None: its inclination and azimuth are variables too.
+        effects: the effects whose variables are tested (default: those tried by default,
+            :attr:`aacmm_pin.effects.Effect.by_default`; discovery adds those it was asked to try).
 
     Returns:
         The scan (see the module doc); :attr:`Scan.unexplained` says whether something is missing.
@@ -318,7 +324,7 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         centred[location == m] -= centred[location == m].mean(axis=0)
     found: list[tuple[Structure, float]] = []
     designs: dict[str, np.ndarray] = {}
-    for variable, where, label, values, kind in _variables(samples, stylus):
+    for variable, where, label, values, kind in _variables(samples, stylus, effects):
         coords = [c for c in range(3) if kind != "own" or c != "xyz".index(where)]
         kind = "global" if kind == "own" else kind
         ss_base = _projected_ss(white[:, coords], loc_design)[0]

@@ -12,7 +12,15 @@ optional further effects that the paper's model lacks:
   URDF inertias by Pinocchio's generalized gravity);
 * ``thermal``: uniform thermal expansion of every length with the ``temp_c`` column;
 * ``backlash``: a direction-dependent angular error of an axis (direction of the motion since the
-  previous sample).
+  previous sample);
+* ``lateral_compliance``: gravity-induced tilt of a joint about the two axes perpendicular to its
+  own, (kx, ky) x the gravity moment about each (:mod:`aacmm_pin.effects.lateral_compliance`),
+  held as extension terms of the truth (``truth.json`` ``extensions``) and applied by the model's
+  own kinematics.
+
+A campaign is SPATs and a length bar (:func:`simulate_campaign`), or, with ``points`` > 0, tool
+points of every tool (alternately) measured by one instrument (a laser tracker, motion capture) in
+its own frame (:func:`simulate_points`; trees such as a torso with two arms too).
 
 Postures are found by damped Newton IK on the *true* model within the joint limits. Same seed, same
 files. The truth is returned apart and never read by identification.
@@ -27,18 +35,21 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.data.campaign import Campaign, LengthBarLog, SpatLog
+from aacmm_pin.data.campaign import Campaign, LengthBarLog, PointLog, SpatLog
 from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
+from aacmm_pin.effects.registry import adjustment
+from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
-from aacmm_pin.model.kinematics import solve_ik
+from aacmm_pin.model.kinematics import Adjustment, ToolIndex, solve_ik
 from aacmm_pin.model.parameters import Parameters
-from aacmm_pin.model.samples import motion_direction
+from aacmm_pin.model.samples import Samples, motion_direction
 from aacmm_pin.units import (
     ARCSEC,
     DEFAULT_SIMULATOR_EFFECTS,
     REFERENCE_TEMPERATURE_C,
     SIGMA_LOCATION,
+    SIGMA_POINT,
     SIGMA_RTEST,
     SIMULATOR_EFFECTS,
     STEP_DEG,
@@ -97,6 +108,16 @@ class SimulationConfig:
     """Arm temperature range over the campaign, deg C; 20 deg C is the reference."""
     backlash: dict[int, float] = field(default_factory=lambda: {2: 6 * ARCSEC})
     """Axis -> half backlash in rad (used with ``backlash``)."""
+    lateral_compliance: dict[int, tuple[float, float]] = field(
+        default_factory=lambda: {1: (3e-5, 2e-5), 3: (2e-5, 4e-5), 10: (4e-5, 3e-5)})
+    """Axis -> lateral compliance (kx, ky) about the joint's two lateral axes, rad/(N m) (used
+    with ``lateral_compliance``; the default: the torso axis and the shoulder pitch of each arm
+    of ``urdf/torso.urdf``, 0.3-1 mrad under their 10-40 N m; axes beyond the arm's are left
+    out)."""
+    points: int = 0
+    """Tool points measured by an instrument (> 0: a points campaign, :func:`simulate_points`)."""
+    sigma_point: float = SIGMA_POINT
+    """Instrument noise of a point, per coordinate, m (used with ``points``)."""
 
     def __post_init__(self) -> None:
         unknown = [e for e in self.effects if e not in EFFECTS]
@@ -132,22 +153,42 @@ class TrueArm:
                 out[:, axis - 1] += half * direction[:, axis - 1]
         return out
 
+    def adjustment(self, q_readout: np.ndarray, offsets: np.ndarray) -> Adjustment:
+        """Return the truth's extension terms' change of the arm at the readouts.
+
+        E.g. lateral compliance, at the readouts' gravity moments, with the other effects' angle
+        errors ``offsets`` (N, n_axes) added.
+        """
+        change = adjustment(self.truth.extensions, Samples(self.arm, q_readout), self.arm.n_axes)
+        change.offsets += offsets
+        return change
+
     def _position_jacobian(self, q_readout: np.ndarray, temp: np.ndarray | None,
-                           direction: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+                           direction: np.ndarray | None, tool: ToolIndex = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
         """Return true r-CS positions (N, 3) and d(position)/d(readouts) (N, 3, n_axes)."""
         offsets = self.angle_offsets(q_readout, np.zeros_like(q_readout) if direction is None
                                      else direction)
-        jac = stylus_jacobians(self.arm, self.truth, q_readout + offsets, frame="r")
+        if self.truth.extensions:  # through the model's kinematics, extensions at the readouts
+            jac = kinematics.stylus_jacobians(self.arm, self.truth, q_readout, frame="r",
+                                              tool=tool,
+                                              adjust=self.adjustment(q_readout, offsets))
+        else:
+            jac = stylus_jacobians(self.arm, self.truth, q_readout + offsets, frame="r", tool=tool)
         pos = jac.position
         if "thermal" in self.config.effects and temp is not None:
             pos = pos * (1.0 + self.config.thermal_alpha * (temp - REFERENCE_TEMPERATURE_C))[:, None]
         return pos, jac.readouts
 
-    def positions(self, q_readout: np.ndarray, temp: np.ndarray | None, frame: str = "r"
-                  ) -> np.ndarray:
+    def positions(self, q_readout: np.ndarray, temp: np.ndarray | None, frame: str = "r",
+                  tool: ToolIndex = None) -> np.ndarray:
         """Return the true stylus centres, shape (N, 3), m, in the r-CS or the MT-CS."""
         offsets = self.angle_offsets(q_readout)
-        p_r = stylus_positions(self.arm, self.truth, q_readout + offsets, frame="r")
+        if self.truth.extensions:
+            p_r = kinematics.stylus_positions(self.arm, self.truth, q_readout, frame="r", tool=tool,
+                                              adjust=self.adjustment(q_readout, offsets))
+        else:
+            p_r = stylus_positions(self.arm, self.truth, q_readout + offsets, frame="r", tool=tool)
         if "thermal" in self.config.effects and temp is not None:
             p_r = p_r * (1.0 + self.config.thermal_alpha * (temp - REFERENCE_TEMPERATURE_C))[:, None]
         if frame == "r":
@@ -203,10 +244,21 @@ def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -
                 amp = rng.uniform(0.2, 1.0) * config.encoder_max / (1 if harmonic == 1 else 2)
                 values += amp * np.sin(harmonic * nodes + rng.uniform(0, 2 * np.pi))
             maps[axis] = EncoderMap(values, config.step_deg)
+    tools = {}
+    if arm.n_tools > 1:  # a tree: every tool's vector (drawn after the rest: same draws before)
+        tools = {joint: vector + (rng.normal(0.0, config.dh_sigma_length, 3)
+                                  if "dh" in config.effects else 0.0)
+                 for joint, vector in arm.nominal_tools.items()}
+        tool = next(iter(tools.values()))
+    extensions = {}
+    if "lateral_compliance" in config.effects:
+        extensions = {f"lateral_compliance[A{a}]": np.asarray(k, dtype=float)
+                      for a, k in sorted(config.lateral_compliance.items()) if a <= arm.n_axes}
     return Parameters(arm=arm.name, dh=dh, tool=tool,
                       rotation_abc=rng.normal(0.0, config.rotation_sigma, 3),
                       translation=np.asarray(config.mt_translation, dtype=float),
-                      encoder_maps=maps, step_deg=config.step_deg)
+                      encoder_maps=maps, step_deg=config.step_deg, tools=tools,
+                      extensions=extensions)
 
 
 def _bar_sockets(rng: np.random.Generator, n: int) -> list[dict[str, np.ndarray]]:
@@ -239,7 +291,8 @@ class Simulation:
     truth: Parameters
     """The virtual arm; ``truth.extra['effects']`` lists the effects and their values."""
     sphere_mt: np.ndarray
-    """True sphere centre of every SPAT sample in the MT-CS, shape (N, 3), m."""
+    """True sphere centre of every SPAT sample in the MT-CS (of a points campaign: every true
+    tool point in the instrument frame), shape (N, 3), m."""
     sockets_r: dict[int, dict[str, np.ndarray]]
     """True socket positions in the r-CS: placement -> socket -> (3,), m."""
 
@@ -266,9 +319,67 @@ def simulate_spat(true_arm: TrueArm, p0: np.ndarray, n: int, rng: np.random.Gene
     return q, sphere, sphere - p0 + rng.normal(0.0, config.sigma_rtest, (n, 3))
 
 
+def simulate_points(arm: Arm, config: SimulationConfig) -> Simulation:
+    """Simulate tool points measured by one instrument (tracker, motion capture) in its own frame.
+
+    ``config.points`` poses drawn uniformly within the joint limits, the arm's tools measured
+    alternately (``tool`` column), each point with the instrument's noise ``config.sigma_point``
+    per coordinate; the instrument frame is X0 and the translation of the truth. No SPAT, no bar.
+    """
+    rng = np.random.default_rng(config.seed)
+    truth = random_truth(arm, config, rng)
+    true_arm = TrueArm(arm, truth, config)
+    lim = arm.joint_limits
+    q = rng.uniform(lim[:, 0], lim[:, 1], (config.points, arm.n_axes))
+    q = np.radians(np.round(np.degrees(q), 9))  # as written to file: truth follows the file
+    tool = np.array(arm.tool_names)[np.arange(config.points) % arm.n_tools]
+    p_r = true_arm.positions(q, None, tool=tool)
+    point_mt = p_r @ truth.rotation().T + truth.translation
+    measured = point_mt + rng.normal(0.0, config.sigma_point, point_mt.shape)
+    points = PointLog(group=np.ones(config.points, dtype=np.int64), q=q, point=measured,
+                      tool=tool if arm.n_tools > 1 else None)
+    campaign = Campaign(spat=None, locations={}, lengthbar=None, bar={}, source=None,
+                        points=points)
+    return Simulation(campaign, truth.replace(extra={"effects": _truth_record(config, {})}),
+                      point_mt, {})
+
+
+def _truth_record(config: SimulationConfig, locations_true: dict[int, np.ndarray]
+                  ) -> dict[str, Any]:
+    """Return what ``truth.json`` records under ``effects`` (the effects and their values)."""
+    effects: dict[str, Any] = {"seed": config.seed, "switched_on": list(config.effects)}
+    if "encoder" in config.effects:
+        effects["encoder"] = "node tables above"
+    if "rtest" in config.effects:
+        effects["rtest_max_um"] = config.rtest_max * 1e6
+    if config.points:
+        effects["points"] = config.points
+        effects["sigma_point_um"] = config.sigma_point * 1e6
+    else:
+        effects["sigma_rtest_um"] = config.sigma_rtest * 1e6
+        effects["sigma_location_um"] = config.sigma_location * 1e6
+        effects["locations_true_mm"] = {str(m): (p * 1e3).tolist()
+                                        for m, p in locations_true.items()}
+    if "compliance" in config.effects:
+        effects["compliance_rad_per_nm"] = {str(a): k for a, k in config.compliance.items()}
+    if "thermal" in config.effects:
+        effects["thermal_alpha_per_k"] = config.thermal_alpha
+        effects["thermal_reference_c"] = REFERENCE_TEMPERATURE_C
+    if "backlash" in config.effects:
+        effects["backlash_half_rad"] = {str(a): b for a, b in config.backlash.items()}
+    if "lateral_compliance" in config.effects:
+        effects["lateral_compliance"] = "extensions (kx, ky in rad per N m)"
+    return effects
+
+
 def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simulation:
-    """Simulate a SPAT + length-bar campaign on a virtual version of ``arm``."""
+    """Simulate a SPAT + length-bar campaign on a virtual version of ``arm``.
+
+    With ``config.points`` > 0, a campaign of instrument points instead (:func:`simulate_points`).
+    """
     config = config or SimulationConfig()
+    if config.points:
+        return simulate_points(arm, config)
     rng = np.random.default_rng(config.seed)
     truth = random_truth(arm, config, rng)
     true_arm = TrueArm(arm, truth, config)
@@ -327,22 +438,7 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
         placement=np.concatenate(placement), socket=np.array(socket),
         q=np.radians(np.round(np.degrees(np.concatenate(q_bar)), 9)),
         t=None, temp=np.concatenate(t_bar) if thermal else None, lines=None)
-    effects: dict[str, Any] = {"seed": config.seed, "switched_on": list(config.effects)}
-    if "encoder" in config.effects:
-        effects["encoder"] = "node tables above"
-    if "rtest" in config.effects:
-        effects["rtest_max_um"] = config.rtest_max * 1e6
-    effects["sigma_rtest_um"] = config.sigma_rtest * 1e6
-    effects["sigma_location_um"] = config.sigma_location * 1e6
-    effects["locations_true_mm"] = {str(m): (p * 1e3).tolist() for m, p in locations_true.items()}
-    if "compliance" in config.effects:
-        effects["compliance_rad_per_nm"] = {str(a): k for a, k in config.compliance.items()}
-    if "thermal" in config.effects:
-        effects["thermal_alpha_per_k"] = config.thermal_alpha
-        effects["thermal_reference_c"] = REFERENCE_TEMPERATURE_C
-    if "backlash" in config.effects:
-        effects["backlash_half_rad"] = {str(a): b for a, b in config.backlash.items()}
-    truth = truth.replace(extra={"effects": effects})
+    truth = truth.replace(extra={"effects": _truth_record(config, locations_true)})
     campaign = Campaign(spat=spat, locations=measured_locations, lengthbar=lengthbar,
                         bar=dict(BAR_LENGTHS) if lengthbar is not None else {}, source=None)
     return Simulation(campaign, truth, np.concatenate(sphere_all), sockets)
@@ -350,6 +446,9 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
 
 def write_simulation(sim: Simulation, folder: str | Path, force: bool = False) -> None:
     """Write the campaign files, ``truth.json`` and the true points (``truth_*.csv``, mm).
+
+    ``truth_spheres.csv`` and ``truth_sockets.csv`` for SPATs and the bar, ``truth_points.csv``
+    for a points campaign.
 
     The folder is written whole (:func:`~aacmm_pin.data.output_folder.output_folder`).
 
@@ -369,7 +468,14 @@ def _write_simulation_files(sim: Simulation, folder: Path) -> None:
 
     write_campaign(sim.campaign, folder)
     write_parameters(sim.truth, folder / "truth.json")
-    assert sim.campaign.spat is not None
+    if sim.campaign.spat is None:  # instrument points: their true positions, instrument frame
+        points = sim.campaign.points
+        assert points is not None
+        tools = points.tool if points.tool is not None else [""] * len(points.q)
+        rows = ["tool,x_mm,y_mm,z_mm"] + [f"{t},{x:.9f},{y:.9f},{z:.9f}"
+                                          for t, (x, y, z) in zip(tools, sim.sphere_mt * 1e3)]
+        (folder / "truth_points.csv").write_text("\n".join(rows) + "\n")
+        return
     rows = ["location,x_mm,y_mm,z_mm"] + [
         f"{m},{x:.9f},{y:.9f},{z:.9f}"
         for m, (x, y, z) in zip(sim.campaign.spat.location, sim.sphere_mt * 1e3)]

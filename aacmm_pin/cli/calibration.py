@@ -40,19 +40,23 @@ def _simulate(args: argparse.Namespace) -> int:
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     config = SimulationConfig(seed=args.seed, effects=effects,
                               samples_per_location=args.samples_per_location,
-                              samples_per_socket=args.samples_per_socket)
+                              samples_per_socket=args.samples_per_socket, points=args.points)
     check_output(args.out, args.force)  # before the work, not after it
-    print(f"simulating {len(config.location_xy)} SPATs of {config.samples_per_location} postures "
-          f"and {config.bar_placements} bar placements (seed {config.seed}; a few seconds) ...",
-          flush=True)
+    if config.points:
+        print(f"simulating {config.points} instrument points (seed {config.seed}) ...", flush=True)
+    else:
+        print(f"simulating {len(config.location_xy)} SPATs of {config.samples_per_location} "
+              f"postures and {config.bar_placements} bar placements (seed {config.seed}; a few "
+              "seconds) ...", flush=True)
     phase("simulating")
     sim = simulate_campaign(load_arm(args.arm), config)
     phase(f"writing {args.out}")
     write_simulation(sim, args.out, force=args.force)
     spat = sim.campaign.spat
-    n_spat = 0 if spat is None else len(spat.location)
-    print(f"wrote {args.out}: {n_spat} SPAT samples at {len(sim.campaign.locations)} locations, "
-          f"effects {', '.join(effects)}; truth in {Path(args.out) / 'truth.json'}")
+    what = (f"{config.points} points" if spat is None else
+            f"{len(spat.location)} SPAT samples at {len(sim.campaign.locations)} locations")
+    print(f"wrote {args.out}: {what}, effects {', '.join(effects)}; truth in "
+          f"{Path(args.out) / 'truth.json'}")
     return 0
 
 
@@ -363,6 +367,9 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                    help="SPAT samples per R-Test location")
     p.add_argument("--samples-per-socket", type=positive(int), default=40,
                    help="length-bar postures per socket")
+    p.add_argument("--points", type=positive(int, zero=True), default=0,
+                   help="instead of SPATs and the bar: this many tool points of a tracker or "
+                        "motion capture (every tool of a tree, alternately; 20 um noise)")
     p.set_defaults(handler=_simulate)
 
     p = add_command(subparsers, "predict", "stylus centres (r-CS, mm) for encoder readouts",
@@ -422,8 +429,9 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
-                   help="comma-separated library effects to try (default: all: the built-ins, "
-                        "installed plugins' and --effects-file's)")
+                   help="comma-separated library effects to try, or 'all' (default: every "
+                        "effect, built-in, installed plugins' and --effects-file's, but those "
+                        "tried only when named: lateral_compliance)")
     p.add_argument("--max-steps", type=positive(int, zero=True), default=6,
                    help="most effects to add")
     for kind, what, default in (("rtest", "R-Test gauge reading", "2"),

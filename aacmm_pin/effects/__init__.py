@@ -37,6 +37,7 @@ from aacmm_pin.effects.base import (
 from aacmm_pin.effects.compliance import compliance
 from aacmm_pin.effects.crosstalk import crosstalk
 from aacmm_pin.effects.encoder import encoder_harmonic, encoder_map
+from aacmm_pin.effects.lateral_compliance import lateral_compliance
 from aacmm_pin.effects.registry import (
     LIBRARY,
     EffectNotFound,
@@ -61,7 +62,7 @@ __all__ = [
     "LIBRARY", "Adjustment", "AngleTerm", "BasisTerm", "Effect", "EffectNotFound", "MapTerm",
     "MeasurementTerm", "ModelSpec", "ScaleTerm", "StylusDerivatives", "Term", "TiltTerm", "Variable",
     "backlash", "check_extensions", "compliance", "crosstalk", "effect_names", "encoder_harmonic",
-    "encoder_map", "library", "load_effect_file", "load_plugins", "measurement_shift", "plugin_of",
-    "plugins_of", "read_parameters", "register_effect", "rtest", "term_from_key", "terms_of",
+    "encoder_map", "lateral_compliance", "library", "load_effect_file", "load_plugins",
+    "measurement_shift", "plugin_of", "plugins_of", "read_parameters", "register_effect", "rtest", "term_from_key", "terms_of",
     "thermal", "write_parameters",
 ]

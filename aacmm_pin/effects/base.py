@@ -418,6 +418,9 @@ class Effect(ABC):
     """Per-sample columns of the campaign files it reads (e.g. ``("temp_c",)``)."""
     in_start: bool = False
     """Whether every start model already has it (e.g. the tool vector)."""
+    by_default: bool = True
+    """Whether discovery tries it, and the residual scan tests its variables, when no list of
+    effects is given (False: only when named, e.g. ``lateral_compliance``)."""
 
     @abstractmethod
     def candidates(self, arm: Arm, samples: Samples) -> list[Term]:

@@ -8,8 +8,11 @@ model's kinematics.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
+from aacmm_pin.effects.base import Term, TiltTerm
 from aacmm_pin.effects.registry import adjustment
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
@@ -33,6 +36,11 @@ def extension_adjustment(arm: Arm, params: Parameters, readouts: np.ndarray,
     if samples is None or not samples.matches(q):
         samples = Samples(arm, q)
     return adjustment(params.extensions, samples, arm.n_axes)
+
+
+def needs_tilts(terms: Iterable[Term]) -> bool:
+    """Whether some of the terms' columns need the stylus Jacobians' tilt columns (tilt terms)."""
+    return any(isinstance(t, TiltTerm) for t in terms)
 
 
 def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r",

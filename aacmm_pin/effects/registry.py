@@ -29,6 +29,7 @@ from aacmm_pin.effects.base import Adjustment, Effect, Term
 from aacmm_pin.effects.compliance import Compliance
 from aacmm_pin.effects.crosstalk import Crosstalk
 from aacmm_pin.effects.encoder import Encoder
+from aacmm_pin.effects.lateral_compliance import LateralCompliance
 from aacmm_pin.effects.rtest import RTest
 from aacmm_pin.effects.thermal import Thermal
 from aacmm_pin.effects.tool import Tool
@@ -86,7 +87,7 @@ def _module_of(cls: type) -> str:
     return cls.__module__
 
 
-for _builtin in (Encoder, Compliance, Thermal, Backlash, Crosstalk, RTest, Tool):
+for _builtin in (Encoder, Compliance, LateralCompliance, Thermal, Backlash, Crosstalk, RTest, Tool):
     register_effect(_builtin, BUILTIN)
 
 
@@ -180,6 +181,11 @@ def library() -> dict[str, Effect]:
     """Return every registered effect by name, installed plugins loaded."""
     load_plugins()
     return LIBRARY
+
+
+def default_effects() -> list[str]:
+    """Return the names of the effects tried when no list is given (:attr:`Effect.by_default`)."""
+    return [name for name, effect in library().items() if effect.by_default]
 
 
 def plugin_of(effect: str) -> str:
@@ -341,7 +347,7 @@ def check_extensions(params: Parameters, arm: Arm | None = None, path: str | Pat
             else:
                 problems.append(Problem(where, None, f"extensions.{key}",
                                         "not a term of the effect library (e.g. compliance[A2], "
-                                        "thermal, backlash[A3], crosstalk[A2<-A3], "
+                                        "lateral_compliance[A2], thermal, backlash[A3], crosstalk[A2<-A3], "
                                         "encoder_harmonic[A4], rtest)"))
             continue
         if values.size != len(term.names):

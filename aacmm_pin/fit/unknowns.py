@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from aacmm_pin.effects.base import Term
-from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
+from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians, stylus_positions
 from aacmm_pin.effects.registry import measurement_shift
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
@@ -245,7 +245,8 @@ class Unknowns:
     def _general_blocks(self, params: Parameters, q: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """As :meth:`_chain_blocks`, through :func:`stylus_jacobians` (terms, extensions)."""
-        jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q))
+        jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q),
+                               tilts=needs_tilts(self.terms))
         n = q.shape[0]
         free = self.free[:self.n_dense]
         dense: np.ndarray = np.empty((n, 3, int(free.sum())))  # the free columns, written once

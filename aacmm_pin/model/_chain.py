@@ -199,14 +199,55 @@ class BatchedChain:
         return pos, jac
 
     def tilt_columns(self, q: np.ndarray, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:
-        """Return d(frame origin)/d(lateral tilts of joints), shape (N, 3, J, 2), m/rad.
+        r"""Return d(frame origin)/d(lateral tilts of joints), shape (N, 3, J, 2), m/rad.
+
+        A tilt of joint j is a small rotation about the x and y columns :math:`u_x, u_y` of
+        :math:`S_j` (its basis after its own motion: the lateral axes of the frame in which
+        Pinocchio's RNEA reports the joint's transmitted force) on the child side of the joint,
+        so the columns are :math:`u \times (p - o_j)`; zero where j does not support the frame.
 
         Args:
             q: configurations, shape (N, nq).
             frames: Pinocchio frame id per sample, shape (N,).
             joints: configuration indices of the tilted joints, shape (J,).
         """
-        raise NotImplementedError("lateral tilt columns")
+        joints = np.asarray(joints, dtype=np.int64)
+        by_q = {int(self.idx_q[j]): j for j in range(1, len(self.parents))}
+        ids = [by_q[int(k)] for k in joints]
+        n = q.shape[0]
+        out = np.zeros((n, 3, joints.size, 2))
+        for lo in range(0, n, CHUNK):
+            pose = self._forward(q[lo:lo + CHUNK])
+            for fid, rows in _groups(frames[lo:lo + CHUNK]):
+                point = self._point(pose, fid, rows)
+                support = set(self.frame(fid)[1].tolist())
+                for col, j in enumerate(ids):
+                    if j not in support:
+                        continue
+                    lateral, origin = self._lateral(pose, j, rows)
+                    d = point - origin
+                    for k in range(2):
+                        out[lo + rows, :, col, k] = np.cross(lateral[..., k], d)
+        return out
+
+    def basis(self, joint: int) -> np.ndarray:
+        """Return joint ``joint``'s basis B_j in its own (Pinocchio joint) frame: z is its axis."""
+        return self._bases[joint]
+
+    def _lateral(self, pose: _Pose, joint: int, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return a joint's lateral axes and origin in the world frame.
+
+        The axes are the x and y columns of S_j (after its own motion), shape (n, 3, 2) or (3, 2);
+        the origin has shape (n, 3) or (3,).
+        """
+        anchor = pose.anchor[joint]
+        if anchor == joint:
+            return pose.frames[joint][rows][:, :, :2], pose.origins[joint][rows]
+        rot, off = pose.rotation[joint], pose.offset[joint]
+        if anchor == 0:
+            return rot[:, :2], off
+        frame = pose.frames[anchor][rows]
+        return frame @ rot[:, :2], pose.origins[anchor][rows] + frame @ off
 
     def _columns(self, pose: _Pose, anchor: int, joints: np.ndarray, point: np.ndarray,
                  rows: np.ndarray) -> np.ndarray:

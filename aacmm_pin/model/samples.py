@@ -16,6 +16,7 @@ import pinocchio as pin
 
 from aacmm_pin.data.logs import LengthBarLog, PointLog, SpatLog
 from aacmm_pin.errors import AacmmError
+from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm
 
 _FILE_OF = {SpatLog: "spat.csv", LengthBarLog: "lengthbar.csv", PointLog: "points.csv"}
@@ -55,6 +56,7 @@ class Samples:
         """The files the samples come from (``spat.csv``, a readouts file), or empty."""
         self.displacement = displacement
         self._gravity: np.ndarray | None = None
+        self._lateral_gravity: np.ndarray | None = None
         self._direction: np.ndarray | None = None
 
     @classmethod
@@ -168,6 +170,34 @@ class Samples:
             self._gravity = -np.array([pin.computeGeneralizedGravity(model, data, qi)[v]
                                        for qi in qs]).reshape(self.n, self.arm.n_axes)
         return self._gravity
+
+    @property
+    def lateral_gravity(self) -> np.ndarray:
+        """Moment gravity loads every axis with about its two lateral axes, shape (N, n_axes, 2), N m.
+
+        The x and y components, in the joint's basis (:meth:`BatchedChain.basis`: z is the joint
+        axis; the lateral axes of :meth:`BatchedChain.tilt_columns`), of minus the moment the
+        parent transmits to the joint's subtree in Pinocchio's RNEA at rest (``data.f[joint]``,
+        in the joint frame, about its origin), nominal runtime model: a joint that gives way
+        laterally by ``k * torque`` with k > 0 lets the arm sag, as :attr:`gravity` does about the
+        axis (whose z component this is).
+        """
+        if self._lateral_gravity is None:
+            model = self.arm.runtime_model()
+            data = model.createData()
+            chain = BatchedChain(model)
+            ids = [model.getJointId(name) for name in self.arm.axis_names]
+            lateral = np.array([chain.basis(j)[:, :2] for j in ids])  # (n_axes, 3, 2)
+            q = [model.joints[j].idx_q for j in ids]
+            qs = np.zeros((self.n, model.nq))
+            qs[:, q] = self.q
+            zero = np.zeros(model.nv)
+            moment = np.empty((self.n, len(ids), 3))
+            for i, qi in enumerate(qs):
+                pin.rnea(model, data, qi, zero, zero)
+                moment[i] = [data.f[j].angular for j in ids]
+            self._lateral_gravity = -np.einsum("aij,nai->naj", lateral, moment)
+        return self._lateral_gravity
 
     @property
     def direction(self) -> np.ndarray:

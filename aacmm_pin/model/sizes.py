@@ -42,11 +42,11 @@ from aacmm_pin.units import ARCSEC
 SUFFIX = ".sizes.json"
 """A URDF's sizes file is the URDF's path with this suffix instead of ``.urdf``."""
 DEFAULT_EFFECTS: Mapping[str, float] = MappingProxyType({
-    "compliance": 1e-5, "backlash": 10 * ARCSEC, "crosstalk": 10 * ARCSEC,
-    "encoder": 20 * ARCSEC, "thermal": 2.3e-5})
+    "compliance": 1e-5, "lateral_compliance": 1e-5, "backlash": 10 * ARCSEC,
+    "crosstalk": 10 * ARCSEC, "encoder": 20 * ARCSEC, "thermal": 2.3e-5})
 """The default arm's size of each effect's parameters, SI: compliance 1e-5 rad/(N m) (20 arcsec at
-10 N m), backlash and crosstalk 10 arcsec, encoder harmonics 20 arcsec, thermal expansion
-2.3e-5 /K (aluminium)."""
+10 N m), lateral compliance the same about each lateral axis, backlash and crosstalk 10 arcsec,
+encoder harmonics 20 arcsec, thermal expansion 2.3e-5 /K (aluminium)."""
 
 
 @dataclass(frozen=True, eq=True)
