@@ -352,6 +352,7 @@ def test_terms_parse_from_their_keys_pickle_and_join_a_model(name: str,
         assert not term.in_model(empty), case.id
         added = term.added_to(empty)
         assert term.in_model(added), case.id
+        assert term.added_to(added) == added, case.id  # adding it again changes nothing
 
 
 @pytest.mark.parametrize("name", START_EFFECTS)

@@ -37,7 +37,7 @@ def _variable(axis, samples):
 
 def term(axis):
     return AngleTerm(f"{name}[A{{axis}}]", "{name}", (f"{name}[A{{axis}}].k",), (1e-5,),
-                     "an angle error proportional to the gravity torque", (axis,),
+                     "an angle error proportional to the gravity torque", axes=(axis,),
                      basis_of=partial(_torque, axis), variable_of=partial(_variable, axis))
 
 

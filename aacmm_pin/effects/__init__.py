@@ -63,6 +63,6 @@ __all__ = [
     "MeasurementTerm", "ModelSpec", "ScaleTerm", "StylusDerivatives", "Term", "TiltTerm", "Variable",
     "backlash", "check_extensions", "compliance", "crosstalk", "effect_names", "encoder_harmonic",
     "encoder_map", "lateral_compliance", "library", "load_effect_file", "load_plugins",
-    "measurement_shift", "plugin_of", "plugins_of", "read_parameters", "register_effect", "rtest", "term_from_key", "terms_of",
-    "thermal", "write_parameters",
+    "measurement_shift", "plugin_of", "plugins_of", "read_parameters", "register_effect", "rtest",
+    "term_from_key", "terms_of", "thermal", "write_parameters",
 ]

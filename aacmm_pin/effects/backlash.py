@@ -41,8 +41,9 @@ def backlash(axis: int) -> AngleTerm:
     key = f"backlash[A{axis}]"
     return AngleTerm(key, "backlash", (f"{key}.half",), (10 * ARCSEC,),
                      f"backlash of axis A{axis}: an angular error whose sign follows the direction "
-                     f"in which A{axis} last moved", (axis,), (direction_variable(axis),), "",
-                     partial(_direction, axis), partial(_direction_variable, axis))
+                     f"in which A{axis} last moved", axes=(axis,), follows=(direction_variable(axis),),
+                     basis_of=partial(_direction, axis),
+                     variable_of=partial(_direction_variable, axis))
 
 
 class Backlash(Effect):

@@ -28,7 +28,7 @@ from __future__ import annotations
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field, replace
 from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
@@ -86,6 +86,9 @@ class Variable(NamedTuple):
 class Term(ABC):
     """One extension of the model: a few parameters, linear in their effect (see module doc).
 
+    ``key``, ``effect``, ``names``, ``plausible`` and ``description`` may be given by position;
+    the other fields only by keyword.
+
     Terms are equal when their keys are. ``basis_of`` and ``variable_of`` (in the subclasses that
     take them) should be module-level functions or ``functools.partial`` of them, so that
     calibrations pickle.
@@ -102,6 +105,7 @@ class Term(ABC):
     the arm's sizes name the term's effect (:meth:`aacmm_pin.model.sizes.Sizes.size_of`)."""
     description: str
     """Plain-language description."""
+    _: KW_ONLY
     axes: tuple[int, ...] = ()
     """Axes the term acts on (empty for arm-wide terms); an angle term changes ``axes[0]``."""
     follows: tuple[str, ...] = ()
@@ -197,8 +201,7 @@ class Term(ABC):
 
     def added_to(self, model: ModelSpec) -> ModelSpec:
         """Return the model with this term added (replacing a term of its slot)."""
-        return ModelSpec(tuple(t for t in model.terms if t.slot != self.slot) + (self,),
-                         model.map_axes, model.use_rtest)
+        return replace(model, terms=tuple(t for t in model.terms if t.slot != self.slot) + (self,))
 
     def replaces(self, other: Term) -> bool:
         """Whether this term may replace ``other`` (same axes) in one discovery step."""
@@ -232,10 +235,10 @@ VariableOf = Callable[["Samples"], "tuple[str, np.ndarray]"]
 class BasisTerm(Term):
     """A term whose parameters multiply a per-sample basis (every way of acting but the map)."""
 
-    basis_of: Basis = field(default=lambda s: np.zeros((s.n, 0)), repr=False)
+    basis_of: Basis = field(repr=False, kw_only=True)
     """Samples -> basis: (N, k) for angle and scale terms, (N, 2, k) for tilt terms, (N, 3, k)
     for measurement terms."""
-    variable_of: VariableOf = field(default=lambda s: ("", np.zeros(s.n)), repr=False)
+    variable_of: VariableOf = field(repr=False, kw_only=True)
     """Samples -> (label with unit, per-sample values) of the term's variable (figures)."""
 
     def basis(self, samples: Samples) -> np.ndarray:
@@ -395,8 +398,9 @@ class MapTerm(Term):
 
     def added_to(self, model: ModelSpec) -> ModelSpec:
         """The axis gets a map, which replaces the other terms of its slot."""
-        return ModelSpec(tuple(t for t in model.terms if t.slot != self.slot),
-                         model.map_axes + (self.axis,), model.use_rtest)
+        axes = model.map_axes if self.axis in model.map_axes else model.map_axes + (self.axis,)
+        return replace(model, terms=tuple(t for t in model.terms if t.slot != self.slot),
+                       map_axes=axes)
 
     def replaces(self, other: Term) -> bool:
         """A map replaces any other term of its slot (it holds every harmonic its nodes resolve)."""

@@ -35,9 +35,9 @@ def compliance(axis: int) -> AngleTerm:
     key = f"compliance[A{axis}]"
     return AngleTerm(key, "compliance", (f"{key}.k",), (1e-5,),  # 20 arcsec at 10 N m
                      f"gravity compliance of joint A{axis}: the arm's own weight bends it by k x "
-                     f"the gravity torque on A{axis} (torque from the URDF inertias)", (axis,),
-                     (torque_variable(axis),), "", partial(_gravity, axis),
-                     partial(_gravity_variable, axis))
+                     f"the gravity torque on A{axis} (torque from the URDF inertias)", axes=(axis,),
+                     follows=(torque_variable(axis),), basis_of=partial(_gravity, axis),
+                     variable_of=partial(_gravity_variable, axis))
 
 
 class Compliance(Effect):

@@ -31,8 +31,8 @@ def crosstalk(axis: int, source: int) -> AngleTerm:
     return AngleTerm(key, "crosstalk", (f"{key}.cos", f"{key}.sin"), (10 * ARCSEC,) * 2,
                      f"crosstalk: the A{axis} angle reads wrong by an amount that depends on the "
                      f"A{source} angle (e.g. bearing or encoder runout coupled across axes)",
-                     (axis, source), (angle_variable(source),), "", partial(_neighbour, source),
-                     partial(readout, source))
+                     axes=(axis, source), follows=(angle_variable(source),),
+                     basis_of=partial(_neighbour, source), variable_of=partial(readout, source))
 
 
 class Crosstalk(Effect):

@@ -51,8 +51,8 @@ def encoder_map(axis: int) -> MapTerm:
     """The paper's encoder error map of one axis (its nodes are the parameters, in the maps)."""
     return MapTerm(f"encoder_map[A{axis}]", "encoder", (), (),
                    f"angular position measurement error of axis A{axis}: an error that depends on "
-                   f"the A{axis} angle (encoder map, nodes every few degrees)", (axis,),
-                   (angle_variable(axis),), f"encoder[A{axis}]")
+                   f"the A{axis} angle (encoder map, nodes every few degrees)", axes=(axis,),
+                   follows=(angle_variable(axis),), slot=f"encoder[A{axis}]")
 
 
 class HarmonicTerm(AngleTerm):
@@ -75,8 +75,9 @@ def encoder_harmonic(axis: int, order: int = 3) -> HarmonicTerm:
                         tuple(f"{key}.{f}{h}" for h in range(1, order + 1) for f in ("cos", "sin")),
                         (20 * ARCSEC,) * (2 * order),
                         f"angular position measurement error of axis A{axis}: harmonics 1..{order} "
-                        f"of the A{axis} angle", (axis,), (angle_variable(axis),), f"encoder[A{axis}]",
-                        partial(_harmonics, axis, order), partial(readout, axis))
+                        f"of the A{axis} angle", axes=(axis,), follows=(angle_variable(axis),),
+                        slot=f"encoder[A{axis}]", basis_of=partial(_harmonics, axis, order),
+                        variable_of=partial(readout, axis))
 
 
 class Encoder(Effect):

@@ -55,9 +55,9 @@ def lateral_compliance(axis: int) -> TiltTerm:
     return TiltTerm(key, NAME, (f"{key}.kx", f"{key}.ky"), (1e-5, 1e-5),  # 20 arcsec at 10 N m
                     f"lateral compliance of joint A{axis}: the arm's own weight tilts it about "
                     f"the two axes perpendicular to A{axis} by k x the gravity moment about each "
-                    f"(moments from the URDF inertias)", (axis,),
-                    (lateral_variable(axis, 0), lateral_variable(axis, 1)), "",
-                    partial(_basis, axis), partial(_variable, axis))
+                    f"(moments from the URDF inertias)", axes=(axis,),
+                    follows=(lateral_variable(axis, 0), lateral_variable(axis, 1)),
+                    basis_of=partial(_basis, axis), variable_of=partial(_variable, axis))
 
 
 def _varying(samples: Samples, axis: int) -> list[int]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,7 +39,7 @@ class GainTerm(MeasurementTerm):
 
     def added_to(self, model: ModelSpec) -> ModelSpec:
         """The model adds the measured displacement (gain 1)."""
-        return ModelSpec(model.terms, model.map_axes, True)
+        return replace(model, use_rtest=True)
 
 
 def rtest() -> GainTerm:
@@ -48,8 +49,8 @@ def rtest() -> GainTerm:
     """
     return GainTerm("rtest", "rtest", ("rtest.gain_x", "rtest.gain_y", "rtest.gain_z"),
                     (1.0, 1.0, 1.0), "the stylus sphere moves in its seat: the R-Test's measured "
-                    "displacement must be added to the nest position (Eq. 3)", (), VARIABLES, "",
-                    _displacement, _displacement_variable)
+                    "displacement must be added to the nest position (Eq. 3)", follows=VARIABLES,
+                    basis_of=_displacement, variable_of=_displacement_variable)
 
 
 def _moved(samples: Samples) -> bool:

@@ -34,8 +34,8 @@ def thermal() -> ScaleTerm:
     """Uniform thermal expansion of every length: scale ``1 + alpha (T - 20 deg C)``."""
     return ScaleTerm("thermal", "thermal", ("thermal.alpha",), (2.3e-5,),
                      "thermal expansion: every length of the arm scales with its temperature "
-                     "(1 + alpha (T - 20 deg C))", (), (VARIABLE,), "", _temperature,
-                     _temperature_variable)
+                     "(1 + alpha (T - 20 deg C))", follows=(VARIABLE,), basis_of=_temperature,
+                     variable_of=_temperature_variable)
 
 
 class Thermal(Effect):

@@ -64,7 +64,7 @@ def basetemp() -> Term:
     """The A1 angle error proportional to the base temperature (one parameter, rad/K)."""
     return AngleTerm(KEY, "basetemp", (f"{KEY}.c",), (float(PLAUSIBLE),),
                      "the A1 encoder reads off in proportion to the base temperature "
-                     f"({COLUMN} - 20 deg C)", (1,), (VARIABLE,), basis_of=_basis,
+                     f"({COLUMN} - 20 deg C)", axes=(1,), follows=(VARIABLE,), basis_of=_basis,
                      variable_of=_variable)
 
 
