@@ -175,7 +175,7 @@ class _Mine(fx.Effect):
 def _mine() -> fx.Term:
     from functools import partial
 
-    from aacmm_pin.effects.compliance import _gravity, _gravity_variable
+    from aacmm_pin.effects.builtin.compliance import _gravity, _gravity_variable
 
     return fx.AngleTerm("mine[A3]", "mine", ("mine[A3].c",), (1e-5,), "a user's term", axes=(3,),
                         basis_of=partial(_gravity, 3), variable_of=partial(_gravity_variable, 3))

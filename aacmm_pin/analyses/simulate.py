@@ -14,7 +14,7 @@ optional further effects that the paper's model lacks:
 * ``backlash``: a direction-dependent angular error of an axis (direction of the motion since the
   previous sample);
 * ``lateral_compliance``: gravity-induced tilt of a joint about the two axes perpendicular to its
-  own, (kx, ky) x the gravity moment about each (:mod:`aacmm_pin.effects.lateral_compliance`),
+  own, (kx, ky) x the gravity moment about each (:mod:`aacmm_pin.effects.builtin.lateral_compliance`),
   held as extension terms of the truth (``truth.json`` ``extensions``) and applied by the model's
   own kinematics.
 

@@ -19,7 +19,6 @@ Calibrated values of the terms live in ``Parameters.extensions`` (``parameters.j
 :func:`aacmm_pin.stylus_positions` and :func:`aacmm_pin.predict`.
 """
 
-from aacmm_pin.effects.backlash import backlash
 from aacmm_pin.effects.base import (
     Adjustment,
     AngleTerm,
@@ -34,10 +33,13 @@ from aacmm_pin.effects.base import (
     TiltTerm,
     Variable,
 )
-from aacmm_pin.effects.compliance import compliance
-from aacmm_pin.effects.crosstalk import crosstalk
-from aacmm_pin.effects.encoder import encoder_harmonic, encoder_map
-from aacmm_pin.effects.lateral_compliance import lateral_compliance
+from aacmm_pin.effects.builtin.backlash import backlash
+from aacmm_pin.effects.builtin.compliance import compliance
+from aacmm_pin.effects.builtin.crosstalk import crosstalk
+from aacmm_pin.effects.builtin.encoder import encoder_harmonic, encoder_map
+from aacmm_pin.effects.builtin.lateral_compliance import lateral_compliance
+from aacmm_pin.effects.builtin.rtest import rtest
+from aacmm_pin.effects.builtin.thermal import thermal
 from aacmm_pin.effects.registry import (
     LIBRARY,
     EffectNotFound,
@@ -55,8 +57,6 @@ from aacmm_pin.effects.registry import (
     terms_of,
     write_parameters,
 )
-from aacmm_pin.effects.rtest import rtest
-from aacmm_pin.effects.thermal import thermal
 
 __all__ = [
     "LIBRARY", "Adjustment", "AngleTerm", "BasisTerm", "Effect", "EffectNotFound", "MapTerm",

@@ -24,15 +24,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from aacmm_pin.effects.backlash import Backlash
 from aacmm_pin.effects.base import Adjustment, Effect, Term
-from aacmm_pin.effects.compliance import Compliance
-from aacmm_pin.effects.crosstalk import Crosstalk
-from aacmm_pin.effects.encoder import Encoder
-from aacmm_pin.effects.lateral_compliance import LateralCompliance
-from aacmm_pin.effects.rtest import RTest
-from aacmm_pin.effects.thermal import Thermal
-from aacmm_pin.effects.tool import Tool
+from aacmm_pin.effects.builtin.backlash import Backlash
+from aacmm_pin.effects.builtin.compliance import Compliance
+from aacmm_pin.effects.builtin.crosstalk import Crosstalk
+from aacmm_pin.effects.builtin.encoder import Encoder
+from aacmm_pin.effects.builtin.lateral_compliance import LateralCompliance
+from aacmm_pin.effects.builtin.rtest import RTest
+from aacmm_pin.effects.builtin.thermal import Thermal
+from aacmm_pin.effects.builtin.tool import Tool
 from aacmm_pin.errors import AacmmError, FileFormatError, Problem
 
 if TYPE_CHECKING:

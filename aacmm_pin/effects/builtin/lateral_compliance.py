@@ -1,7 +1,7 @@
 r"""Lateral compliance: a joint tilts about the axes perpendicular to its own by k x gravity moment.
 
 A joint's bearings, and the link behind it, give way under the moment gravity loads them with: about
-the joint's axis (:mod:`aacmm_pin.effects.compliance`) and about the two axes perpendicular to it,
+the joint's axis (:mod:`aacmm_pin.effects.builtin.compliance`) and about the two axes perpendicular to it,
 which no encoder sees. With :math:`(\tau_x, \tau_y)` the gravity moment about the lateral axes
 :math:`u_x, u_y` of joint n (:attr:`aacmm_pin.model.samples.Samples.lateral_gravity`, from the URDF
 inertias by Pinocchio's RNEA), the joint tilts by :math:`(\delta_x, \delta_y) = (k_x \tau_x, k_y
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aacmm_pin.effects.base import Effect, Term, TiltTerm, Variable, axis_key, per_axis, varies
-from aacmm_pin.effects.compliance import TORQUE_SPAN
+from aacmm_pin.effects.builtin.compliance import TORQUE_SPAN
 
 if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aacmm_pin.effects.base import AngleTerm, Effect, Term, per_axis, varies
-from aacmm_pin.effects.encoder import ANGLE_SPAN, angle_variable, readout
+from aacmm_pin.effects.builtin.encoder import ANGLE_SPAN, angle_variable, readout
 from aacmm_pin.units import ARCSEC
 
 if TYPE_CHECKING:
