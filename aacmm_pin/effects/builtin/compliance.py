@@ -7,13 +7,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aacmm_pin.data.columns import SUFFIXES
 from aacmm_pin.effects.base import AngleTerm, Effect, Term, Variable, axis_key, per_axis, varies
 
 if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm
     from aacmm_pin.model.samples import Samples
 
-TORQUE_SPAN = 1e-2
+TORQUE_SPAN = SUFFIXES["_nm"].min_spread
 """A gravity torque that spans less than this (N m) over the samples cannot show a compliance."""
 
 

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aacmm_pin.data.columns import SUFFIXES
 from aacmm_pin.effects.base import (
     AngleTerm,
     Effect,
@@ -28,7 +29,7 @@ if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm
     from aacmm_pin.model.samples import Samples
 
-ANGLE_SPAN = np.radians(1.0)
+ANGLE_SPAN = np.radians(SUFFIXES["_deg"].min_spread)
 """An axis whose readouts span less than this (rad) cannot show an error of its angle."""
 
 

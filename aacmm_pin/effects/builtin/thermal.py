@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aacmm_pin.data.columns import column
 from aacmm_pin.effects.base import Effect, ScaleTerm, Term, Variable, varies
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.units import REFERENCE_TEMPERATURE_C
@@ -14,7 +15,7 @@ if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm
     from aacmm_pin.model.samples import Samples
 
-TEMPERATURE_SPAN_C = 0.05
+TEMPERATURE_SPAN_C = column("temp_c").min_spread
 """A temperature that spans less than this (deg C) cannot show an expansion."""
 VARIABLE = "temperature"
 """The residual scan's name of the arm temperature."""
