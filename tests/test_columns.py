@@ -67,14 +67,14 @@ def test_unknown_column_survives_read_samples_write_read(tmp_path: Path, arm: ap
 def test_extra_columns_are_converted_to_si_by_unit_suffix(tmp_path: Path) -> None:
     """Extra columns in mm, um, deg, s are read in m, rad, s and written back in their units."""
     values = {"probe_mm": [1.5] * 6, "gap_um": [-3.0] * 6, "tilt_deg": [0.25] * 6, "dwell_s": [2] * 6,
-              "load_n": [9.81] * 6, "torque_nm": [-1.0] * 6, "count": [7] * 6}
+              "load_n": [9.81] * 6, "torque_n_m": [-1.0] * 6, "count": [7] * 6}
     lines = GOOD["spat.csv"].splitlines()
     text = "\n".join([",".join([lines[0], *values]), *(
         ",".join([row, *(str(v[k]) for v in values.values())]) for k, row in enumerate(lines[1:]))])
     spat = read_campaign(make(tmp_path / "a", spat_csv=text)).spat
     assert spat is not None
     expect = {"probe_mm": 1.5e-3, "gap_um": -3e-6, "tilt_deg": math.radians(0.25), "dwell_s": 2.0,
-              "load_n": 9.81, "torque_nm": -1.0, "count": 7.0}
+              "load_n": 9.81, "torque_n_m": -1.0, "count": 7.0}
     assert list(spat.columns) == list(values)
     for name, si in expect.items():
         np.testing.assert_allclose(spat.columns[name], si, rtol=1e-15, err_msg=name)
@@ -84,9 +84,7 @@ def test_extra_columns_are_converted_to_si_by_unit_suffix(tmp_path: Path) -> Non
     write_campaign(read_campaign(tmp_path / "a"), tmp_path / "b")
     header = (tmp_path / "b" / "spat.csv").read_text().splitlines()
     assert header[0].endswith(",dz_mm," + ",".join(values))
-    assert header[1].split(",")[-7:] == ["1.500000000", "-3.000000000", "0.250000000",
-                                         "2.000000000", "9.810000000", "-1.000000000",
-                                         "7.000000000"]
+    assert header[1].split(",")[-7:] == ["1.5", "-3", "0.25", "2", "9.81", "-1", "7"]
 
 
 @pytest.mark.parametrize("cell, words", [("abc", "'abc' is not a number"),
@@ -294,3 +292,20 @@ def test_points_keep_sigma_and_extra_columns_in_their_order(tmp_path: Path) -> N
     assert again is not None
     for name, values in points.columns.items():
         np.testing.assert_allclose(again.columns[name], values, rtol=1e-12, err_msg=name)
+
+
+def test_small_values_of_an_unknown_column_are_written_back_whole(tmp_path: Path) -> None:
+    """A dimensionless column of 1e-10-sized values (a strain) is not rounded to 0 on write."""
+    strain = [1.25e-10, -3.5e-11, 2e-10, 0.0, 7.75e-9, -1e-12]
+    first = read_campaign(make(tmp_path / "a", {"spat.csv": _with_column("spat.csv", "strain",
+                                                                         strain)}))
+    write_campaign(first, tmp_path / "b")
+    again = read_campaign(tmp_path / "b")
+    assert again.spat is not None
+    np.testing.assert_allclose(again.spat.columns["strain"], strain, rtol=1e-12, atol=0)
+
+
+def test_nm_is_nanometres_and_n_m_newton_metres() -> None:
+    """A metrologist's nm is a length; a torque column ends with _n_m."""
+    assert column("runout_nm").unit == "nm" and column("runout_nm").to_si(np.array([5.0]))[0] == 5e-9
+    assert column("load_n_m").unit == "N m"

@@ -367,4 +367,5 @@ def test_effects_of_every_start_model_propose_no_terms(name: str, sources: dict[
 def test_every_registered_effect_is_checked() -> None:
     """The contract's parameter lists are the registry's effects (a new one is checked too)."""
     assert set(EFFECTS) | set(START_EFFECTS) == set(registry.library()) - {EXAMPLE}
-    assert {"encoder", "compliance", "thermal", "backlash", "crosstalk", "rtest"} <= set(EFFECTS)
+    assert {"encoder", "compliance", "lateral_compliance", "thermal", "backlash", "crosstalk",
+            "rtest"} <= set(EFFECTS)

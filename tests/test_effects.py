@@ -243,3 +243,27 @@ def test_positive_lateral_compliance_makes_the_arm_sag(which: str) -> None:
             assert z_after < z_before, (axis, tilt)
             checked += 1
     assert checked >= 10
+
+
+def test_an_effect_may_not_take_a_built_in_name_unasked() -> None:
+    """A plugin's effect named like a built-in would evaluate the built-in's keys: refused."""
+
+    class Impostor(fx.Effect):
+        name = "compliance"
+
+        def candidates(self, arm: ap.Arm, samples: Samples) -> list[fx.Term]:
+            return []
+
+        def term(self, key: str) -> fx.Term | None:
+            return None
+
+    builtin = fx.LIBRARY["compliance"]
+    with pytest.raises(ap.AacmmError, match="'compliance'.*taken by the effect of 'aacmm_pin'"):
+        fx.register_effect(Impostor, "someone-elses-plugin")
+    assert fx.LIBRARY["compliance"] is builtin
+    try:
+        fx.register_effect(Impostor, "someone-elses-plugin", replace=True)
+        assert isinstance(fx.LIBRARY["compliance"], Impostor)
+    finally:
+        fx.register_effect(builtin, "aacmm_pin", replace=True)
+    assert fx.LIBRARY["compliance"] is builtin

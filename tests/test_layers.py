@@ -68,9 +68,10 @@ def _imports(path: Path, module: str, types: bool = True) -> list[str]:
         if id(node) in skip:
             continue
         if isinstance(node, ast.ImportFrom):
-            if node.level:  # relative import
-                base = package.split(".")[:len(package.split(".")) - node.level + 1] if package else []
-                name = ".".join([*base, node.module or ""]).strip(".")
+            if node.level:  # relative import: resolved against the module's package
+                parts = package.split(".") if package else []
+                base = parts[:len(parts) - node.level + 1]
+                name = ".".join(["aacmm_pin", *base, node.module or ""]).strip(".")
             else:
                 name = node.module or ""
             if name == "aacmm_pin":
@@ -166,3 +167,6 @@ def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     found = _imports(path, "probe", types=False)
     assert "aacmm_pin.outputs.viewer" in found and "aacmm_pin.cli" not in found
     assert "aacmm_pin.cli" in _imports(path, "probe")
+    inner = tmp_path / "inner.py"
+    inner.write_text("from ..outputs import viewer\nfrom .base import Term\n")
+    assert _imports(inner, "effects.inner") == ["aacmm_pin.outputs", "aacmm_pin.effects.base"]

@@ -46,7 +46,7 @@ from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.fit.measurements import Measurements, measurements
+from aacmm_pin.fit.measurements import measurements, stated_noise
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.progress import Progress
@@ -109,24 +109,6 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     with single_threaded_blas():  # many small products: threads only spin
         return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, max_nfev,
                          progress, noise or campaign.noise or StatedNoise())
-
-
-def stated_noise(campaign: Campaign, meas: Measurements, noise: StatedNoise) -> np.ndarray:
-    """Return the stated noise of every sample per coordinate, shape (N,), m.
-
-    SPAT samples: the R-Test's; tool points: their ``sigma_um`` column, else the instrument's;
-    length-bar readouts: the campaign's stated socket noise (``campaign.json`` ``socket``, else
-    :data:`aacmm_pin.units.SIGMA_SOCKET`).
-    """
-    if meas.sigma is None:
-        return np.full(len(meas.q), noise.rtest if campaign.spat is not None else noise.point)
-    points = campaign.points
-    stated = np.where(np.isnan(meas.sigma), noise.rtest, meas.sigma)
-    if points is not None and points.sigma is None:  # points without sigma_um: the instrument's
-        rows = meas.group < 0 if campaign.spat is not None else np.ones(len(stated), dtype=bool)
-        stated = np.where(rows, noise.point, stated)
-    out: np.ndarray = stated
-    return out
 
 
 def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,

@@ -32,7 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from aacmm_pin.data.columns import MAX_ANGLE_DEG, column, file_order
+from aacmm_pin.data.columns import BUILT_IN, MAX_ANGLE_DEG, column, file_order
 from aacmm_pin.data.csv_table import (
     MAX_COLUMNS,
     MAX_FILE_BYTES,
@@ -374,9 +374,22 @@ def _file_columns(log: SpatLog | LengthBarLog | PointLog,
     in the log's order.
     """
     q_deg = dict(zip(q_names(log.q.shape[1]), np.degrees(log.q).T.tolist()))
-    extra = {name: column(name).from_si(log.columns[name]).tolist()
+    extra = {name: _cells(name, column(name).from_si(log.columns[name]).tolist())
              for name in file_order(list(log.columns))}
     return {**before, **q_deg, **after, **extra}
+
+
+BUILT_IN_NAMES = frozenset(c.name for c in BUILT_IN)
+"""The per-sample columns the package itself reads (written with 9 decimals, as ever)."""
+
+
+def _cells(name: str, values: list[float]) -> list[float] | list[str]:
+    """Return a per-sample column's cells: the package's own with 9 decimals, others exactly.
+
+    Any other column's values are written with 12 significant digits, whatever their size: a
+    1e-10 strain is not written as 0.
+    """
+    return values if name in BUILT_IN_NAMES else [format(v, ".12g") for v in values]
 
 
 def _mm(names: tuple[str, ...], xyz: Any) -> dict[str, list[float]]:

@@ -115,10 +115,13 @@ SUFFIXES: dict[str, Column] = {
     "_um": Column("_um", "", "um", UM, -MAX_COORDINATE * 1e6, MAX_COORDINATE * 1e6, "a length"),
     "_deg": Column("_deg", "", "deg", math.pi / 180.0, -MAX_ANGLE_DEG, MAX_ANGLE_DEG, "an angle",
                    min_spread=1.0),
-    "_nm": Column("_nm", "", "N m", 1.0, description="a torque", min_spread=1e-2),
+    "_nm": Column("_nm", "", "nm", 1e-9, -MAX_COORDINATE * 1e9, MAX_COORDINATE * 1e9,
+                  "a length"),
+    "_n_m": Column("_n_m", "", "N m", 1.0, description="a torque", min_spread=1e-2),
     "_n": Column("_n", "", "N", 1.0, description="a force"),
 }
-"""Unit of a column no table names, by the end of its name (longest suffix first when matched)."""
+"""Unit of a column no table names, by the end of its name (longest suffix first when matched):
+``_nm`` is nanometres (a length, as a metrologist reads it), ``_n_m`` newton metres."""
 
 _REGISTERED: dict[str, Column] = {c.name: c for c in BUILT_IN}
 

@@ -50,6 +50,7 @@ through :func:`library`, which loads the installed plugins first."""
 _SOURCE: dict[str, str] = {}
 _LOADED: list[bool] = []
 _LOCK = threading.RLock()
+_FILES: dict[str, str] = {}
 
 
 class EffectNotFound(AacmmError, KeyError):
@@ -59,27 +60,40 @@ class EffectNotFound(AacmmError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
-def register_effect(effect: Effect | type[Effect], plugin: str | None = None) -> Effect:
-    """Add (or replace) an effect of the library; return it.
+def register_effect(effect: Effect | type[Effect], plugin: str | None = None, *,
+                    replace: bool = False) -> Effect:
+    """Add an effect to the library; return it.
 
     Args:
         effect: an effect instance, or an effect class (instantiated without arguments).
         plugin: where it comes from, written into ``parameters.json`` so that another process can
             say what to install: a distribution name, or a file path (default: the module of the
             effect's class; a script's path for a class defined in the script run).
+        replace: allow replacing an effect of the same name from another source (a built-in's
+            keys would otherwise be evaluated by someone else's code without a word).
+
+    Raises:
+        AacmmError: if it is no named effect, or its name is taken by an effect of another source.
     """
     if isinstance(effect, type):
         effect = effect()
     if not isinstance(effect, Effect) or not effect.name:
         raise AacmmError(f"register_effect: an aacmm_pin.effects.Effect with a name expected, got "
                          f"{effect!r}")
+    source = plugin or _module_of(type(effect))
+    held = _SOURCE.get(effect.name)
+    if effect.name in LIBRARY and held != source and not replace:
+        raise AacmmError(f"effect {effect.name!r} of {source!r}: the name is taken by the effect of "
+                         f"{held!r} (rename it, or register_effect(..., replace=True))")
     LIBRARY[effect.name] = effect
-    _SOURCE[effect.name] = plugin or _module_of(type(effect))
+    _SOURCE[effect.name] = source
     return effect
 
 
 def _module_of(cls: type) -> str:
-    """Return the module that defines ``cls``; a script run as ``__main__``: its file's path."""
+    """Return the module that defines ``cls``; for a script run or an effects file, its path."""
+    if cls.__module__ in _FILES:
+        return _FILES[cls.__module__]
     if cls.__module__ == "__main__":
         main = getattr(sys.modules.get("__main__"), "__file__", None)
         if main:
@@ -162,6 +176,7 @@ def load_effect_file(path: str | Path) -> list[str]:
         raise AacmmError(f"{path}: not a Python file")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module  # dataclasses and pickling look their module up
+    _FILES[name] = str(path.resolve())  # its effects' plugin, unless it names another
     try:
         spec.loader.exec_module(module)
     except Exception as exc:
@@ -172,8 +187,6 @@ def load_effect_file(path: str | Path) -> list[str]:
             if isinstance(cls, type) and issubclass(cls, Effect) and cls.__module__ == name \
                     and cls.name and not inspect.isabstract(cls):
                 new.append(register_effect(cls).name)
-    for n in new:
-        _SOURCE[n] = str(path.resolve())
     return new
 
 

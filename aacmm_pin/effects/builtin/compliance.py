@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm
     from aacmm_pin.model.samples import Samples
 
-TORQUE_SPAN = SUFFIXES["_nm"].min_spread
+TORQUE_SPAN = SUFFIXES["_n_m"].min_spread
 """A gravity torque that spans less than this (N m) over the samples cannot show a compliance."""
 
 
