@@ -23,6 +23,30 @@ SIGMA_LOCATION = 3e-6
 SIGMA_POINT = 20e-6
 """Default standard uncertainty of an absolute tool point per coordinate, m: a laser tracker's
 stated accuracy over a robot's workspace (e.g. 15 um + 6 um/m); a ``sigma_um`` column overrides it."""
+NOISE_MIN = 1e-9
+"""Smallest stated noise (standard uncertainty per coordinate) accepted, m: nothing measures a
+position better than about 1 nm (a laser interferometer's resolution); below it the weights of a
+fit span more than its floating-point precision (a row of 1e-15 m outweighs 20 um ones by 1e10)."""
+NOISE_MAX = 1.0
+"""Largest stated noise accepted, m: about an arm's reach (1-4 m); a measurement that uncertain
+carries nothing (a unit error: m written where um was meant)."""
+
+
+def noise_problem(value: float) -> str | None:
+    """Return why a stated noise ``value`` (m) is not plausible, or None if it is.
+
+    Plausible: finite and within :data:`NOISE_MIN` to :data:`NOISE_MAX`; the text gives the bounds in
+    um, as the files and options state noise.
+    """
+    if not (math.isfinite(value) and value > 0):
+        return f"a positive noise expected, got {value!r} m"
+    if not NOISE_MIN <= value <= NOISE_MAX:
+        return (f"{value / UM:.3g} um is not a plausible noise: nothing measures a position better "
+                f"than {NOISE_MIN / UM:g} um (1 nm) or worse than {NOISE_MAX / UM:g} um (an arm's "
+                "reach)")
+    return None
+
+
 SIGMA_SOCKET = 2e-6
 """Standard uncertainty of a stylus centre seated in a length-bar socket, per coordinate, m (the
 arm's readout noise at a fixed point, as for an R-Test reading); used when the bar is a

@@ -98,6 +98,16 @@ def positive(kind: type = float, zero: bool = False) -> Callable[[str], Any]:
     return parse
 
 
+def noise_um(text: str) -> float:
+    """Argparse type of a stated noise in um: within the bounds of :func:`aacmm_pin.units.noise_problem`."""
+    from aacmm_pin.units import UM, noise_problem
+
+    value = positive()(text)
+    if (why := noise_problem(value * UM)) is not None:
+        raise argparse.ArgumentTypeError(why)
+    return float(value)
+
+
 def seed_option(text: str) -> argparse.ArgumentParser:
     """``--seed N``: a random seed, 0 by default (same seed, same result)."""
     p = _parent()

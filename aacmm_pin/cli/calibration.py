@@ -20,6 +20,7 @@ from aacmm_pin.cli._options import (
     max_nfev_option,
     model_option,
     no_rtest_option,
+    noise_um,
     out_option,
     positive,
     seed_option,
@@ -401,7 +402,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p.add_argument("--robust", action="store_true",
                    help="reject outlier samples (Huber then hard rejection beyond 5 robust sigma "
                         "of the whitened residual norm; listed in report.json 'outliers')")
-    p.add_argument("--sigma-um", type=positive(), default=None,
+    p.add_argument("--sigma-um", type=noise_um, default=None,
                    help="R-Test noise per coordinate in um (default: from the residuals)")
     p.add_argument("--step-deg", type=positive(), default=5.0, help="map node step, deg")
     p.add_argument("--terms", default=None, metavar="KEYS",
@@ -437,7 +438,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     for kind, what, default in (("rtest", "R-Test gauge reading", "2"),
                                 ("location", "R-Test nest (zero) position", "3"),
                                 ("point", "tool point of an instrument", "20")):
-        p.add_argument(f"--sigma-{kind}-um", type=positive(), default=None,
+        p.add_argument(f"--sigma-{kind}-um", type=noise_um, default=None,
                        help=f"stated noise of a {what} per coordinate, um, which the final "
                             f"residual is judged against (default: campaign.json, else {default})")
     p.set_defaults(handler=_discover)

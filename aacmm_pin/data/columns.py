@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from aacmm_pin.units import MAX_COORDINATE, MM, TEMPERATURE_RANGE_C, UM
+from aacmm_pin.units import MAX_COORDINATE, MM, NOISE_MAX, NOISE_MIN, TEMPERATURE_RANGE_C, UM
 
 MAX_ANGLE_DEG = 720.0
 """Largest angle accepted in a file, deg (two turns either way): readouts and ``_deg`` columns."""
@@ -76,7 +76,7 @@ class Column:
         if self.low <= value <= self.high:
             return None
         if self.noun:
-            return f"{unit}is not a plausible {self.noun}"
+            return f"{unit}is not a plausible {self.noun} ({self.low:g} to {self.high:g} {self.unit})"
         if math.isinf(self.low) or math.isinf(self.high):
             bound = f"below {self.low:g}" if value < self.low else f"above {self.high:g}"
             return f"{unit}is {bound} {self.unit}".rstrip()
@@ -99,7 +99,7 @@ class Column:
 
 
 BUILT_IN: tuple[Column, ...] = (
-    Column("sigma_um", "sigma", "um", UM, 0.0, MAX_COORDINATE * 1e6,
+    Column("sigma_um", "sigma", "um", UM, NOISE_MIN / UM, NOISE_MAX / UM,
            "stated standard uncertainty of a point per coordinate", positive=True,
            noun="standard uncertainty"),
     Column("t_s", "t", "s", 1.0, description="time of the sample"),

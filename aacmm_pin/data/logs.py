@@ -20,7 +20,14 @@ import numpy as np
 
 from aacmm_pin.data.columns import BUILT_IN
 from aacmm_pin.errors import CampaignFormatError, Problem
-from aacmm_pin.units import SIGMA_LOCATION, SIGMA_POINT, SIGMA_RTEST, SIGMA_SOCKET, UM
+from aacmm_pin.units import (
+    SIGMA_LOCATION,
+    SIGMA_POINT,
+    SIGMA_RTEST,
+    SIGMA_SOCKET,
+    UM,
+    noise_problem,
+)
 
 # Log field -> (dtype, shape after the row axis); None: any length.
 _ARRAYS: dict[str, tuple[Any, tuple[int | None, ...]]] = {
@@ -64,9 +71,8 @@ class StatedNoise:
 
     def __post_init__(self) -> None:
         for name in ("rtest", "location", "point", "socket"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: a positive noise in m expected, got {value!r}")
+            if (why := noise_problem(getattr(self, name))) is not None:
+                raise ValueError(f"{name}: {why}")
 
     def to_um(self) -> dict[str, float]:
         """Return the ``campaign.json`` form: kind -> noise, um."""
@@ -97,6 +103,10 @@ def read_noise(path: str | Path) -> StatedNoise:
                          f"{value!r}") for key, value in noise.items() if key in kinds and not (
                              isinstance(value, (int, float)) and not isinstance(value, bool)
                              and math.isfinite(value) and value > 0)]
+    problems += [Problem(path, None, f"noise_um.{key}", why) for key, value in noise.items()
+                 if key in kinds and isinstance(value, (int, float)) and not isinstance(value, bool)
+                 and math.isfinite(value) and value > 0
+                 and (why := noise_problem(float(value) * UM)) is not None]
     if problems:
         raise CampaignFormatError(problems)
     return StatedNoise(**{key: float(value) * UM for key, value in noise.items()})

@@ -35,6 +35,7 @@ from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit.fit_rounds import Fit, fit_rounds, reject_outliers
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import Measurements, measurements, stated_noise
+from aacmm_pin.fit.noise_judgement import MAX_POINTS_FIT_RMS, NOISE_P, Judgement, judge_residual
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Factor, Nuisance, Problem, SolverSettings
 from aacmm_pin.fit.unknowns import FrameKey, NestKey, UnknownKey, Unknowns
@@ -47,6 +48,7 @@ from aacmm_pin.units import (
     SIGMA_POINT,
     SIGMA_RTEST,
     STEP_DEG,
+    noise_problem,
 )
 
 __all__ = ["MAX_FIT_RMS", "MIN_DOF_FRACTION", "MODELS", "NESTS", "NOISE_P", "FitOptions", "identify",
@@ -55,8 +57,6 @@ __all__ = ["MAX_FIT_RMS", "MIN_DOF_FRACTION", "MODELS", "NESTS", "NOISE_P", "Fit
 MODELS = ("dh", "proposed")
 NESTS = ("auto", "estimate", "fixed")
 """How :func:`identify` treats the R-Test nests' offsets."""
-NOISE_P = 1e-3
-"""A residual whose chi-square p-value against the stated noise is below this does not match it."""
 MIN_DOF_FRACTION = 0.1
 """An identification whose degrees of freedom are fewer than this fraction of its residual
 coordinates reports ``success`` False: its residual cannot estimate the noise."""
@@ -64,7 +64,9 @@ MAX_FIT_RMS = 0.2e-3
 """A fit of R-Test SPATs whose RMS residual exceeds this (m) reports ``success`` False: no
 articulated arm CMM leaves that after calibration, so the inputs disagree (units, R-Test zero
 positions, readouts). Fits of absolute points alone (robots on a laser tracker: a DH model leaves
-1 mm on real UR5 and WAM data) are not judged by it."""
+1 mm on real UR5 and WAM data) are not judged by it but by
+:data:`~aacmm_pin.fit.noise_judgement.MAX_POINTS_FIT_RMS`; every fit's residual is judged against
+its stated noise (:mod:`aacmm_pin.fit.noise_judgement`)."""
 
 
 @dataclass(frozen=True)
@@ -110,8 +112,8 @@ class FitOptions:
         if self.model not in MODELS:
             raise ValueError(f"model: choose from {', '.join(MODELS)}, got {self.model!r}")
         for name, value in (("sigma", self.sigma), ("sigma_location", self.sigma_location)):
-            if value is not None and not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: a positive noise in m expected, got {value!r}")
+            if value is not None and (why := noise_problem(value)) is not None:
+                raise ValueError(f"{name}: {why}")
         if self.nests not in NESTS:
             raise ValueError(f"nests: choose from {', '.join(NESTS)}, got {self.nests!r}")
 
@@ -428,6 +430,10 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     success, message = _verdict(res, robust, settled, outliers, suspects, scale, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
+    if enough:
+        success, message = _judged(success, message, _judgement(campaign, setup, residual, kept,
+                                                                n_det), robust, setup,
+                                   _points_rms(campaign, setup, residual, kept))
     return Calibration(parameters=unknowns.parameters(x_full[:problem.n_arm]), model=options.model,
                        use_rtest=options.use_rtest,
                        names=unknowns.names + [str(k) for k in setup.nuisance_keys],
@@ -483,6 +489,71 @@ def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[O
                    "than any articulated arm leaves after calibration: the inputs disagree (units "
                    "of a column, R-Test zero positions in locations.csv, readouts); " + message)
     return success, message
+
+
+def _point_rows(campaign: Campaign, meas: Measurements) -> np.ndarray:
+    """Return which samples are absolute points, shape (N,) (as :func:`stated_noise` tells them)."""
+    if campaign.points is None:
+        return np.zeros(len(meas.q), dtype=bool)
+    if campaign.spat is not None:  # the points' groups are negative beside SPAT
+        out: np.ndarray = meas.group < 0
+        return out
+    return np.ones(len(meas.q), dtype=bool) if meas.nest is None else meas.nest < 0
+
+
+def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np.ndarray,
+               n_det: int) -> Judgement:
+    """Return the kept residual judged against the stated noise (:mod:`~aacmm_pin.fit.noise_judgement`).
+
+    ``residual``: every sample's residual, shape (N, 3), m; ``kept``: the samples fitted, (N,).
+    """
+    stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
+    white = residual[kept] / stated[kept, None]
+    points = _point_rows(campaign, setup.meas)[kept]
+    group = np.where(points, np.abs(setup.meas.group[kept]), -1) if points.any() else None
+    return judge_residual(white, n_det, group)
+
+
+def _points_rms(campaign: Campaign, setup: _Setup, residual: np.ndarray,
+                kept: np.ndarray) -> float | None:
+    """Return the RMS residual of the kept absolute points (m), None without points."""
+    rows = _point_rows(campaign, setup.meas) & kept
+    return float(np.sqrt(np.mean(residual[rows] ** 2))) if rows.any() else None
+
+
+def _judged(success: bool, message: str, judged: Judgement, robust: bool, setup: _Setup,
+            points_rms: float | None) -> tuple[bool, str]:
+    """Return ``success`` and ``message`` with the residual's judgement against the stated noise.
+
+    Fails a residual that follows the points' row order, a gross points residual and a robust fit
+    whose kept residual is above the noise; notes any other residual above the noise.
+    """
+    noise = (f"{judged.ratio:.3g} x the stated noise (chi-square p = {judged.p_value:.2g}, "
+             f"{judged.dof} degrees of freedom)")
+    if points_rms is not None and points_rms > MAX_POINTS_FIT_RMS:
+        return False, (f"points fit RMS {points_rms * 1e3:.4g} mm is beyond "
+                       f"{MAX_POINTS_FIT_RMS * 1e3:.3g} mm, more than any arm leaves after "
+                       "calibration: the inputs disagree (units of a column, the tool, the pairing "
+                       f"of readouts and points); {message}")
+    order = judged.row_order
+    if order is not None:
+        shape = (f"a step after row {order.row} of its points" if order.shape == "step"
+                 else "a drift along its points")
+        return False, (f"the residual of group {order.group} follows row order (time): {shape} "
+                       f"of {order.size:.3g} noise sigmas explains {order.fraction:.0%} of it "
+                       f"(p = {order.p_value:.2g}), residual {noise}; no kinematic model explains "
+                       "that: the instrument or the arm's base moved during the measurement "
+                       f"(measure again, or split the points into groups); {message}")
+    if judged.p_value >= NOISE_P:
+        return success, message
+    if robust:
+        return False, (f"robust fit: the kept samples' residual is {noise}: the rejection "
+                       "threshold is set by that residual, so outliers below it are kept "
+                       "(breakdown: about half the samples off?) or the model misses an effect "
+                       "that rejection mistakes for outliers; check the inputs, or fit without "
+                       f"robust and run discover; {message}")
+    return success, (f"{message}; the residual is {noise}: the model misses an effect or the "
+                     "noise is understated; aacmm-pin discover names what is missing")
 
 
 def _where(flagged: tuple[Outlier, ...]) -> str:

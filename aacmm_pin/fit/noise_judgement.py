@@ -1,0 +1,140 @@
+r"""A fit's residual judged against its stated noise: chi-square, structure along row order, gross size.
+
+Every identification (:func:`aacmm_pin.identify`) ends with :func:`judge_residual` on its whitened
+residual (each sample's residual divided by its stated noise per coordinate):
+
+* **chi-square** against the stated noise, :math:`\chi^2 = \sum r^2 / \sigma^2` with the residual
+  coordinates less the determined parameters as degrees of freedom; p below
+  :data:`NOISE_P` means the residual is above the noise. On its own that is not a failure: a model
+  that misses an effect (a DH model on a robot with gravity compliance) leaves such a residual on
+  clean data; the message says so with the numbers and advises ``discover``.
+* **row order** of an instrument's points (file order, i.e. time): a step (best split point) and a
+  linear drift of the residual's three coordinates, each F-tested against the residual's own
+  variance (so a wrong stated noise does not look like structure) with a Bonferroni factor over
+  the split points, the two shapes and the groups (family-wise false-alarm rate
+  :data:`ALPHA_ROW_ORDER`). A residual above the noise that follows row order *and* of which that
+  step or drift is the larger part (more than half the sum of squares) is an instrument that
+  moved (a bumped tracker): no kinematic model explains a function of the row number, so
+  ``success`` is False. A model error on poses measured in a sweep follows row order too, but
+  only as a small part of its residual (real UR5 grid data: 4 %).
+* **gross size** of absolute points: a fit RMS beyond :data:`MAX_POINTS_FIT_RMS` fails, as
+  :data:`aacmm_pin.fit.identification.MAX_FIT_RMS` does for SPAT fits.
+* **a robust fit** whose kept residual is above the stated noise fails: its rejection threshold is
+  a multiple of a scale the residual set itself, so outliers below it stay (breakdown: half the
+  samples off by the same amount leave a scale of half that offset), or the model misses an
+  effect, which the rejection then mistakes for outliers.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy import stats
+
+NOISE_P = 1e-3
+"""A residual whose chi-square p-value against the stated noise is below this does not match it."""
+ALPHA_ROW_ORDER = 1e-3
+"""Family-wise false-alarm rate of the row-order tests (step and drift, every group)."""
+MIN_SEGMENT = 5
+"""Fewest samples on either side of a step split."""
+MAX_POINTS_FIT_RMS = 10e-3
+"""A fit of absolute points whose RMS residual exceeds this (m) reports ``success`` False: robots
+leave at most a few mm after a DH calibration (an uncalibrated UR5 is 2.6 mm off, a calibrated
+cable-driven WAM about 1.3 mm RMS), so 10 mm is a unit, frame or pairing error of the inputs."""
+
+
+class RowOrder(NamedTuple):
+    """The strongest structure of a group's residual along its rows."""
+
+    group: int
+    """Instrument group."""
+    shape: str
+    """``"step"`` or ``"drift"``."""
+    row: int
+    """First row (0-based, within the group's rows in file order) after the step; 0 for a drift."""
+    fraction: float
+    """Fraction of the group's residual sum of squares the shape explains."""
+    p_value: float
+    """Bonferroni-corrected p-value of its F test."""
+    size: float
+    """Step (difference of the means) or drift over the rows, norm of the whitened 3-D vector."""
+
+
+class Judgement(NamedTuple):
+    """What the residual says about the fit."""
+
+    p_value: float
+    """Chi-square p-value of the residual against the stated noise."""
+    ratio: float
+    """RMS of the whitened residual (1: the stated noise)."""
+    dof: int
+    """Degrees of freedom of the chi-square."""
+    row_order: RowOrder | None
+    """The row-order structure that fails the fit, or None."""
+
+
+def _best_step(r: np.ndarray) -> tuple[float, int, float]:
+    """Return the largest step sum of squares of centred rows ``r`` (m, 3), its split, its size."""
+    m = len(r)
+    c = np.cumsum(r, axis=0)[:-1]
+    k = np.arange(1, m)
+    diff = c / k[:, None] + c / (m - k)[:, None]  # mean before - mean after (r has zero mean)
+    ss = k * (m - k) / m * np.sum(diff ** 2, axis=1)
+    ok = (k >= MIN_SEGMENT) & (m - k >= MIN_SEGMENT)
+    ss = np.where(ok, ss, -1.0)
+    best = int(np.argmax(ss))
+    return float(ss[best]), best + 1, float(np.linalg.norm(diff[best]))
+
+
+def row_order(white: np.ndarray, group: int, n_tests: int) -> RowOrder | None:
+    """Return the strongest significant step or drift of one group's whitened residual, or None.
+
+    Args:
+        white: whitened residual of the group's samples in file order, shape (m, 3).
+        group: the group's id (reported).
+        n_tests: number of groups tested (Bonferroni factor).
+    """
+    m = len(white)
+    if m < 2 * MIN_SEGMENT + 1:
+        return None
+    r = white - white.mean(axis=0)
+    total = float(np.sum(r ** 2))
+    if total <= 0:
+        return None
+    dof_res = 3 * m - 3 - 3  # the mean and the shape's 3 coordinates
+    step_ss, split, step = _best_step(r)
+    x = np.arange(m) - (m - 1) / 2.0
+    slope = x @ r / (x @ x)
+    drift_ss = float(np.sum(slope ** 2) * (x @ x))
+    found = []
+    for shape, ss, row, size, factor in (("step", step_ss, split, step, m - 2 * MIN_SEGMENT + 1),
+                                         ("drift", drift_ss, 0, float(np.linalg.norm(slope))
+                                          * (m - 1), 1)):
+        f = (ss / 3) / max((total - ss) / dof_res, 1e-300)
+        p = min(float(stats.f.sf(f, 3, dof_res)) * factor * 2 * n_tests, 1.0)
+        if p < ALPHA_ROW_ORDER and ss > 0.5 * total:
+            found.append(RowOrder(group, shape, row, ss / total, p, size))
+    return max(found, key=lambda o: o.fraction) if found else None
+
+
+def judge_residual(white: np.ndarray, n_det: int, point_group: np.ndarray | None) -> Judgement:
+    """Judge a whitened residual against the noise and along the points' row order.
+
+    Args:
+        white: residual of the kept samples divided by their stated noise, shape (N, 3).
+        n_det: determined parameters.
+        point_group: instrument group of each kept sample that is an absolute point, in file
+            order, (N,), -1 elsewhere (SPAT, bar); None: no points.
+    """
+    dof = max(white.size - n_det, 1)
+    stat = float(np.sum(white ** 2))
+    p = float(stats.chi2.sf(stat, dof))
+    ratio = float(np.sqrt(stat / max(white.size, 1)))
+    worst = None
+    if p < NOISE_P and point_group is not None:
+        groups = [g for g in np.unique(point_group) if g >= 0]
+        found = [o for g in groups
+                 if (o := row_order(white[point_group == g], int(g), len(groups))) is not None]
+        worst = max(found, key=lambda o: o.fraction) if found else None
+    return Judgement(p, ratio, dof, worst)

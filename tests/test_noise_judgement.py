@@ -1,0 +1,129 @@
+"""Every fit judged against its stated noise (issue 24, items 1 and 5): a bumped tracker, a robust
+fit in breakdown and a model error above the noise; implausible stated noise refused."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import aacmm_pin as ap
+from aacmm_pin.cli import main
+from aacmm_pin.data.campaign import PointLog
+from tests.test_points import UR5, _points_campaign, _truth
+
+N = 150  # points: a fit of ~25 DH parameters in about 0.3 s
+
+
+def _with(campaign: ap.Campaign, point: np.ndarray | None = None,
+          sigma: np.ndarray | None = None) -> ap.Campaign:
+    pts = campaign.points
+    assert pts is not None
+    return ap.Campaign(spat=None, locations={}, lengthbar=None, bar={}, points=PointLog(
+        group=pts.group, q=pts.q, point=pts.point if point is None else point, sigma=sigma))
+
+
+@pytest.fixture(scope="module")
+def arm() -> ap.Arm:
+    return ap.load_arm(UR5)
+
+
+def test_a_bumped_tracker_fails_the_fit(arm: ap.Arm) -> None:
+    """The last 30 % of the points moved 0.5 mm: success False, the step and its row named."""
+    clean = _points_campaign(arm, _truth(arm, 0), N, 0)
+    assert clean.points is not None
+    point = clean.points.point.copy()
+    start = int(0.7 * N)
+    point[start:] += 0.5e-3 / np.sqrt(3)
+    cal = ap.identify(_with(clean, point), arm, model="dh")
+    assert not cal.success
+    assert "follows row order" in cal.message and f"step after row {start}" in cal.message
+
+
+def test_a_robust_fit_in_breakdown_fails(arm: ap.Arm) -> None:
+    """Every other point 2 mm off with robust=True: no outlier set fits the noise; success False."""
+    clean = _points_campaign(arm, _truth(arm, 1), N, 1)
+    assert clean.points is not None
+    point = clean.points.point.copy()
+    point[::2] += 2e-3 / np.sqrt(3)
+    cal = ap.identify(_with(clean, point), arm, model="dh", robust=True)
+    assert not cal.success
+    assert "robust fit: the kept samples' residual is" in cal.message
+
+
+def test_a_residual_above_the_noise_is_said_not_failed(arm: ap.Arm) -> None:
+    """Points with 20 um noise stated as 5 um: success stays, the message gives the ratio (~4)."""
+    clean = _points_campaign(arm, _truth(arm, 2), N, 2)
+    cal = ap.identify(_with(clean, sigma=np.full(N, 5e-6)), arm, model="dh")
+    assert cal.success
+    ratio = float(cal.message.split("the residual is ")[1].split(" x ")[0])
+    assert abs(ratio / 4 - 1) < 0.15  # 450 coordinates: the RMS is within ~3 % of 20/5
+    assert "discover" in cal.message
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_clean_points_fits_stay_successful(arm: ap.Arm, seed: int) -> None:
+    """Clean simulated points: success True and no note about the noise."""
+    cal = ap.identify(_points_campaign(arm, _truth(arm, seed), N, seed), arm, model="dh")
+    assert cal.success and "stated noise" not in cal.message
+
+
+@pytest.mark.slow
+def test_row_order_false_alarm_rate_on_white_noise() -> None:
+    """Pure noise, 2000 draws of 150 samples: the row-order test fails at most its stated rate."""
+    from aacmm_pin.fit.noise_judgement import ALPHA_ROW_ORDER, judge_residual
+
+    rng = np.random.default_rng(0)
+    fails = 0
+    for _ in range(2000):
+        white = rng.normal(0.0, 1.3, (N, 3))  # above the noise: the row-order test runs
+        fails += judge_residual(white, 25, np.ones(N, dtype=int)).row_order is not None
+    assert fails <= 2000 * ALPHA_ROW_ORDER + 3 * np.sqrt(2000 * ALPHA_ROW_ORDER)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(10, 20))
+def test_clean_points_fits_over_seeds(arm: ap.Arm, seed: int) -> None:
+    """Ten more seeds of clean points: every fit succeeds (chi-square alarm rate 1e-3 each)."""
+    cal = ap.identify(_points_campaign(arm, _truth(arm, seed), 300, seed), arm, model="dh")
+    assert cal.success and "stated noise" not in cal.message
+
+
+# item 5: plausible bounds for stated noise
+
+
+@pytest.mark.parametrize("cell", ["1e-9", "1e-300", "2e6"])
+def test_implausible_sigma_um_is_refused_with_file_line_and_column(tmp_path: Path,
+                                                                    cell: str) -> None:
+    """sigma_um 1e-9 / 1e-300 / 2e6 um on one row: refused, naming points.csv, its line, the column."""
+    header = ["group", "q1_deg", "q2_deg", "x_mm", "y_mm", "z_mm", "sigma_um"]
+    rows = [["1", "10", str(20 + k), "1", "2", str(3 + k), "15"] for k in range(5)]
+    rows[2][-1] = cell
+    (tmp_path / "points.csv").write_text("\n".join(",".join(r) for r in [header, *rows]) + "\n")
+    with pytest.raises(ap.CampaignFormatError, match=r"points.csv:4: column 'sigma_um': .*not a "
+                                                     r"(plausible|positive) standard uncertainty"):
+        ap.read_campaign(tmp_path)
+
+
+@pytest.mark.parametrize("value", ["1e300", "1e-9", "2e6"])
+def test_cli_refuses_an_implausible_noise(tmp_path: Path, value: str,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """--sigma-um beyond 1 nm .. 1 m: refused by the parser (exit 2) with one line, no traceback."""
+    with pytest.raises(SystemExit) as info:
+        main(["identify", str(tmp_path), f"--sigma-um={value}", "--out", str(tmp_path / "o")])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "not a plausible noise" in err and "Traceback" not in err
+
+
+def test_identify_and_campaign_json_refuse_an_implausible_noise(arm: ap.Arm,
+                                                                tmp_path: Path) -> None:
+    """identify(sigma=1e-15) raises ValueError; campaign.json noise_um.point 1e-9 is refused."""
+    campaign = _points_campaign(arm, _truth(arm, 0), 20, 0)
+    with pytest.raises(ValueError, match="sigma: .*not a plausible noise"):
+        ap.identify(campaign, arm, model="dh", sigma=1e-15)
+    (tmp_path / "campaign.json").write_text(json.dumps({"noise_um": {"point": 1e-9}}))
+    with pytest.raises(ap.CampaignFormatError, match="noise_um.point.*not a plausible noise"):
+        ap.read_noise(tmp_path / "campaign.json")
