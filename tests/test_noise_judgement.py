@@ -127,3 +127,47 @@ def test_identify_and_campaign_json_refuse_an_implausible_noise(arm: ap.Arm,
     (tmp_path / "campaign.json").write_text(json.dumps({"noise_um": {"point": 1e-9}}))
     with pytest.raises(ap.CampaignFormatError, match="noise_um.point.*not a plausible noise"):
         ap.read_noise(tmp_path / "campaign.json")
+
+
+# item 4: degrees of freedom per tool and group; "spans 3-D" against the noise
+
+
+def test_a_tree_tool_with_three_points_fails(tmp_path: Path) -> None:
+    """Torso, 100 'left' points and 3 'right' ones: the right branch's 9 parameters on 9
+    coordinates leave no degrees of freedom; success False naming the tool."""
+    from tests.test_tree import TORSO, _campaign
+    from tests.test_tree import _truth as tree_truth
+
+    torso = ap.load_arm(TORSO)
+    c = _campaign(torso, tree_truth(torso, 0, compliant=False), 200, 0)
+    p = c.points
+    assert p is not None and p.tool is not None
+    keep = (p.tool == "left") | (np.cumsum(p.tool == "right") <= 3)
+    cam = ap.Campaign(spat=None, locations={}, lengthbar=None, bar={}, points=PointLog(
+        group=p.group[keep], q=p.q[keep], point=p.point[keep], tool=p.tool[keep]))
+    cal = ap.identify(cam, torso, model="dh")
+    assert not cal.success and "tool 'right': 3 points (9 coordinates)" in cal.message
+    assert ap.identify(c, torso, model="dh").success  # 100 points each: fine
+
+
+def test_noisy_copies_of_one_pose_do_not_span_3d(arm: ap.Arm) -> None:
+    """200 noisy copies (20 um) of one pose: their spread is the noise; refused, naming the group."""
+    clean = _points_campaign(arm, _truth(arm, 0), 1, 0, sigma=0.0)
+    assert clean.points is not None
+    rng = np.random.default_rng(1)
+    copies = ap.Campaign(spat=None, locations={}, lengthbar=None, bar={}, points=PointLog(
+        group=np.ones(200, dtype=np.int64), q=np.repeat(clean.points.q, 200, axis=0),
+        point=clean.points.point + rng.normal(0.0, 20e-6, (200, 3))))
+    with pytest.raises(ap.IdentificationError, match="group 1 .200 points. lie on a line"):
+        ap.identify(copies, arm, model="dh")
+
+
+def test_points_on_a_noisy_line_are_refused(arm: ap.Arm) -> None:
+    """200 points on a 1 m line with 20 um noise: the rotation about the line is not fixed; refused."""
+    rng = np.random.default_rng(2)
+    s = rng.uniform(0.0, 1.0, 200)
+    point = np.c_[s, 0.5 * s, np.zeros(200)] + rng.normal(0.0, 20e-6, (200, 3))
+    c = _points_campaign(arm, _truth(arm, 0), 200, 2)
+    assert c.points is not None
+    with pytest.raises(ap.IdentificationError, match="lie on a line or a plane .their least"):
+        ap.identify(_with(c, point), arm, model="dh")

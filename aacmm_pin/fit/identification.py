@@ -430,6 +430,8 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     success, message = _verdict(res, robust, settled, outliers, suspects, scale, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
+    if enough and success:
+        success, message = _parts_dof(success, message, problem, x_full, setup, kept)
     if enough:
         success, message = _judged(success, message, _judgement(campaign, setup, residual, kept,
                                                                 n_det), robust, setup,
@@ -488,6 +490,52 @@ def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[O
         message = (f"fit RMS {spat_rms * 1e6:.4g} um is beyond {MAX_FIT_RMS * 1e6:.3g} um, more "
                    "than any articulated arm leaves after calibration: the inputs disagree (units "
                    "of a column, R-Test zero positions in locations.csv, readouts); " + message)
+    return success, message
+
+
+def _parts_dof(success: bool, message: str, problem: Problem, x_full: np.ndarray, setup: _Setup,
+               kept: np.ndarray) -> tuple[bool, str]:
+    """Return ``success`` False with a message where a tool's or group's points have no dof to spare.
+
+    A part (the samples of one tool of a tree, or of one instrument group with a frame of its own)
+    determines ``rank(J) - rank(J without its rows)`` parameters that no other sample does (its
+    branch's DH errors, its tool vector, its frame); fewer than :data:`MIN_DOF_FRACTION` of its
+    residual coordinates left over (3 points of a tool for its 9 parameters: none) means its fit
+    passes through its points whatever their noise, and its uncertainty is not known.
+    """
+    meas = setup.meas
+    parts: list[tuple[str, np.ndarray]] = []
+    tool = meas.samples.tool
+    if tool is not None and np.unique(tool).size > 1:
+        names = setup.meas.samples.arm.tool_names
+        parts += [(f"tool '{names[t]}'", (tool == t) & kept) for t in np.unique(tool)]
+    if meas.frame is not None:
+        parts += [(f"instrument group {g}", (meas.frame == f) & kept)
+                  for f, g in enumerate(meas.frame_groups)]
+    if not parts:
+        return success, message
+    jac = problem.jac(problem.z(x_full))
+    jac = jac / np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
+    rows = np.ones(jac.shape[0], dtype=bool)
+    rows[:3 * len(kept)] = np.repeat(kept, 3)
+
+    def rank(sel: np.ndarray) -> int:
+        sv = np.linalg.svd(jac[sel], compute_uv=False)
+        return int(np.sum(sv > sv[0] * 1e-8)) if sv.size else 0
+
+    full = rank(rows)
+    for label, part in parts:
+        others = rows.copy()
+        others[:3 * len(kept)] &= ~np.repeat(part, 3)
+        own, coords = full - rank(others), 3 * int(part.sum())
+        if coords - own < MIN_DOF_FRACTION * coords:
+            return False, (f"{label}: {part.sum()} points ({coords} coordinates) for {own} "
+                           f"parameters that only they determine: {coords - own} degrees of "
+                           f"freedom, fewer than {MIN_DOF_FRACTION:.0%} of them, so the fit passes "
+                           "through those points whatever their noise and its uncertainty is not "
+                           f"known; measure at least about "
+                           f"{int(np.ceil(own / (1 - MIN_DOF_FRACTION) / 3)) - int(part.sum())}"
+                           f" more poses with it; {message}")
     return success, message
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from scipy import stats
 
 from aacmm_pin.data.campaign import Campaign, PointLog, SpatLog, StatedNoise
 from aacmm_pin.errors import AacmmError
@@ -86,13 +87,41 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
         raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
     _check_point_tools(points, arm, "points.csv" if campaign.source is None
                        else str(campaign.source / "points.csv"))
+    noise = campaign.noise.point if campaign.noise is not None else SIGMA_POINT
     for g in np.unique(points.group):
-        pts = points.point[points.group == g]
-        if len(pts) < 4 or np.linalg.matrix_rank(pts - pts.mean(axis=0), tol=1e-4) < 3:
+        rows = points.group == g
+        pts = points.point[rows]
+        sigma = noise if points.sigma is None else float(np.median(points.sigma[rows]))
+        spread = _least_spread(pts, sigma) if len(pts) >= 4 else None
+        if len(pts) < 4 or spread is not None:
+            beyond = "" if spread is None else (
+                f" (their least spread direction {spread * 1e6:.3g} um RMS is no more than "
+                f"the stated noise {sigma * 1e6:.3g} um explains, p >= {SPREAD_P:g})")
             raise IdentificationError(
-                f"the measured points of group {g} ({len(pts)} points) lie on a line or a plane: "
-                "they cannot fix that instrument's frame (measure 4 or more poses spread in 3-D)")
+                f"the measured points of group {g} ({len(pts)} points) lie on a line or a plane"
+                f"{beyond}: they cannot fix that instrument's frame (measure 4 or more poses "
+                "spread in 3-D)")
     return points
+
+
+SPREAD_P = 1e-3
+"""Level of the test that an instrument group's points spread in every direction beyond their
+stated noise (:func:`check_points`): above it, what spread they have may be noise alone."""
+
+
+def _least_spread(pts: np.ndarray, sigma: float) -> float | None:
+    """Return the RMS spread of points (n, 3) along their least spread direction, m, if noise explains it.
+
+    Noise of standard deviation ``sigma`` per coordinate gives a sum of squares along any fixed
+    direction of sigma^2 chi-square(n - 1); the smallest one over the directions is at most that.
+    Returns None when it is beyond the (1 - :data:`SPREAD_P`) quantile: the points span 3-D.
+    """
+    centred = pts - pts.mean(axis=0)
+    ss = float(np.linalg.svd(centred, compute_uv=False)[-1] ** 2)
+    if ss / sigma ** 2 > stats.chi2.isf(SPREAD_P, len(pts) - 1) and \
+            np.linalg.matrix_rank(centred, tol=1e-4) == 3:
+        return None
+    return float(np.sqrt(ss / len(pts)))
 
 
 def _check_point_tools(points: PointLog, arm: Arm, path: str) -> None:
