@@ -39,7 +39,7 @@ def test_a_bumped_tracker_fails_the_fit(arm: ap.Arm) -> None:
     point[start:] += 0.5e-3 / np.sqrt(3)
     cal = ap.identify(_with(clean, point), arm, model="dh")
     assert not cal.success
-    assert "follows row order" in cal.message and f"step after row {start}" in cal.message
+    assert "follows row order" in cal.message and f"step at points.csv row {start + 1}" in cal.message
 
 
 def test_a_robust_fit_in_breakdown_fails(arm: ap.Arm) -> None:
@@ -171,3 +171,19 @@ def test_points_on_a_noisy_line_are_refused(arm: ap.Arm) -> None:
     assert c.points is not None
     with pytest.raises(ap.IdentificationError, match="lie on a line or a plane .their least"):
         ap.identify(_with(c, point), arm, model="dh")
+
+
+def test_a_drifting_tracker_fails_and_the_cli_names_the_line(arm: ap.Arm, tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]
+                                                              ) -> None:
+    """The points drift by 0.6 mm over the file: identify exits 1, FAILED, naming the drift and
+    points.csv line 2 (the first point)."""
+    clean = _points_campaign(arm, _truth(arm, 5), N, 5)
+    assert clean.points is not None
+    point = clean.points.point + np.linspace(0.0, 0.6e-3, N)[:, None] / np.sqrt(3)
+    ap.write_campaign(_with(clean, point), tmp_path / "c")
+    code = main(["identify", str(tmp_path / "c"), "--arm", str(UR5), "--model", "dh",
+                 "--out", str(tmp_path / "cal")])
+    out = capsys.readouterr().out
+    assert code == 1 and "FAILED" in out
+    assert "follows row order (time): a drift from points.csv line 2 on" in out

@@ -108,6 +108,12 @@ def noise_um(text: str) -> float:
     return float(value)
 
 
+def noise_um_or_zero(text: str) -> float:
+    """Argparse type of a simulated noise in um: 0 (none) or as :func:`noise_um`."""
+    value = positive(zero=True)(text)
+    return 0.0 if value == 0 else noise_um(text)
+
+
 def seed_option(text: str) -> argparse.ArgumentParser:
     """``--seed N``: a random seed, 0 by default (same seed, same result)."""
     p = _parent()

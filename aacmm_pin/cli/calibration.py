@@ -21,6 +21,7 @@ from aacmm_pin.cli._options import (
     model_option,
     no_rtest_option,
     noise_um,
+    noise_um_or_zero,
     out_option,
     positive,
     seed_option,
@@ -120,7 +121,8 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
     """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
     from aacmm_pin.fit.robust import OUTLIER_K
 
-    state = "converged" if cal.success else "DID NOT CONVERGE"
+    state = ("converged" if cal.success else "FAILED" if cal.raw.get("success", False)
+             else "DID NOT CONVERGE")
     by_loc = ", ".join(f"{cal.group_label(m)}: {v * 1e6:.2f}"
                        for m, v in cal.fit_rms_by_location().items())
     kinds = {"spat": f"SPAT {'with' if cal.use_rtest else 'without'} R-Test",
@@ -144,6 +146,8 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
               "or a model that misses an effect; --robust rejects outliers")
     if not cal.success:
         print(f"  {cal.message}")
+    elif (note := cal.message.partition("; the residual is ")[2]):  # above the stated noise
+        print(f"  NOTE: the residual is {note}")
 
 
 def _discover(args: argparse.Namespace) -> int:
@@ -462,9 +466,9 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
     p.add_argument("--trials", type=positive(int), default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=positive(int), default=None,
                    help="local processes (default: all cores)")
-    p.add_argument("--sigma-rtest-um", type=positive(zero=True), default=2.0,
+    p.add_argument("--sigma-rtest-um", type=noise_um_or_zero, default=2.0,
                    help="R-Test reading sigma, um")
-    p.add_argument("--sigma-location-um", type=positive(zero=True), default=3.0,
+    p.add_argument("--sigma-location-um", type=noise_um_or_zero, default=3.0,
                    help="R-Test location sigma, um")
     p.set_defaults(handler=_uncertainty)
 

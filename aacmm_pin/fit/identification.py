@@ -35,7 +35,13 @@ from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit.fit_rounds import Fit, fit_rounds, reject_outliers
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import Measurements, measurements, stated_noise
-from aacmm_pin.fit.noise_judgement import MAX_POINTS_FIT_RMS, NOISE_P, Judgement, judge_residual
+from aacmm_pin.fit.noise_judgement import (
+    MAX_POINTS_FIT_RMS,
+    NOISE_P,
+    Judgement,
+    judge_residual,
+    p_text,
+)
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Factor, Nuisance, Problem, SolverSettings
 from aacmm_pin.fit.unknowns import FrameKey, NestKey, UnknownKey, Unknowns
@@ -434,7 +440,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
         success, message = _parts_dof(success, message, problem, x_full, setup, kept)
     if enough:
         success, message = _judged(success, message, _judgement(campaign, setup, residual, kept,
-                                                                n_det), robust, setup,
+                                                                n_det), robust, campaign, setup,
                                    _points_rms(campaign, setup, residual, kept))
     return Calibration(parameters=unknowns.parameters(x_full[:problem.n_arm]), model=options.model,
                        use_rtest=options.use_rtest,
@@ -559,7 +565,23 @@ def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np
     white = residual[kept] / stated[kept, None]
     points = _point_rows(campaign, setup.meas)[kept]
     group = np.where(points, np.abs(setup.meas.group[kept]), -1) if points.any() else None
-    return judge_residual(white, n_det, group)
+    time = setup.meas.samples.t
+    judged = judge_residual(white, n_det, group, None if time is None else time[kept])
+    if judged.row_order is None:
+        return judged
+    return judged._replace(row_order=judged.row_order._replace(  # a sample of the campaign
+        row=int(np.flatnonzero(kept)[judged.row_order.row])))
+
+
+def _point_line(campaign: Campaign, meas: Measurements, sample: int) -> str:
+    """Return ``"points.csv line 42"`` (or ``"points.csv row 41"``) for a sample that is a point."""
+    first = int(np.flatnonzero(_point_rows(campaign, meas))[0])
+    points = campaign.points
+    assert points is not None
+    row = sample - first
+    if points.lines is not None:
+        return f"points.csv line {int(points.lines[row])}"
+    return f"points.csv row {row + 1}"
 
 
 def _points_rms(campaign: Campaign, setup: _Setup, residual: np.ndarray,
@@ -569,14 +591,14 @@ def _points_rms(campaign: Campaign, setup: _Setup, residual: np.ndarray,
     return float(np.sqrt(np.mean(residual[rows] ** 2))) if rows.any() else None
 
 
-def _judged(success: bool, message: str, judged: Judgement, robust: bool, setup: _Setup,
-            points_rms: float | None) -> tuple[bool, str]:
+def _judged(success: bool, message: str, judged: Judgement, robust: bool, campaign: Campaign,
+            setup: _Setup, points_rms: float | None) -> tuple[bool, str]:
     """Return ``success`` and ``message`` with the residual's judgement against the stated noise.
 
     Fails a residual that follows the points' row order, a gross points residual and a robust fit
     whose kept residual is above the noise; notes any other residual above the noise.
     """
-    noise = (f"{judged.ratio:.3g} x the stated noise (chi-square p = {judged.p_value:.2g}, "
+    noise = (f"{judged.ratio:.3g} x the stated noise (chi-square {p_text(judged.p_value)}, "
              f"{judged.dof} degrees of freedom)")
     if points_rms is not None and points_rms > MAX_POINTS_FIT_RMS:
         return False, (f"points fit RMS {points_rms * 1e3:.4g} mm is beyond "
@@ -585,11 +607,11 @@ def _judged(success: bool, message: str, judged: Judgement, robust: bool, setup:
                        f"of readouts and points); {message}")
     order = judged.row_order
     if order is not None:
-        shape = (f"a step after row {order.row} of its points" if order.shape == "step"
-                 else "a drift along its points")
+        at = _point_line(campaign, setup.meas, order.row)
+        shape = (f"a step at {at}" if order.shape == "step" else f"a drift from {at} on")
         return False, (f"the residual of group {order.group} follows row order (time): {shape} "
                        f"of {order.size:.3g} noise sigmas explains {order.fraction:.0%} of it "
-                       f"(p = {order.p_value:.2g}), residual {noise}; no kinematic model explains "
+                       f"({p_text(order.p_value)}), residual {noise}; no kinematic model explains "
                        "that: the instrument or the arm's base moved during the measurement "
                        f"(measure again, or split the points into groups); {message}")
     if judged.p_value >= NOISE_P:

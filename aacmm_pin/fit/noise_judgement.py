@@ -44,6 +44,11 @@ leave at most a few mm after a DH calibration (an uncalibrated UR5 is 2.6 mm off
 cable-driven WAM about 1.3 mm RMS), so 10 mm is a unit, frame or pairing error of the inputs."""
 
 
+def p_text(p: float) -> str:
+    """Return ``"p = 3.1e-05"``, or ``"p < 1e-300"`` for a p-value that underflows."""
+    return f"p = {p:.2g}" if p >= 1e-300 else "p < 1e-300"
+
+
 class RowOrder(NamedTuple):
     """The strongest structure of a group's residual along its rows."""
 
@@ -52,7 +57,7 @@ class RowOrder(NamedTuple):
     shape: str
     """``"step"`` or ``"drift"``."""
     row: int
-    """First row (0-based, within the group's rows in file order) after the step; 0 for a drift."""
+    """First sample after the step (0-based among the samples judged); for a drift its first one."""
     fraction: float
     """Fraction of the group's residual sum of squares the shape explains."""
     p_value: float
@@ -118,14 +123,16 @@ def row_order(white: np.ndarray, group: int, n_tests: int) -> RowOrder | None:
     return max(found, key=lambda o: o.fraction) if found else None
 
 
-def judge_residual(white: np.ndarray, n_det: int, point_group: np.ndarray | None) -> Judgement:
+def judge_residual(white: np.ndarray, n_det: int, point_group: np.ndarray | None,
+                   time: np.ndarray | None = None) -> Judgement:
     """Judge a whitened residual against the noise and along the points' row order.
 
     Args:
-        white: residual of the kept samples divided by their stated noise, shape (N, 3).
+        white: residual of the samples judged divided by their stated noise, shape (N, 3).
         n_det: determined parameters.
-        point_group: instrument group of each kept sample that is an absolute point, in file
-            order, (N,), -1 elsewhere (SPAT, bar); None: no points.
+        point_group: instrument group of each sample that is an absolute point, (N,), -1
+            elsewhere (SPAT, bar); None: no points.
+        time: time of each sample, (N,), s; None: the row order is the time order.
     """
     dof = max(white.size - n_det, 1)
     stat = float(np.sum(white ** 2))
@@ -133,8 +140,12 @@ def judge_residual(white: np.ndarray, n_det: int, point_group: np.ndarray | None
     ratio = float(np.sqrt(stat / max(white.size, 1)))
     worst = None
     if p < NOISE_P and point_group is not None:
+        order = np.arange(len(white)) if time is None else np.argsort(time, kind="stable")
         groups = [g for g in np.unique(point_group) if g >= 0]
-        found = [o for g in groups
-                 if (o := row_order(white[point_group == g], int(g), len(groups))) is not None]
+        found = []
+        for g in groups:
+            rows = order[point_group[order] == g]
+            if (o := row_order(white[rows], int(g), len(groups))) is not None:
+                found.append(o._replace(row=int(rows[o.row])))
         worst = max(found, key=lambda o: o.fraction) if found else None
     return Judgement(p, ratio, dof, worst)
