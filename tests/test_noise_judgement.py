@@ -187,3 +187,39 @@ def test_a_drifting_tracker_fails_and_the_cli_names_the_line(arm: ap.Arm, tmp_pa
     out = capsys.readouterr().out
     assert code == 1 and "FAILED" in out
     assert "follows row order (time): a drift from points.csv line 2 on" in out
+
+
+SAMPLE = Path(__file__).resolve().parents[2] / "shared" / "sample-campaign"
+
+
+@pytest.mark.skipif(not SAMPLE.is_dir(), reason="../shared/sample-campaign is not beside the project")
+def test_a_bumped_rtest_fails_and_the_clean_campaign_stays_successful() -> None:
+    """Sample campaign: clean, success; the last 30 % of location 1's R-Test readings 20 um off
+    (the R-Test moved): success False, naming the location and the spat.csv line."""
+    campaign = ap.read_campaign(SAMPLE)
+    assert ap.identify(campaign, model="proposed").success
+    spat = campaign.spat
+    assert spat is not None and spat.lines is not None
+    rows = np.flatnonzero(spat.location == spat.location[0])
+    start = rows[int(0.7 * len(rows))]
+    disp = spat.displacement.copy()
+    disp[rows[rows >= start]] += 20e-6 / np.sqrt(3)
+    cal = ap.identify(campaign.with_spat(displacement=disp), model="proposed")
+    assert not cal.success
+    assert (f"R-Test location {spat.location[0]} follows row order (time): a step at spat.csv "
+            f"line {spat.lines[start]}") in cal.message
+
+
+def test_discover_still_examines_a_fit_failed_by_its_residual(arm: ap.Arm) -> None:
+    """The bumped tracker: identify fails (judged), discover runs and says what the residual follows."""
+    from aacmm_pin.analyses.discovery import discover
+
+    clean = _points_campaign(arm, _truth(arm, 0), N, 0)
+    assert clean.points is not None
+    point = clean.points.point.copy()
+    point[int(0.7 * N):] += 0.5e-3 / np.sqrt(3)
+    bumped = _with(clean, point)
+    cal = ap.identify(bumped, arm, model="dh")
+    assert not cal.success and cal.judged
+    found = discover(bumped, arm, "dh", max_steps=1)
+    assert found.scan is not None and found.scan.unexplained

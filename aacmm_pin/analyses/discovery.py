@@ -127,7 +127,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                        extensions=spec.terms, max_nfev=max_nfev,
                        nests="estimate",  # one treatment for every model
                        sigma_location=noise.location)
-        if not cal.success:
+        if not (cal.success or cal.judged):  # a residual judged against the noise: examined
             raise AacmmError(f"discovery: the fit with "
                              f"{', '.join(t.key for t in spec.terms) or start} did not converge: "
                              f"{cal.message}")

@@ -436,6 +436,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     success, message = _verdict(res, robust, settled, outliers, suspects, scale, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
+    checked = success
     if enough and success:
         success, message = _parts_dof(success, message, problem, x_full, setup, kept)
     if enough:
@@ -457,7 +458,8 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
                        inputs=tuple(k for k, on in (("spat", setup.has_spat),
                                                     ("points", campaign.points is not None),
                                                     ("bar", options.use_bar)) if on),
-                       robust=robust, outliers=outliers, suspects=suspects, inlier=inlier)
+                       robust=robust, outliers=outliers, suspects=suspects, inlier=inlier,
+                       judged=checked and not success)
 
 
 def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[Outlier, ...],
@@ -563,25 +565,39 @@ def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np
     """
     stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
     white = residual[kept] / stated[kept, None]
-    points = _point_rows(campaign, setup.meas)[kept]
-    group = np.where(points, np.abs(setup.meas.group[kept]), -1) if points.any() else None
     time = setup.meas.samples.t
-    judged = judge_residual(white, n_det, group, None if time is None else time[kept])
+    judged = judge_residual(white, n_det, _segments(campaign, setup.meas)[kept],
+                            None if time is None else time[kept])
     if judged.row_order is None:
         return judged
     return judged._replace(row_order=judged.row_order._replace(  # a sample of the campaign
         row=int(np.flatnonzero(kept)[judged.row_order.row])))
 
 
-def _point_line(campaign: Campaign, meas: Measurements, sample: int) -> str:
-    """Return ``"points.csv line 42"`` (or ``"points.csv row 41"``) for a sample that is a point."""
-    first = int(np.flatnonzero(_point_rows(campaign, meas))[0])
-    points = campaign.points
-    assert points is not None
-    row = sample - first
-    if points.lines is not None:
-        return f"points.csv line {int(points.lines[row])}"
-    return f"points.csv row {row + 1}"
+def _segments(campaign: Campaign, meas: Measurements) -> np.ndarray:
+    """Return the instrument set-up of every sample, shape (N,).
+
+    2 m for R-Test location m's SPAT samples, 2 g + 1 for instrument group g's points, -1 for
+    length-bar readouts.
+    """
+    points = _point_rows(campaign, meas)
+    spat = np.zeros(len(points), dtype=bool)
+    if campaign.spat is not None:
+        spat[:len(campaign.spat.location)] = True
+    out: np.ndarray = np.where(spat, 2 * np.abs(meas.group), -1)
+    return np.where(points, 2 * np.abs(meas.group) + 1, out)
+
+
+def _sample_line(campaign: Campaign, meas: Measurements, sample: int) -> str:
+    """Return ``"points.csv line 42"`` (or ``"spat.csv row 41"``) for a SPAT sample or a point."""
+    points = _point_rows(campaign, meas)
+    log = campaign.points if points[sample] else campaign.spat
+    assert log is not None
+    row = sample - int(np.flatnonzero(points)[0]) if points[sample] else sample
+    name = "points.csv" if points[sample] else "spat.csv"
+    if log.lines is not None:
+        return f"{name} line {int(log.lines[row])}"
+    return f"{name} row {row + 1}"
 
 
 def _points_rms(campaign: Campaign, setup: _Setup, residual: np.ndarray,
@@ -607,13 +623,15 @@ def _judged(success: bool, message: str, judged: Judgement, robust: bool, campai
                        f"of readouts and points); {message}")
     order = judged.row_order
     if order is not None:
-        at = _point_line(campaign, setup.meas, order.row)
+        at = _sample_line(campaign, setup.meas, order.row)
+        where = (f"group {order.group // 2}" if order.group % 2 else
+                 f"R-Test location {order.group // 2}")
         shape = (f"a step at {at}" if order.shape == "step" else f"a drift from {at} on")
-        return False, (f"the residual of group {order.group} follows row order (time): {shape} "
+        return False, (f"the residual of {where} follows row order (time): {shape} "
                        f"of {order.size:.3g} noise sigmas explains {order.fraction:.0%} of it "
                        f"({p_text(order.p_value)}), residual {noise}; no kinematic model explains "
                        "that: the instrument or the arm's base moved during the measurement "
-                       f"(measure again, or split the points into groups); {message}")
+                       f"(measure again, or split the samples into groups); {message}")
     if judged.p_value >= NOISE_P:
         return success, message
     if robust:

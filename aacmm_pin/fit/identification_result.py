@@ -89,6 +89,10 @@ class Calibration:
     (named in ``message`` too)."""
     inlier: np.ndarray | None = field(default=None, repr=False)
     """Samples kept in the fit, shape (N,), bool; None: all."""
+    judged: bool = False
+    """Whether ``success`` is False only by the residual's judgement against the stated noise or a
+    tool's or group's degrees of freedom (:mod:`aacmm_pin.fit.noise_judgement`): the solver
+    converged and the other checks passed, so the fit can still be examined (``discover``)."""
 
     def equivalent(self, other: Parameters) -> tuple[Parameters, float]:
         """Return ``other`` (e.g. the truth) moved into this calibration's gauge and held values.

@@ -8,14 +8,15 @@ residual (each sample's residual divided by its stated noise per coordinate):
   :data:`NOISE_P` means the residual is above the noise. On its own that is not a failure: a model
   that misses an effect (a DH model on a robot with gravity compliance) leaves such a residual on
   clean data; the message says so with the numbers and advises ``discover``.
-* **row order** of an instrument's points (file order, i.e. time): a step (best split point) and a
+* **row order** of each instrument set-up (an R-Test location's SPAT samples, an instrument group's
+  points; file order, or ``t_s`` when given, i.e. time): a step (best split point) and a
   linear drift of the residual's three coordinates, each F-tested against the residual's own
   variance (so a wrong stated noise does not look like structure) with a Bonferroni factor over
   the split points, the two shapes and the groups (family-wise false-alarm rate
   :data:`ALPHA_ROW_ORDER`). A residual above the noise that follows row order *and* of which that
   step or drift is the larger part (more than half the sum of squares) is an instrument that
-  moved (a bumped tracker): no kinematic model explains a function of the row number, so
-  ``success`` is False. A model error on poses measured in a sweep follows row order too, but
+  moved (a bumped tracker or R-Test): no kinematic model explains a function of the row number,
+  so ``success`` is False. A model error on poses measured in a sweep follows row order too, but
   only as a small part of its residual (real UR5 grid data: 4 %).
 * **gross size** of absolute points: a fit RMS beyond :data:`MAX_POINTS_FIT_RMS` fails, as
   :data:`aacmm_pin.fit.identification.MAX_FIT_RMS` does for SPAT fits.
@@ -53,7 +54,7 @@ class RowOrder(NamedTuple):
     """The strongest structure of a group's residual along its rows."""
 
     group: int
-    """Instrument group."""
+    """Segment (see :func:`judge_residual`)."""
     shape: str
     """``"step"`` or ``"drift"``."""
     row: int
@@ -123,15 +124,16 @@ def row_order(white: np.ndarray, group: int, n_tests: int) -> RowOrder | None:
     return max(found, key=lambda o: o.fraction) if found else None
 
 
-def judge_residual(white: np.ndarray, n_det: int, point_group: np.ndarray | None,
+def judge_residual(white: np.ndarray, n_det: int, segment: np.ndarray | None,
                    time: np.ndarray | None = None) -> Judgement:
-    """Judge a whitened residual against the noise and along the points' row order.
+    """Judge a whitened residual against the noise and along the row order of each segment.
 
     Args:
         white: residual of the samples judged divided by their stated noise, shape (N, 3).
         n_det: determined parameters.
-        point_group: instrument group of each sample that is an absolute point, (N,), -1
-            elsewhere (SPAT, bar); None: no points.
+        segment: what each sample is measured in, (N,): an index >= 0 per instrument set-up
+            (an R-Test location, an instrument group of points), -1 for samples not tested
+            (length-bar readouts); None: none tested. ``RowOrder.group`` is this index.
         time: time of each sample, (N,), s; None: the row order is the time order.
     """
     dof = max(white.size - n_det, 1)
@@ -139,12 +141,12 @@ def judge_residual(white: np.ndarray, n_det: int, point_group: np.ndarray | None
     p = float(stats.chi2.sf(stat, dof))
     ratio = float(np.sqrt(stat / max(white.size, 1)))
     worst = None
-    if p < NOISE_P and point_group is not None:
+    if p < NOISE_P and segment is not None:
         order = np.arange(len(white)) if time is None else np.argsort(time, kind="stable")
-        groups = [g for g in np.unique(point_group) if g >= 0]
+        groups = [g for g in np.unique(segment) if g >= 0]
         found = []
         for g in groups:
-            rows = order[point_group[order] == g]
+            rows = order[segment[order] == g]
             if (o := row_order(white[rows], int(g), len(groups))) is not None:
                 found.append(o._replace(row=int(rows[o.row])))
         worst = max(found, key=lambda o: o.fraction) if found else None
