@@ -223,3 +223,20 @@ def test_discover_still_examines_a_fit_failed_by_its_residual(arm: ap.Arm) -> No
     assert not cal.success and cal.judged
     found = discover(bumped, arm, "dh", max_steps=1)
     assert found.scan is not None and found.scan.unexplained
+
+
+@pytest.mark.skipif(not SAMPLE.is_dir(), reason="../shared/sample-campaign is not beside the project")
+def test_a_drift_fails_unless_a_temperature_varies() -> None:
+    """Location 1's R-Test readings drift by 20 um over its rows: a moved instrument (success False)
+    without a temperature column; with one that rises 2 deg C, a warming arm: left to discover."""
+    campaign = ap.read_campaign(SAMPLE)
+    spat = campaign.spat
+    assert spat is not None
+    rows = np.flatnonzero(spat.location == spat.location[0])
+    disp = spat.displacement.copy()
+    disp[rows] += np.linspace(0.0, 20e-6, rows.size)[:, None] / np.sqrt(3)
+    drifted = ap.identify(campaign.with_spat(displacement=disp), model="proposed")
+    assert not drifted.success and "a drift from spat.csv line" in drifted.message
+    temp = 20.0 + 2.0 * np.arange(len(spat.q)) / len(spat.q)
+    warming = ap.identify(campaign.with_spat(displacement=disp, temp=temp), model="proposed")
+    assert warming.success and "x the stated noise" in warming.message

@@ -28,6 +28,7 @@ from scipy.special import chdtrc
 
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.data.campaign import Campaign, StatedNoise
+from aacmm_pin.data.columns import column
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.fit import identifiability as ident
@@ -566,8 +567,10 @@ def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np
     stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
     white = residual[kept] / stated[kept, None]
     time = setup.meas.samples.t
+    warms = any(name.endswith("_c") and column(name).varies(values[kept])
+                for name, values in setup.meas.samples.columns.items())
     judged = judge_residual(white, n_det, _segments(campaign, setup.meas)[kept],
-                            None if time is None else time[kept])
+                            None if time is None else time[kept], drift_explained=warms)
     if judged.row_order is None:
         return judged
     return judged._replace(row_order=judged.row_order._replace(  # a sample of the campaign

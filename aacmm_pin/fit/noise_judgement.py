@@ -16,7 +16,9 @@ residual (each sample's residual divided by its stated noise per coordinate):
   :data:`ALPHA_ROW_ORDER`). A residual above the noise that follows row order *and* of which that
   step or drift is the larger part (more than half the sum of squares) is an instrument that
   moved (a bumped tracker or R-Test): no kinematic model explains a function of the row number,
-  so ``success`` is False. A model error on poses measured in a sweep follows row order too, but
+  so ``success`` is False. A drift is that only when no temperature column varies (an arm that
+  warms drifts; ``discover`` names the thermal effect); a step always (a linear drift is
+  explained better by a line than by any step: at most 3/4 of its sum of squares). A model error on poses measured in a sweep follows row order too, but
   only as a small part of its residual (real UR5 grid data: 4 %).
 * **gross size** of absolute points: a fit RMS beyond :data:`MAX_POINTS_FIT_RMS` fails, as
   :data:`aacmm_pin.fit.identification.MAX_FIT_RMS` does for SPAT fits.
@@ -125,7 +127,7 @@ def row_order(white: np.ndarray, group: int, n_tests: int) -> RowOrder | None:
 
 
 def judge_residual(white: np.ndarray, n_det: int, segment: np.ndarray | None,
-                   time: np.ndarray | None = None) -> Judgement:
+                   time: np.ndarray | None = None, drift_explained: bool = False) -> Judgement:
     """Judge a whitened residual against the noise and along the row order of each segment.
 
     Args:
@@ -135,6 +137,8 @@ def judge_residual(white: np.ndarray, n_det: int, segment: np.ndarray | None,
             (an R-Test location, an instrument group of points), -1 for samples not tested
             (length-bar readouts); None: none tested. ``RowOrder.group`` is this index.
         time: time of each sample, (N,), s; None: the row order is the time order.
+        drift_explained: a measured variable that moves an arm gradually (a temperature)
+            varies: a drift is left to ``discover`` (the thermal effect), only a step fails.
     """
     dof = max(white.size - n_det, 1)
     stat = float(np.sum(white ** 2))
@@ -147,7 +151,8 @@ def judge_residual(white: np.ndarray, n_det: int, segment: np.ndarray | None,
         found = []
         for g in groups:
             rows = order[segment[order] == g]
-            if (o := row_order(white[rows], int(g), len(groups))) is not None:
+            o = row_order(white[rows], int(g), len(groups))
+            if o is not None and not (drift_explained and o.shape == "drift"):
                 found.append(o._replace(row=int(rows[o.row])))
         worst = max(found, key=lambda o: o.fraction) if found else None
     return Judgement(p, ratio, dof, worst)
