@@ -18,8 +18,9 @@ residual (each sample's residual divided by its stated noise per coordinate):
   moved (a bumped tracker or R-Test): no kinematic model explains a function of the row number,
   so ``success`` is False. A drift is that only when no temperature column varies (an arm that
   warms drifts; ``discover`` names the thermal effect); a step always (a linear drift is
-  explained better by a line than by any step: at most 3/4 of its sum of squares). A model error on poses measured in a sweep follows row order too, but
-  only as a small part of its residual (real UR5 grid data: 4 %).
+  explained better by a line than by any step: at most 3/4 of its sum of squares). A model
+  error on poses measured in a sweep follows row order too, but only as a small part of its
+  residual (real UR5 grid data: 4 %; simulated compliance, backlash, encoder errors: none).
 * **gross size** of absolute points: a fit RMS beyond :data:`MAX_POINTS_FIT_RMS` fails, as
   :data:`aacmm_pin.fit.identification.MAX_FIT_RMS` does for SPAT fits.
 * **a robust fit** whose kept residual is above the stated noise fails: its rejection threshold is
