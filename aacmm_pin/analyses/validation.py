@@ -94,7 +94,9 @@ def bar_pairs(campaign: Campaign, mask: np.ndarray | None = None) -> BarPairs:
     """
     log = campaign.lengthbar
     if log is None or not campaign.bar:
-        raise AacmmError("the campaign has no length-bar data (lengthbar.csv and bar.csv)")
+        where = "the campaign" if campaign.source is None else str(campaign.source)
+        raise AacmmError(f"{where} has no length-bar data (lengthbar.csv and bar.csv): measure the "
+                         "calibrated bar (or absolute points, for validate) to compare against")
     keep = np.ones(len(log.q), dtype=bool) if mask is None else mask
     placements = list(dict.fromkeys(int(k) for k in log.placement))
     pairs = list(campaign.bar)
