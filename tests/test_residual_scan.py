@@ -214,3 +214,27 @@ def test_hint_names_library_terms_that_were_not_named() -> None:
     report = named.to_dict()
     assert report is not None and report["library_terms"] == ["compliance[A4]"]
     assert "compliance[A4]" in report["hint"] and "no effect in the library" not in report["hint"]
+
+
+def test_points_beside_spat_are_judged_by_their_own_noise(arm: ap.Arm) -> None:
+    """SPAT (2 um) and tracker points (20 um, their own frame) fitted by the right model: the
+    residual's spread differs per location only by the stated noise, which is no structure."""
+    from aacmm_pin.analyses.residual_scan import scan_residuals
+    from aacmm_pin.data.campaign import Campaign, PointLog
+    from aacmm_pin.fit.measurements import measurements, stated_noise
+
+    sim = ap.simulate_campaign(arm, ap.SimulationConfig(seed=0, effects=("dh",),
+                                                        samples_per_location=30, bar_placements=0))
+    rng = np.random.default_rng(0)
+    lim = arm.joint_limits
+    q = rng.uniform(lim[:, 0], lim[:, 1], (60, arm.n_axes))
+    point = (ap.stylus_positions(arm, sim.truth, q, frame="mt") + rng.normal(0, 20e-6, (60, 3))
+             + [1.0, 0.5, 0.2])  # a tracker's frame
+    c = sim.campaign
+    campaign = Campaign(spat=c.spat, locations=c.locations, lengthbar=None, bar={},
+                        points=PointLog(group=np.ones(60, dtype=np.int64), q=q, point=point))
+    cal = ap.identify(campaign, arm, model="dh")
+    meas = measurements(campaign, arm, use_rtest=True)
+    scan = scan_residuals(cal, meas.samples, stated_noise(campaign, meas, StatedNoise()))
+    assert scan.noise_consistent, scan.hint()
+    assert not scan.structure, scan.hint()  # Holm-adjusted p < ALPHA_STRUCTURE: a false alarm

@@ -208,7 +208,9 @@ def spat_centres(arm: Arm, params: Parameters, campaign: Campaign,
     """
     spat = campaign.spat
     if spat is None:
-        raise AacmmError("the campaign has no SPAT (spat.csv and locations.csv)")
+        where = "the campaign" if campaign.source is None else str(campaign.source)
+        raise AacmmError(f"{where} has no SPAT (spat.csv and locations.csv): the SPAT figure needs "
+                         "the stylus in an R-Test nest through many postures")
     points = stylus_positions(arm, params, spat.q, frame="mt",
                               samples=Samples.of_log(arm, spat))
     if use_rtest:

@@ -63,6 +63,37 @@ def size_factors(cal: Calibration) -> dict[str, float]:
     return out
 
 
+def held_out_groups(cal: Calibration) -> tuple[list[np.ndarray], list[bool]]:
+    """Return the held-out groups of a calibration's samples and whether each is centred.
+
+    A group is the data residual rows (3 per sample) left out together. Samples with a nest
+    (R-Test locations, bar sockets) are left out per nest id and centred (the left-out nest's
+    offset is unknown); absolute tool points are split into :data:`FOLDS` folds (seeded),
+    stratified by instrument group so that every fold keeps most points of every group and a
+    group's frame stays fixed by the rest (left out whole, its six unknowns would be free). Without
+    nests every sample is a point of the folds.
+    """
+    problem = cal.problem
+    n = len(cal.location)
+    point = np.ones(n, dtype=bool)
+    if problem.n_loc > 0:
+        nest = problem.nuisance.nest
+        point = cal.location < 0 if "spat" in cal.inputs else (
+            np.ones(n, dtype=bool) if nest is None else nest < 0)
+    groups = [np.flatnonzero(cal.location == m) for m in np.unique(cal.location[~point])]
+    centred = [True] * len(groups)
+    if point.any():
+        fold = np.full(n, -1, dtype=np.int64)
+        seen: dict[int, int] = {}
+        for i in np.random.default_rng(0).permutation(n):  # as before for one group of points
+            if point[i]:
+                k = seen.get(int(cal.location[i]), 0)
+                fold[i], seen[int(cal.location[i])] = k % FOLDS, k + 1
+        groups += [np.flatnonzero(fold == f) for f in range(FOLDS) if np.any(fold == f)]
+        centred += [False] * (len(groups) - len(centred))
+    return [(3 * g[:, None] + np.arange(3)).ravel() for g in groups], centred
+
+
 class LinearScorer:
     """A calibration linearised at its solution, for scoring candidate terms on the residuals.
 
@@ -106,17 +137,11 @@ class LinearScorer:
         else:
             self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
         self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
-        # held-out groups: the R-Test locations (each left-out SPAT less its mean: its nest offset
-        # is unknown); absolute points (no nests): FOLDS folds of the samples, seeded
-        self.centred = problem.n_loc > 0
-        if self.centred:
-            fold = cal.location
-        else:
-            fold = np.empty(len(cal.location), dtype=np.int64)
-            fold[np.random.default_rng(0).permutation(len(fold))] = np.arange(len(fold)) % FOLDS
-        rows = np.repeat(fold, 3)
-        self.groups = [np.flatnonzero(rows == m) for m in np.unique(fold)]
-        self.n_held = self.n_data - (3 * len(self.groups) if self.centred else 0)
+        # held-out groups: the R-Test locations and bar sockets (each left out less its mean: its
+        # nest offset is unknown); absolute points: FOLDS folds of the samples, seeded
+        self.groups, self.centred = held_out_groups(cal)
+        """Rows (data residual indices) of each held-out group; whether each is centred."""
+        self.n_held = self.n_data - 3 * int(np.sum(self.centred))
         self.prior_rows = np.arange(self.n_data, len(self.r))
         self.stylus: StylusJacobians = stylus_jacobians(cal.unknowns.arm, cal.parameters,
                                                         samples.q, frame="mt", samples=samples)
@@ -208,9 +233,9 @@ class LinearScorer:
         d_all = solve(g_all, b_all)
         fit_ssr = float(np.sum(residual(np.arange(self.n_data), d_all) ** 2))
         held = 0.0
-        for rows, (g, b) in zip(self.groups, grams):
+        for rows, centred, (g, b) in zip(self.groups, self.centred, grams):
             e = residual(rows, solve(g_all - g, b_all - b)).reshape(-1, 3)
-            held += float(np.sum((e - e.mean(axis=0) if self.centred else e) ** 2))
+            held += float(np.sum((e - e.mean(axis=0) if centred else e) ** 2))
         bar_chi2 = float("nan")
         if self._bar_white is not None:
             _, e_bar, j_bar = self._bar_white

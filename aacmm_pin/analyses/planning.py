@@ -8,7 +8,9 @@ uncertainty is finite and equals it), plus the map-mean gauge; nest offsets are 
 their prior (sigma 3 um). A candidate SPAT (an R-Test location and a posture family, postures found
 by IK on the calibrated model) adds its rows; the predicted covariance follows by a low-rank
 update. The map uncertainty of an axis is the RMS of its node standard uncertainties; the worst
-axis is the one with the largest among the axes whose map is estimated.
+axis is the one with the largest among the axes whose map is estimated. Only SPATs are counted:
+a campaign without them is refused (:func:`check_plannable`), and absolute points beside them are
+left out of the present information (the plan says so: its uncertainties are then upper bounds).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import stylus_ik
+from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identifiability import GAUGE_WEIGHT, plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.unknowns import Unknowns
@@ -28,6 +31,20 @@ from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.progress import Progress
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION
+
+
+class PlanningError(AacmmError):
+    """The campaign cannot be planned for (e.g. it has no SPAT)."""
+
+
+def check_plannable(campaign: Campaign) -> None:
+    """Raise PlanningError if ``campaign`` has no SPAT: the plan ranks R-Test nests and postures."""
+    if campaign.spat is None or len(campaign.spat.location) == 0:
+        where = "" if campaign.source is None else f"{campaign.source}: "
+        raise PlanningError(
+            f"{where}no SPAT (spat.csv): plan ranks where to put the R-Test next and needs the "
+            "campaign's SPATs; for absolute points (points.csv) measure more poses spread over "
+            "every joint's range instead (identify lists what the data leaves unidentifiable)")
 
 
 @dataclass(frozen=True)
@@ -64,6 +81,8 @@ class Plan:
     """RMS std of the length errors now, m."""
     candidates: list[Candidate] = field(default_factory=list)
     """Candidates ranked by the predicted worst-axis map uncertainty, best first."""
+    points_left_out: int = 0
+    """Absolute points of the campaign not counted in the information (upper-bound uncertainties)."""
 
     def reduction(self, candidate: Candidate) -> float:
         """Return the share by which a candidate shrinks the worst axis' map uncertainty (0-1)."""
@@ -78,6 +97,9 @@ class Plan:
             lines.append(f"  A{axis} worst ranges: {text or 'none'}")
         if self.length_std is not None:
             lines.append(f"length-error uncertainty now: {self.length_std * 1e6:.2f} um RMS")
+        if self.points_left_out:
+            lines.append(f"note: the {self.points_left_out} absolute points (points.csv) are not "
+                         "counted: the uncertainties above are upper bounds")
         lines.append(f"{'rank':>4}  {'nest x, y, z (mm, MT-CS)':>28}  {'family':<28} "
                      f"{'worst axis after':>17} {'reduction':>9} {'length std after':>16}")
         for rank, c in enumerate(self.candidates[:top], start=1):
@@ -97,6 +119,7 @@ class Plan:
             "worst_ranges_deg": {str(a): [[lo, hi, s / ARCSEC] for lo, hi, s in r]
                                  for a, r in self.worst_ranges.items()},
             "length_std_um": None if self.length_std is None else self.length_std * 1e6,
+            "points_left_out": self.points_left_out,
             "candidates": [{"rank": i + 1, "location_mt_mm": (c.location_mt * 1e3).tolist(),
                             "family": c.family, "n_postures": len(c.postures),
                             "worst_axis_std_after_arcsec": c.worst_after / ARCSEC,
@@ -149,7 +172,12 @@ def _map_std(info_inv_diag: np.ndarray, u: Unknowns) -> dict[int, np.ndarray]:
 
 def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = None,
                     sigma_location: float = SIGMA_LOCATION) -> tuple[_Information, np.ndarray]:
-    """Return the information model and the present information matrix of a calibration."""
+    """Return the information model and the present information matrix of a calibration.
+
+    Raises:
+        PlanningError: if the campaign has no SPAT.
+    """
+    check_plannable(campaign)
     assert campaign.spat is not None
     model = _Information(cal.unknowns.arm, cal.parameters, cal.unknowns.map_axes,
                          sigma or cal.sigma, sigma_location)
@@ -199,6 +227,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
         sigma_location: prior std of a nest position per coordinate, m.
         progress: show the candidates evaluated (log lines when stderr is not a terminal).
     """
+    check_plannable(campaign)
     if not cal.unknowns.map_axes:
         raise ValueError("cal: plan needs a calibration of the proposed model (with maps)")
     model, info = information_now(cal, campaign, sigma_location=sigma_location)
@@ -257,7 +286,8 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
                                  rms_after[worst], _length_rms(length_grads, new_cov)))
     ticker.close()
     out.sort(key=lambda c: c.worst_after)
-    return Plan(worst, rms_now, ranges, length_now, out)
+    n_points = 0 if campaign.points is None else len(campaign.points.group)
+    return Plan(worst, rms_now, ranges, length_now, out, n_points)
 
 
 def _length_grads(cal: Calibration, campaign: Campaign, u: Unknowns) -> np.ndarray | None:

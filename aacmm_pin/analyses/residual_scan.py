@@ -346,13 +346,21 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         log_p = min(log_p + float(np.log(len(fits))), 0.0)
         found.append((Structure(variable, where, float(np.sqrt(excess / (3 * n))) * noise_rms,
                                 1.0, log_p, k, values, label), log_p))
-    groups = [centred[location == m].reshape(-1) for m in np.unique(location)]
+    # the spread per location in units of each sample's stated noise: points (20 um) beside
+    # SPATs (2 um) differ by what was stated, not by structure
+    white_centred = white.copy()
+    for m in np.unique(location):
+        white_centred[location == m] -= white_centred[location == m].mean(axis=0)
+    ids = np.unique(location)
+    groups = [white_centred[location == m].reshape(-1) for m in ids]
     if len(groups) > 1 and all(g.size > 1 for g in groups):
         bartlett = stats.bartlett(*groups)
         var = [float(np.mean(g ** 2)) for g in groups]
-        excess_var = max(max(var) - float(np.mean(centred ** 2)), 0.0)
+        worst = int(np.argmax(var))  # its excess in um: in units of its own stated noise
+        excess_var = max(var[worst] - float(np.mean(white_centred ** 2)), 0.0)
+        worst_noise = float(np.sqrt(np.mean(sigma[location == ids[worst]] ** 2)))
         found.append((Structure("the location (its spread)", "each location",
-                                float(np.sqrt(excess_var)), 1.0,
+                                float(np.sqrt(excess_var)) * worst_noise, 1.0,
                                 float(np.log(max(float(bartlett.pvalue), 1e-300))), len(groups) - 1,
                                 location.astype(float), "location"),
                       float(np.log(max(float(bartlett.pvalue), 1e-300)))))

@@ -1,7 +1,8 @@
 r"""Uncertainty of an identified arm: Monte Carlo (paper Section 5) and linearised covariance.
 
 Monte Carlo: perturb the R-Test readings (sigma 2 um per coordinate and sample) and the R-Test
-zero positions (sigma 3 um per coordinate and location), re-identify with the nominal
+zero positions (sigma 3 um per coordinate and location), every other sample (absolute tool points,
+length-bar readouts seated in a socket) by its stated noise, re-identify with the nominal
 calibration's structure starting from its solution (:func:`aacmm_pin.fit.identification.refit`), and take
 the standard deviation (k=1) of every parameter, map node and length error over the trials.
 Trials run through any :class:`concurrent.futures.Executor`: local processes by default, or e.g.
@@ -83,8 +84,51 @@ class MonteCarloResult:
         return np.array([lookup.get(NodeKey.at(axis, d), np.nan) for d in nodes_deg])
 
 
-def _trial_batch(cal: Calibration, factor: Factor | None, base: np.ndarray, location: np.ndarray,
-                 use_rtest: bool, sigma_rtest: float, sigma_location: float, seeds: list[int],
+@dataclass(frozen=True)
+class Perturbation:
+    """What a Monte Carlo trial perturbs: every sample of the calibration's problem.
+
+    SPAT samples (the first ``location.size`` rows) get R-Test reading noise and their location's
+    zero position error; every other sample (tool points, bar readouts) its stated noise.
+    """
+
+    base: np.ndarray
+    """Measured points of the calibration's problem, shape (N, 3), m (as ``Problem.measured``)."""
+    sigma: np.ndarray
+    """Perturbation per coordinate of every sample, shape (N,), m (0: none, e.g. a rejected
+    sample)."""
+    location: np.ndarray
+    """R-Test location of each SPAT sample, shape (n_spat,) (the first n_spat rows of ``base``)."""
+    use_rtest: bool
+    """Whether the R-Test displacements are used per sample (else their location mean)."""
+    sigma_location: float
+    """R-Test zero position perturbation per coordinate and location, m."""
+
+
+def perturbation(cal: Calibration, campaign: Campaign, sigma_rtest: float = SIGMA_RTEST,
+                 sigma_location: float = SIGMA_LOCATION) -> Perturbation:
+    """Return what trials of ``cal`` (identified from ``campaign``) perturb, and by how much.
+
+    SPAT samples come first in the problem (:func:`aacmm_pin.fit.measurements.measurements`); the
+    others' stated noise is the problem's ``sigma_class / row weight`` (the weights the fit used).
+    """
+    problem = cal.problem
+    base = problem.measured
+    n_spat = 0 if campaign.spat is None else len(campaign.spat.location)
+    sigma = np.full(len(base), problem.sigma_class)
+    if problem.row_weight is not None:
+        w = problem.row_weight[::3]
+        with np.errstate(divide="ignore"):
+            sigma = np.where(w > 0, problem.sigma_class / w, 0.0)
+    sigma[:n_spat] = sigma_rtest
+    if n_spat:
+        base = base.copy()
+        base[:n_spat] = measured_positions(campaign, cal.use_rtest)
+    location = np.zeros(0) if campaign.spat is None else campaign.spat.location
+    return Perturbation(base, sigma, location, cal.use_rtest, sigma_location)
+
+
+def _trial_batch(cal: Calibration, factor: Factor | None, shake: Perturbation, seeds: list[int],
                  campaign: Campaign | None = None) -> tuple[np.ndarray, int, np.ndarray | None]:
     """Run trials with these seeds.
 
@@ -104,7 +148,7 @@ def _trial_batch(cal: Calibration, factor: Factor | None, base: np.ndarray, loca
     with single_threaded_blas():
         if factor is None:
             factor = cal.problem.factor(cal.problem.z(cal.x))
-        x, ok = _trials(cal, factor, base, location, use_rtest, sigma_rtest, sigma_location, seeds)
+        x, ok = _trials(cal, factor, shake, seeds)
         lengths = None
         if campaign is not None and campaign.lengthbar is not None and campaign.bar:
             u = cal.unknowns
@@ -114,19 +158,21 @@ def _trial_batch(cal: Calibration, factor: Factor | None, base: np.ndarray, loca
         return x, ok, lengths
 
 
-def _trials(cal: Calibration, factor: Factor, base: np.ndarray, location: np.ndarray,
-            use_rtest: bool, sigma_rtest: float, sigma_location: float, seeds: list[int]
+def _trials(cal: Calibration, factor: Factor, shake: Perturbation, seeds: list[int]
             ) -> tuple[np.ndarray, int]:
     out, ok = [], 0
-    ids, index = np.unique(location, return_inverse=True)
+    n_spat = shake.location.size
+    ids, index = np.unique(shake.location, return_inverse=True)
     for seed in seeds:
         rng = np.random.default_rng(seed)
-        noise = rng.normal(0.0, sigma_rtest, base.shape)
-        if not use_rtest:  # the conventional SPAT uses each location's mean displacement
+        noise = rng.standard_normal(shake.base.shape) * shake.sigma[:, None]
+        spat = noise[:n_spat]
+        if not shake.use_rtest:  # the conventional SPAT uses each location's mean displacement
             for m in range(ids.size):
-                noise[index == m] = noise[index == m].mean(axis=0)
-        nest = rng.normal(0.0, sigma_location, (ids.size, 3))[index]
-        x, good = refit(cal, base + noise + nest, factor=factor)
+                spat[index == m] = spat[index == m].mean(axis=0)
+        nest = np.zeros_like(noise)  # added last: SPAT-only trials as before, to the bit
+        nest[:n_spat] = rng.normal(0.0, shake.sigma_location, (ids.size, 3))[index]
+        x, good = refit(cal, shake.base + noise + nest, factor=factor)
         out.append(x)
         ok += good
     return np.array(out), ok
@@ -178,9 +224,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
 
     if trials < 2:
         raise ValueError(f"trials: need at least 2, got {trials}")
-    base = measured_positions(campaign, cal.use_rtest)
-    spat = campaign.spat
-    assert spat is not None
+    shake = perturbation(cal, campaign, sigma_rtest, sigma_location)
     workers = workers or os.cpu_count() or 1
     seeds = [seed + i for i in range(trials)]
     parallel = executor is not None or workers > 1
@@ -201,13 +245,11 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
             with single_threaded_blas():  # as in a worker's batch: the same bits either way
                 factor = cal.problem.factor(cal.problem.z(cal.x))
             for batch in batches:
-                results.append(_trial_batch(cal, factor, base, spat.location, cal.use_rtest, sigma_rtest,
-                                            sigma_location, batch, bar_only))
+                results.append(_trial_batch(cal, factor, shake, batch, bar_only))
                 bar.update(len(batch))
         else:
             try:
-                futures = [pool.submit(_trial_batch, cal, None, base, spat.location, cal.use_rtest,
-                                       sigma_rtest, sigma_location, batch, bar_only)
+                futures = [pool.submit(_trial_batch, cal, None, shake, batch, bar_only)
                            for batch in batches]
                 for future, batch in zip(futures, batches):
                     results.append(future.result())

@@ -94,7 +94,9 @@ def bar_pairs(campaign: Campaign, mask: np.ndarray | None = None) -> BarPairs:
     """
     log = campaign.lengthbar
     if log is None or not campaign.bar:
-        raise AacmmError("the campaign has no length-bar data (lengthbar.csv and bar.csv)")
+        where = "the campaign" if campaign.source is None else str(campaign.source)
+        raise AacmmError(f"{where} has no length-bar data (lengthbar.csv and bar.csv): measure the "
+                         "calibrated bar (or absolute points, for validate) to compare against")
     keep = np.ones(len(log.q), dtype=bool) if mask is None else mask
     placements = list(dict.fromkeys(int(k) for k in log.placement))
     pairs = list(campaign.bar)
@@ -151,6 +153,9 @@ class PointValidation:
     """Predicted minus measured point in the instrument frame, shape (N, 3), m."""
     lines: np.ndarray | None
     """1-based line of each point in points.csv, shape (N,), or None."""
+    fitted_groups: tuple[int, ...] = ()
+    """Instrument groups whose frame is not the calibration's and was fitted to the predicted
+    points (6 unknowns each; :func:`points_in_main_frame`)."""
 
     @property
     def distances(self) -> np.ndarray:
@@ -177,30 +182,69 @@ class PointValidation:
         """Return a one-line summary in mm."""
         worst = int(np.argmax(self.distances))
         where = f" (line {int(self.lines[worst])})" if self.lines is not None else ""
+        note = "" if not self.fitted_groups else (
+            f"; the frame of group{'s' if len(self.fitted_groups) > 1 else ''} "
+            f"{', '.join(map(str, self.fitted_groups))} is not the calibration's: fitted to "
+            "these points (6 unknowns each) before comparing")
         return (f"{len(self.errors)} points: mean error {self.mean * 1e3:.4f} mm, RMS "
-                f"{self.rms * 1e3:.4f} mm, max {self.max * 1e3:.4f} mm{where}")
+                f"{self.rms * 1e3:.4f} mm, max {self.max * 1e3:.4f} mm{where}{note}")
 
     def to_dict(self) -> dict[str, Any]:
         """Return the JSON form (mm)."""
         return {"n_points": int(len(self.errors)), "mean_mm": self.mean * 1e3,
                 "rms_mm": self.rms * 1e3, "max_mm": self.max * 1e3,
+                "fitted_frame_groups": list(self.fitted_groups),
                 "errors_mm": (self.errors * 1e3).tolist()}
+
+
+def points_in_main_frame(arm: Arm, params: Parameters, campaign: Campaign
+                         ) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Return the predicted and measured tool points in the calibration's frame, and the groups fitted.
+
+    As :func:`aacmm_pin.fit.measurements.measurements` assigns frames: without SPAT the lowest
+    instrument group is measured in the calibration's frame (X0 and translation); every other group
+    (all of them beside SPAT) has a frame of its own, which the calibration does not store: its
+    points are mapped by the rigid transform that best fits them to the predicted points (what an
+    identification estimates as that frame's six unknowns).
+
+    Returns:
+        ``(predicted, measured, fitted)``: shapes (N, 3), (N, 3) in m (the calibration's MT-CS),
+        and the groups whose frame was fitted.
+    """
+    from scipy.spatial.transform import Rotation
+
+    points = campaign.points
+    if points is None:
+        raise AacmmError("the campaign has no absolute points (points.csv)")
+    pred = stylus_positions(arm, params, points.q, frame="mt", samples=Samples.of_log(arm, points))
+    measured = points.point.copy()
+    ids = np.unique(points.group)
+    own = ids if campaign.spat is not None else ids[1:]
+    for g in own:
+        sel = points.group == g
+        cp, cm = pred[sel].mean(axis=0), measured[sel].mean(axis=0)
+        if sel.sum() > 1:
+            rot = Rotation.align_vectors(pred[sel] - cp, measured[sel] - cm)[0].as_matrix()
+        else:
+            rot = np.eye(3)
+        measured[sel] = (measured[sel] - cm) @ rot.T + cp
+    return pred, measured, tuple(int(g) for g in own)
 
 
 def validate_points(arm: Arm, params: Parameters, campaign: Campaign) -> PointValidation:
     """Compare the calibrated arm's tool points with a campaign's absolutely measured points.
 
     The points are predicted in the instrument frame of the calibration (its ``base_to_mt``
-    transform): a test campaign must be measured with the same instrument set-up.
+    transform): a test campaign must be measured with the same instrument set-up. Points of a
+    group with a frame of its own (every group beside SPAT, every group but the lowest without)
+    are compared after fitting that frame (:func:`points_in_main_frame`; the result names them).
 
     Raises:
         AacmmError: if the campaign has no points.
     """
-    points = campaign.points
-    if points is None:
-        raise AacmmError("the campaign has no absolute points (points.csv)")
-    pred = stylus_positions(arm, params, points.q, frame="mt", samples=Samples.of_log(arm, points))
-    return PointValidation(pred - points.point, points.lines)
+    pred, measured, fitted = points_in_main_frame(arm, params, campaign)
+    assert campaign.points is not None
+    return PointValidation(pred - measured, campaign.points.lines, fitted)
 
 
 def validate(arm: Arm, params: Parameters, campaign: Campaign,

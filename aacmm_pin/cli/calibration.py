@@ -265,8 +265,11 @@ def _uncertainty(args: argparse.Namespace) -> int:
                               std=std)
     ratio = mc.ratio()
     ratio = ratio[np.isfinite(ratio)]
-    print(f"{mc.trials} Monte Carlo trials ({mc.converged} converged), sigma R-Test "
-          f"{args.sigma_rtest_um} um, sigma location {args.sigma_location_um} um -> {out}")
+    shaken = "" if campaign.spat is None else (f", sigma R-Test {args.sigma_rtest_um} um, sigma "
+                                               f"location {args.sigma_location_um} um")
+    if campaign.points is not None:
+        shaken += ", points by their stated noise"
+    print(f"{mc.trials} Monte Carlo trials ({mc.converged} converged){shaken} -> {out}")
     print(f"Monte Carlo / linearised std: median {np.median(ratio):.3f}, "
           f"{np.mean(np.abs(ratio - 1) <= 0.2):.0%} of {ratio.size} identified values within 20%")
     if mc.length_std is not None:
@@ -291,13 +294,14 @@ def _plan(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from aacmm_pin.analyses.planning import plan
+    from aacmm_pin.analyses.planning import check_plannable, plan
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
 
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)
+    check_plannable(campaign)  # before minutes of identification
     cal = identify(campaign, arm, model=args.model, max_nfev=args.max_nfev,
                    progress=True)
     centre = np.mean(list(campaign.locations.values()), axis=0)

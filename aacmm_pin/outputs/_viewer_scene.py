@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.analyses.validation import ValidationResult, validate
+from aacmm_pin.analyses.validation import ValidationResult, points_in_main_frame, validate
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import predict
 from aacmm_pin.effects.registry import check_extensions
@@ -79,11 +79,15 @@ class ModelResiduals:
     arm: Arm
     """Its arm."""
     nest: np.ndarray
-    """Zero position of each SPAT sample's R-Test nest, shape (N, 3)."""
+    """Zero position of each SPAT sample's R-Test nest, then each absolute point's measured
+    position (deviations are magnified about it), shape (N, 3), r-CS, m."""
     predicted: np.ndarray
-    """Predicted stylus centre of each SPAT sample, shape (N, 3)."""
+    """Predicted stylus centre of each SPAT sample, then of each absolute point (points.csv),
+    shape (N, 3), r-CS, m."""
     measured: np.ndarray
-    """Measured sphere centre (nest + R-Test displacement) of each SPAT sample, shape (N, 3)."""
+    """Measured sphere centre (nest + R-Test displacement) of each SPAT sample, then each absolute
+    point (mapped into the calibration's frame: :func:`~aacmm_pin.analyses.validation.points_in_main_frame`),
+    shape (N, 3), r-CS, m."""
     validation: ValidationResult | None
     """Length-bar errors, or None without a length bar."""
     sockets: dict[tuple[int, str], np.ndarray]
@@ -125,6 +129,12 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
         shift = np.array([offsets.get(str(int(m)), [0.0, 0.0, 0.0]) for m in spat.location]) * 1e-6
         measured = (measured_positions(campaign) + shift - trans) @ rot
         predicted = predict(arm, params, spat.q, Samples.of_log(arm, spat))
+    if campaign.points is not None:  # what a points fit fitted: the points after the SPATs
+        pred_pt, meas_pt, _ = points_in_main_frame(arm, params, campaign)
+        meas_pt = (meas_pt - trans) @ rot
+        nest = np.vstack([nest, meas_pt])
+        measured = np.vstack([measured, meas_pt])
+        predicted = np.vstack([predicted, (pred_pt - trans) @ rot])
     validation, sockets = None, {}
     bar = campaign.lengthbar
     if bar is not None and campaign.bar:
