@@ -326,3 +326,11 @@ def test_calibrated_urdf_keeps_mesh_paths_valid(tmp_path, small_cal):
                                load_meshes=False, build_scene_graph=False)
     handler = robot._filename_handler
     assert all(Path(handler(n)).is_file() for n in (names[0], names[1], names[3]))
+
+
+def test_a_refused_run_leaves_no_folders_behind(tmp_path):
+    """identify of a missing campaign into new/sub/cal: exit 2, and new/ is not left behind."""
+    status, err = run_cli(["identify", str(tmp_path / "missing"), "--out",
+                           str(tmp_path / "new" / "sub" / "cal")])
+    assert status == 2 and str(tmp_path / "missing") in err
+    assert list(tmp_path.iterdir()) == []

@@ -154,6 +154,7 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
             _HELD[key] -= 1
         return
     check_output(target, force, inputs, folder)  # a file on the way: before creating folders
+    created = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]
     try:
         lock.parent.mkdir(parents=True, exist_ok=True)
         fd = _lock(lock, target)
@@ -170,6 +171,11 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
         except OSError:
             pass
         os.close(fd)
+        for made in created if not target.exists() else []:  # nothing written: no empty folders
+            try:
+                made.rmdir()
+            except OSError:
+                break
 
 
 def _lock(lock: Path, target: Path) -> int:
