@@ -296,9 +296,10 @@ endsolid t
 """
 
 
-def test_calibrated_urdf_keeps_mesh_paths_valid(tmp_path, small_cal):
+def test_calibrated_urdf_keeps_mesh_paths_valid(tmp_path, small_sim, small_cal):
     """An arm with relative mesh paths: calibrated.urdf reaches the same files from its folder;
-    package:// and absolute paths are left as written; yourdfpy loads the meshes."""
+    package:// and absolute paths are left as written; yourdfpy finds the meshes and view draws
+    them (on main: "Mesh meshes/a.stl could not be found")."""
     yourdfpy = pytest.importorskip("yourdfpy")
     arm_dir = tmp_path / "arm" / "urdf"
     (tmp_path / "arm" / "meshes").mkdir(parents=True)
@@ -326,6 +327,11 @@ def test_calibrated_urdf_keeps_mesh_paths_valid(tmp_path, small_cal):
                                load_meshes=False, build_scene_graph=False)
     handler = robot._filename_handler
     assert all(Path(handler(n)).is_file() for n in (names[0], names[1], names[3]))
+    ap.write_campaign(small_sim.campaign, tmp_path / "camp")
+    written = written.replace('"package://pkg/c.stl"', f'"{names[3]}"')  # no package here
+    (tmp_path / "results" / "cal" / "calibrated.urdf").write_text(written)
+    page = ap.view(tmp_path / "results" / "cal", tmp_path / "camp", html=tmp_path / "v.html").html
+    assert page is not None and page.stat().st_size > 100_000
 
 
 def test_a_refused_run_leaves_no_folders_behind(tmp_path):

@@ -155,11 +155,9 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
         return
     check_output(target, force, inputs, folder)  # a file on the way: before creating folders
     created = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]
-    try:
+    with named_os_error(target, lock.parent):  # a read-only folder: named by the output
         lock.parent.mkdir(parents=True, exist_ok=True)
         fd = _lock(lock, target)
-    except OSError as exc:
-        raise OSError(exc.errno, exc.strerror, str(target)) from None
     _HELD[key] = 1
     try:
         check_output(target, force, inputs, folder)  # what the lock's holder may have written

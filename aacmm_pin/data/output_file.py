@@ -36,8 +36,9 @@ def output_file(target: str | Path, force: bool = False, inputs: Iterable[str | 
     """
     target = Path(target)
     with claim_output(target, force, inputs, folder=False):
-        fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
-                                    dir=target.absolute().parent)
+        with named_os_error(target, target.absolute().parent):
+            fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+                                        dir=target.absolute().parent)
         os.close(fd)
         tmp = Path(name)
         try:

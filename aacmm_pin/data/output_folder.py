@@ -81,7 +81,8 @@ def output_folder(target: str | Path, force: bool = False, inputs: Iterable[str 
     target = Path(target)
     with claim_output(target, force, inputs, folder=True):
         parent = target.absolute().parent
-        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent))
+        with named_os_error(target, parent):
+            tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent))
         try:
             with named_os_error(target, tmp):
                 yield tmp
