@@ -11,14 +11,17 @@ unseen. The lock file is removed when the claim ends (a killed run leaves it; th
 from __future__ import annotations
 
 import errno
-import fcntl
 import os
+import sys
 import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from aacmm_pin.errors import AacmmError
+
+if sys.platform != "win32":
+    import fcntl
 
 _HELD: dict[tuple[str, int], int] = {}
 """(lock file, thread) -> depth of the claims this process holds (a writer inside a command's claim)."""
@@ -164,11 +167,14 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
         yield target
     finally:
         del _HELD[key]
+        if sys.platform == "win32":  # an open file cannot be removed there
+            os.close(fd)
         try:
-            lock.unlink()
+            lock.unlink()  # while locked (POSIX): a run waiting on it takes a new one
         except OSError:
             pass
-        os.close(fd)
+        if sys.platform != "win32":
+            os.close(fd)
         for made in created if not target.exists() else []:  # nothing written: no empty folders
             try:
                 made.rmdir()
@@ -176,8 +182,26 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
                 break
 
 
+def _busy(target: Path, holder: str) -> OutputExistsError:
+    """Return the error of an output another run holds (``holder``: its process id, if read)."""
+    return OutputExistsError(target, "another run is writing it"
+                             + (f" (process {holder})" if holder.isdigit() else "")
+                             + "; wait for it to end or choose another output")
+
+
 def _lock(lock: Path, target: Path) -> int:
-    """Create or open ``lock``, take its exclusive lock without waiting; return its descriptor."""
+    """Create or open ``lock``, take its exclusive lock without waiting; return its descriptor.
+
+    Without ``flock`` (Windows) the lock is the file's exclusive creation: a killed run's lock
+    file then stays until removed by hand.
+    """
+    if sys.platform == "win32":
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            raise _busy(target, lock.read_text("ascii", "replace").strip()) from None
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+        return fd
     while True:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         try:
@@ -187,9 +211,7 @@ def _lock(lock: Path, target: Path) -> int:
             os.close(fd)
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise
-            raise OutputExistsError(target, "another run is writing it"
-                                    + (f" (process {holder})" if holder.isdigit() else "")
-                                    + "; wait for it to end or choose another output") from None
+            raise _busy(target, holder) from None
         try:
             same = os.path.samestat(os.fstat(fd), os.stat(lock))
         except FileNotFoundError:  # its holder removed it as we opened it: take a new one
