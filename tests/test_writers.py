@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -340,3 +341,24 @@ def test_a_refused_run_leaves_no_folders_behind(tmp_path):
                            str(tmp_path / "new" / "sub" / "cal")])
     assert status == 2 and str(tmp_path / "missing") in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_pairs_of_identify_runs_started_together(tmp_path, small_sim):
+    """6 pairs of identify runs started together into one new --out (the issue: both exit 0 in 3
+    of 6 pairs): in every pair exactly one succeeds, and the other fails at once (before the
+    first has finished, not after doing all the work) with one line."""
+    camp = tmp_path / "camp"
+    ap.write_campaign(small_sim.campaign, camp)
+    for k in range(6):
+        out = tmp_path / f"cal{k}"
+        argv = [sys.executable, "-m", "aacmm_pin", "identify", str(camp), "--out", str(out)]
+        procs = [subprocess.Popen(argv, env=ENV, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.PIPE, text=True) for _ in range(2)]
+        order = []
+        while len(order) < 2:
+            order += [i for i, p in enumerate(procs) if i not in order and p.poll() is not None]
+            time.sleep(0.01)
+        done = [(procs[i].returncode, procs[i].communicate()[1]) for i in order]
+        assert [status for status, _ in done] == [2, 0], done  # the refused one ends first
+        assert str(out) in one_line(done[0][1]) and BUSY in done[0][1]
