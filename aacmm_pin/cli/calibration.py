@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 
 def _simulate(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.simulate import SimulationConfig
+
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     config = SimulationConfig(seed=args.seed, effects=effects,
                               samples_per_location=args.samples_per_location,
