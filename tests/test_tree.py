@@ -402,7 +402,8 @@ def test_predict_command_reads_joint_names_and_tools(tmp_path, torso, capsys):
     got = np.loadtxt(out, delimiter=",", skiprows=1, usecols=(-3, -2, -1)) * 1e-3
     np.testing.assert_allclose(got, kinematics.predict(torso, params, q, tool=tools), atol=1e-11)
     (tmp_path / "q.csv").write_text("\n".join(",".join(r[1:]) for r in [header, *rows]) + "\n")
-    assert cli.main(["predict", str(tmp_path), str(tmp_path / "q.csv"), "--out", str(out)]) == 2
+    assert cli.main(["predict", str(tmp_path), str(tmp_path / "q.csv"), "--out", str(out),
+                     "--force"]) == 2
     assert "q.csv:1: column 'tool': missing column" in capsys.readouterr().err
 
 

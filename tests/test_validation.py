@@ -142,7 +142,8 @@ def test_cli_validate_compares_the_scatter_with_report_json(small_sim: ap.Simula
     assert data["socket_scatter"]["ratio"] > data["socket_scatter"]["limit"]
     assert any(CAUSES in w for w in data["warnings"])
     (tmp_path / "cal" / "report.json").unlink()
-    assert main(["validate", str(tmp_path / "cal"), str(tmp_path / "camp"), "--json", str(out)]) == 0
+    assert main(["validate", str(tmp_path / "cal"), str(tmp_path / "camp"), "--json", str(out),
+                 "--force"]) == 0  # the file of the run above: replaced only when asked
     printed = capsys.readouterr().out
     assert printed.count("not compared with the calibration's accuracy") == 1
     assert CAUSES not in printed and json.loads(out.read_text())["socket_scatter"]["ratio"] is None

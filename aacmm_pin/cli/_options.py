@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -73,12 +73,19 @@ def out_option(default: Path, text: str) -> argparse.ArgumentParser:
     return p
 
 
-def force_option() -> argparse.ArgumentParser:
-    """``--force``: replace an existing, non-empty output folder (written whole or not at all)."""
+FORCE_FOLDER = ("replace the output folder if it exists and holds files (all of them are "
+                "removed); without it such a folder is refused")
+FORCE_FILE = "replace the output file if it exists; without it an existing file is refused"
+
+
+def force_option(text: str = FORCE_FOLDER) -> argparse.ArgumentParser:
+    """``--force``: replace an existing output (a folder or a file, written whole or not at all).
+
+    Without it an existing output is refused; with it too, an output that is one of the command's
+    inputs (:func:`aacmm_pin.data.output_claim.check_inputs`).
+    """
     p = _parent()
-    p.add_argument("--force", action="store_true",
-                   help="replace the output folder if it exists and holds files (all of them are "
-                        "removed); without it such a folder is refused")
+    p.add_argument("--force", action="store_true", help=text)
     return p
 
 
@@ -197,12 +204,27 @@ def load_effect_files(args: argparse.Namespace) -> list[str]:
     return [name for path in files for name in load_effect_file(path)]
 
 
-def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` as JSON to ``path`` (what ``--json FILE`` asks for), atomically.
+def write_json(path: Path, data: dict[str, Any], force: bool = False,
+               inputs: Sequence[str | Path] = ()) -> None:
+    """Write ``data`` as JSON to ``path`` (what ``--json FILE`` asks for), whole or not at all.
 
-    The text goes to a temporary file beside ``path`` first, then replaces ``path`` in one rename.
+    Through :func:`aacmm_pin.data.output_file.write_text_file`: an existing file is replaced only
+    with ``force``, never when it is one of ``inputs``.
     """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    from aacmm_pin.data.output_file import write_text_file
+
+    write_text_file(path, json.dumps(data, indent=2) + "\n", force, inputs)
+
+
+def claim_file(path: Path | None, force: bool, inputs: Sequence[str | Path] = ()
+               ) -> AbstractContextManager[Any]:
+    """Claim an optional output file (``--json``, ``--html``) at a command's start, before its work.
+
+    Returns :func:`aacmm_pin.data.output_claim.claim_output` of the file (refused at once when it
+    exists without ``force``, is an input, or another run writes it), or a no-op for None.
+    """
+    if path is None:
+        return nullcontext()
+    from aacmm_pin.data.output_claim import claim_output
+
+    return claim_output(path, force, inputs, folder=False)

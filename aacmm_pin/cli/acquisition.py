@@ -16,8 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from aacmm_pin.cli._options import (
+    FORCE_FILE,
     add_command,
     arm_option,
+    claim_file,
+    force_option,
     json_option,
     nest_option,
     positive,
@@ -96,17 +99,26 @@ def _fake_devices(args: argparse.Namespace) -> int:
     from aacmm_pin.model.arm import load_arm
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    try:
-        config = FakeConfig(
-            location=args.location, seed=args.seed, effects=effects, postures=args.postures,
-            rate=args.rate_hz, gauge_format=args.gauge_format, dwell=args.dwell_s,
-            garbage=args.garbage, checksum=args.checksum_errors, out_of_range=args.out_of_range,
-            timeouts=args.timeouts, silence=args.silence_s,
-            nest=read_nest(args.nest) if args.nest else Nest())
-        devices = FakeDevices(config, load_arm(args.arm))
-    except ValueError as exc:
-        print(f"aacmm-pin fake-devices: error: {exc}", file=sys.stderr)
-        return 2
+    with claim_file(args.json, args.force):  # refused before the devices start
+        try:
+            config = FakeConfig(
+                location=args.location, seed=args.seed, effects=effects, postures=args.postures,
+                rate=args.rate_hz, gauge_format=args.gauge_format, dwell=args.dwell_s,
+                garbage=args.garbage, checksum=args.checksum_errors,
+                out_of_range=args.out_of_range, timeouts=args.timeouts, silence=args.silence_s,
+                nest=read_nest(args.nest) if args.nest else Nest())
+            devices = FakeDevices(config, load_arm(args.arm))
+        except ValueError as exc:
+            print(f"aacmm-pin fake-devices: error: {exc}", file=sys.stderr)
+            return 2
+        _play(args, config, devices, effects)
+    counts = ", ".join(f"{k} {v}" for k, v in devices.injected.items())
+    print(f"fake-devices: stopped; {devices.lines_sent} arm lines; injected: {counts}", flush=True)
+    return 0
+
+
+def _play(args: argparse.Namespace, config: Any, devices: Any, effects: tuple[str, ...]) -> None:
+    """Run the fake devices until stopped; write ``--json`` at the start and at the end."""
     stop = threading.Event()
     with _stop_on_signals(stop), devices:
         print(f"fake-devices: location {config.location} of a simulated campaign (seed "
@@ -119,13 +131,10 @@ def _fake_devices(args: argparse.Namespace) -> int:
         print("zero_mm " + ",".join(f"{v * 1e3:.6f}" for v in devices.zero))
         print("run: aacmm-pin acquire CAMPAIGN " + " ".join(devices.acquire_args()), flush=True)
         if args.json:
-            write_json(args.json, devices.describe())
+            write_json(args.json, devices.describe(), args.force)
         devices.run(args.seconds, stop)
-    if args.json:
-        write_json(args.json, devices.describe())
-    counts = ", ".join(f"{k} {v}" for k, v in devices.injected.items())
-    print(f"fake-devices: stopped; {devices.lines_sent} arm lines; injected: {counts}", flush=True)
-    return 0
+    if args.json:  # its own file, still claimed: replaced
+        write_json(args.json, devices.describe(), force=True)
 
 
 def add_parsers(subparsers: Any) -> None:
@@ -184,7 +193,8 @@ def add_parsers(subparsers: Any) -> None:
                     "their paths and the acquire command that reads them, run for --seconds.",
         parents=[seed_option("seed of the simulated campaign"), arm_option(),
                  nest_option("nest file (default: orthogonal)"),
-                 json_option("the paths, played postures/readings and injected faults")])
+                 json_option("the paths, played postures/readings and injected faults"),
+                 force_option(FORCE_FILE)])
     p.add_argument("--location", type=int, default=1, help="R-Test location to play (1-4)")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS),
                    help=f"comma-separated simulator effects from {', '.join(SIMULATOR_EFFECTS)}")

@@ -12,8 +12,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from aacmm_pin.cli._options import (
+    FORCE_FILE,
     add_command,
     arm_option,
+    claim_file,
     effects_file_option,
     force_option,
     json_option,
@@ -25,7 +27,9 @@ from aacmm_pin.cli._options import (
     out_option,
     positive,
     seed_option,
+    write_json,
 )
+from aacmm_pin.data.output_claim import claim_output, input_paths
 from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
 
@@ -34,16 +38,21 @@ if TYPE_CHECKING:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign, write_simulation
-    from aacmm_pin.data.output_folder import check_output
-    from aacmm_pin.model.arm import load_arm
-    from aacmm_pin.progress import phase
+    from aacmm_pin.analyses.simulate import SimulationConfig
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     config = SimulationConfig(seed=args.seed, effects=effects,
                               samples_per_location=args.samples_per_location,
                               samples_per_socket=args.samples_per_socket, points=args.points)
-    check_output(args.out, args.force)  # before the work, not after it
+    with claim_output(args.out, args.force, input_paths(_arm_file(args.arm))):
+        return _simulate_into(args, config, effects)  # the folder held from before the work
+
+
+def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ...]) -> int:
+    from aacmm_pin.analyses.simulate import simulate_campaign, write_simulation
+    from aacmm_pin.model.arm import load_arm
+    from aacmm_pin.progress import phase
+
     if config.points:
         print(f"simulating {config.points} instrument points (seed {config.seed}) ...", flush=True)
     else:
@@ -63,12 +72,19 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _predict(args: argparse.Namespace) -> int:
+    inputs = input_paths(args.readouts, _arm_file(args.arm), calibrations=[args.params])
+    with claim_output(args.out, args.force, inputs, folder=False):  # before reading anything
+        return _predict_into(args, inputs)
+
+
+def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     from aacmm_pin.data.campaign import (
         read_id_columns,
         read_sample_columns,
         read_tool_column,
         write_points,
     )
+    from aacmm_pin.data.output_file import output_file
     from aacmm_pin.effects.calibrated import predict
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.model.samples import Samples
@@ -84,22 +100,26 @@ def _predict(args: argparse.Namespace) -> int:
     samples = Samples(arm, q, columns=columns, files=(Path(args.readouts).name,))
     points = predict(arm, params, q, samples, tool=tool)
     keep = read_id_columns(args.readouts, arm)
-    write_points(args.out, points, keep)
+    with output_file(args.out, args.force, inputs) as tmp:
+        write_points(tmp, points, keep)  # id cells made safe for spreadsheets
     kept = f" after the input's {', '.join(keep)} columns" if keep else ""
     print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS){kept} to {args.out}")
     return 0
 
 
 def _identify(args: argparse.Namespace) -> int:
+    with claim_output(args.out, args.force, _campaign_inputs(args)):
+        return _identify_into(args)  # the folder held from before the work
+
+
+def _identify_into(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.data.output_folder import check_output
     from aacmm_pin.effects.registry import term_from_key
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
-    check_output(args.out, args.force)
     terms = tuple(term_from_key(k.strip()) for k in (args.terms or "").split(",") if k.strip())
     phase("loading the arm")
     arm = load_arm(args.arm)
@@ -151,14 +171,17 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
 
 
 def _discover(args: argparse.Namespace) -> int:
+    with claim_output(args.out, args.force, _campaign_inputs(args)):
+        return _discover_into(args)  # the folder held from before the work
+
+
+def _discover_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.discovery import discover
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
-    from aacmm_pin.data.output_folder import check_output
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
 
-    check_output(args.out, args.force)
     arm = load_arm(args.arm)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
                                                  if e.strip()]
@@ -198,8 +221,12 @@ def _discover(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    import json
+    inputs = input_paths(calibrations=[args.caldir], campaigns=[args.campaign])
+    with claim_file(args.json, args.force, inputs):  # before the work, not after it
+        return _validate_into(args, inputs)
 
+
+def _validate_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     from aacmm_pin.analyses.validation import validate, validate_points
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.model.arm import load_arm
@@ -225,24 +252,28 @@ def _validate(args: argparse.Namespace) -> int:
         print(points.table())
         data["points"] = points.to_dict()
     if args.json:
-        Path(args.json).write_text(json.dumps(data, indent=2) + "\n")
+        write_json(args.json, data, args.force, inputs)
     return 0
 
 
 def _uncertainty(args: argparse.Namespace) -> int:
+    with claim_output(args.out, args.force, _campaign_inputs(args)):
+        return _uncertainty_into(args)  # the folder held from before the work
+
+
+def _uncertainty_into(args: argparse.Namespace) -> int:
     import json
 
     import numpy as np
 
     from aacmm_pin.analyses.uncertainty import monte_carlo, uncertainty_report
     from aacmm_pin.data.campaign import read_campaign
-    from aacmm_pin.data.output_folder import check_output, output_folder
+    from aacmm_pin.data.output_folder import output_folder
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
     from aacmm_pin.outputs.plots import plot_encoder_maps
 
-    check_output(args.out, args.force)
     arm = load_arm(args.arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
@@ -290,8 +321,12 @@ def _uncertainty(args: argparse.Namespace) -> int:
 
 
 def _plan(args: argparse.Namespace) -> int:
-    import json
+    inputs = _campaign_inputs(args)
+    with claim_file(args.json, args.force, inputs):  # before the minutes of work, not after them
+        return _plan_into(args, inputs)
 
+
+def _plan_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     import numpy as np
 
     from aacmm_pin.analyses.planning import check_plannable, plan
@@ -313,15 +348,25 @@ def _plan(args: argparse.Namespace) -> int:
                   progress=True)
     print(result.table(args.top))
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+        write_json(args.json, result.to_dict(), args.force, inputs)
     return 0
 
 
 def _demo(args: argparse.Namespace) -> int:
     from aacmm_pin.outputs.demo import run_demo
 
-    run_demo(args.out, seed=args.seed)
+    run_demo(args.out, seed=args.seed, force=args.force)
     return 0
+
+
+def _campaign_inputs(args: argparse.Namespace) -> list[Path]:
+    """Return what a command of a campaign and ``--arm`` reads (kept from its outputs)."""
+    return input_paths(_arm_file(args.arm), campaigns=[args.campaign])
+
+
+def _arm_file(arm: str | None) -> str | None:
+    """Return ``--arm`` if it names a file (a URDF path, read), None for an embedded arm's name."""
+    return arm if arm is not None and Path(arm).is_file() else None
 
 
 def _axes(args: argparse.Namespace) -> int:
@@ -384,7 +429,7 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p = add_command(subparsers, "predict", "stylus centres (r-CS, mm) for encoder readouts",
                     parents=[out_option(Path("points.csv"), "output CSV"),
                              arm_option(None, "override the URDF named in the parameters"),
-                             effects_file_option()])
+                             effects_file_option(), force_option(FORCE_FILE)])
     p.add_argument("params", type=Path, help="parameters.json or a calibration folder")
     p.add_argument("readouts", type=Path,
                    help="CSV with columns q1_deg..qn_deg (or one <joint>_deg per axis)")
@@ -455,7 +500,8 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
 def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
-                    parents=[json_option("the errors"), effects_file_option()])
+                    parents=[json_option("the errors"), effects_file_option(),
+                             force_option(FORCE_FILE)])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")
     p.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
     p.set_defaults(handler=_validate)
@@ -480,7 +526,8 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
                     parents=[model_option(("proposed",), "the model whose uncertainty is planned "
                                                          "for (DH errors and encoder maps)"),
                              arm, seed_option("seed of the candidate postures' IK starts"),
-                             json_option("the plan"), max_nfev_option()])
+                             json_option("the plan"), max_nfev_option(),
+                             force_option(FORCE_FILE)])
     p.add_argument("campaign", type=Path, help="campaign folder")
     p.add_argument("--grid", type=positive(int), default=3, help="candidate nests per side")
     p.add_argument("--spacing-mm", type=positive(zero=True), default=260.0,
@@ -494,5 +541,5 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
     p = add_command(subparsers, "demo", "the main job: simulate, identify the paper's 3 models, "
                                         "validate, figures",
                     parents=[out_option(Path("aacmm-pin-demo"), "output folder"),
-                             seed_option("seed of the simulated campaign")])
+                             seed_option("seed of the simulated campaign"), force_option()])
     p.set_defaults(handler=_demo)

@@ -10,9 +10,13 @@ from pathlib import Path
 from typing import Any
 
 from aacmm_pin.cli._options import (
+    FORCE_FILE,
+    Handler,
     add_command,
     arm_option,
+    claim_file,
     effects_file_option,
+    force_option,
     json_option,
     no_rtest_option,
     params_option,
@@ -51,8 +55,27 @@ def _points(args: argparse.Namespace) -> tuple[Any, Any]:
 def _finish(args: argparse.Namespace, text: str, data: dict[str, Any]) -> int:
     print(text)
     if args.json:
-        write_json(args.json, data)
+        write_json(args.json, data, args.force, _inputs(args))
     return 0
+
+
+def _inputs(args: argparse.Namespace) -> list[Path]:
+    """Return the files and folders the figure reads (kept from ``--json``)."""
+    from aacmm_pin.data.output_claim import input_paths
+
+    arm = args.arm if args.arm is not None and Path(args.arm).is_file() else None
+    return input_paths(getattr(args, "points", None), arm,
+                       campaigns=[getattr(args, "campaign", None)], calibrations=[args.params])
+
+
+def _claiming(handler: Handler) -> Handler:
+    """Return ``handler`` run with its ``--json`` file claimed first (refused before any work)."""
+    def run(args: argparse.Namespace) -> int:
+        with claim_file(args.json, args.force, _inputs(args)):
+            return handler(args)
+
+    run.__doc__ = handler.__doc__
+    return run
 
 
 def _spat(args: argparse.Namespace) -> int:
@@ -129,13 +152,13 @@ def add_parsers(subparsers: Any) -> None:
     common = [params_option(), effects_file_option(),
               arm_option(None, "URDF path or embedded arm name (default: the one the parameters "
                                "name, else aacmm7)"),
-              json_option("the figures")]
+              json_option("the figures"), force_option(FORCE_FILE)]
 
     q = add_command(sub, "spat", "point articulation figures of a SPAT log, per location",
                     parents=[*common, no_rtest_option("do not remove the R-Test displacement "
                                                       "(conventional SPAT)")])
     q.add_argument("campaign", type=Path, help="campaign folder with spat.csv")
-    q.set_defaults(handler=_spat)
+    q.set_defaults(handler=_claiming(_spat))
 
     points_help = ("CSV with x_mm,y_mm,z_mm (points) or q1_deg..qn_deg (readouts, with --params); "
                    "optional column group")
@@ -144,14 +167,14 @@ def add_parsers(subparsers: Any) -> None:
     q.add_argument("points", type=Path, help=points_help)
     q.add_argument("--diameter-mm", type=float, required=True,
                    help="calibrated sphere diameter, mm")
-    q.set_defaults(handler=_sphere)
+    q.set_defaults(handler=_claiming(_sphere))
 
     q = add_command(sub, "ldia", "L_Dia from 5 x 5 articulated points on a sphere",
                     parents=common)
     q.add_argument("points", type=Path, help=points_help + " (else consecutive groups)")
     q.add_argument("--group-size", type=int, default=5, help="points per articulation")
-    q.set_defaults(handler=_ldia)
+    q.set_defaults(handler=_claiming(_ldia))
 
     q = add_command(sub, "euni", "E_UNI from the length bar", parents=common)
     q.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
-    q.set_defaults(handler=_euni)
+    q.set_defaults(handler=_claiming(_euni))

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from aacmm_pin.cli._options import add_command, effects_file_option
+from aacmm_pin.cli._options import FORCE_FILE, add_command, effects_file_option, force_option
 
 
 def _view(args: argparse.Namespace) -> int:
@@ -15,7 +15,8 @@ def _view(args: argparse.Namespace) -> int:
     from aacmm_pin.outputs.viewer import view
 
     result = view(args.caldir, args.campaign, html=args.html, open_browser=args.open,
-                  compare=args.compare, location=args.location, scale=args.scale)
+                  compare=args.compare, location=args.location, scale=args.scale,
+                  force=args.force)
     summary = ", ".join(f"{m['label']} RMS {m['rms_um']:.2f} um" for m in result.scene.info["models"])
     if result.html is not None:
         print(f"wrote {result.html}: {summary} (deviations magnified {result.scene.scale:g}x)")
@@ -43,7 +44,7 @@ def add_parsers(subparsers: Any) -> None:
     """
     p = add_command(subparsers, "view", "MeshCat view of the arm, the campaign and the residuals "
                                         "(live on localhost, or --html FILE)",
-                    parents=[effects_file_option()])
+                    parents=[effects_file_option(), force_option(FORCE_FILE)])
     p.add_argument("caldir", type=Path, help="calibration folder or parameters.json (shown first)")
     p.add_argument("campaign", type=Path, help="campaign folder")
     p.add_argument("--html", type=Path, default=None, metavar="FILE",

@@ -55,6 +55,7 @@ from aacmm_pin.data.logs import (
     StatedNoise,
     read_noise,
 )
+from aacmm_pin.data.spreadsheet import neutralise_formulas
 from aacmm_pin.errors import CampaignFormatError, Problem
 
 __all__ = ["MAX_ANGLE_DEG", "MAX_COLUMNS", "MAX_FILE_BYTES", "NOISE_FILE", "ArmNames", "Campaign",
@@ -443,7 +444,9 @@ def write_points(path: str | Path, points: np.ndarray,
     """Write points, shape (N, 3) in m, to a CSV file with columns x_mm,y_mm,z_mm (9 decimals).
 
     ``keep``: further columns (name -> N cells, as read) written first, e.g. the id columns of
-    the readouts the points were predicted from (:func:`read_id_columns`).
+    the readouts the points were predicted from (:func:`read_id_columns`); a cell a spreadsheet
+    would run as a formula (``=...``, ``@...``) gets a ``'`` in front
+    (:func:`~aacmm_pin.data.spreadsheet.neutralise_formula`; numbers are left as they are).
 
     Raises:
         ValueError: if ``points`` does not have shape (N, 3) or a kept column another length.
@@ -454,6 +457,7 @@ def write_points(path: str | Path, points: np.ndarray,
     keep = dict(keep or {})
     if bad := [k for k, v in keep.items() if len(v) != len(points)]:
         raise ValueError(f"keep: columns {bad} do not have {len(points)} cells")
+    keep = {name: neutralise_formulas(cells) for name, cells in keep.items()}
     _write_csv(Path(path), {**keep, **_mm(_XYZ["loc"], points)})
 
 

@@ -5,7 +5,10 @@ uncertainty study) writes it into a temporary folder beside the target, then put
 one rename (Linux ``renameat2(RENAME_EXCHANGE)`` swaps it with an existing folder atomically; else
 the old folder is renamed aside first). A process killed at any moment leaves the old folder or
 the new one, never a mix (at worst a hidden ``.<name>.*.tmp`` folder beside it). An existing,
-non-empty folder is replaced only when asked (``force``, the CLI's ``--force``).
+non-empty folder is replaced only when asked (``force``, the CLI's ``--force``), never when it is
+or holds one of the command's inputs; the folder is claimed for as long as the block runs
+(:func:`~aacmm_pin.data.output_claim.claim_output`: a second run into it fails at once). An
+operating-system error while writing (a full disk) names the folder; the old one stays.
 """
 
 from __future__ import annotations
@@ -15,22 +18,22 @@ import ctypes.util
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.data.output_claim import (
+    OutputExistsError,
+    check_output,
+    claim_output,
+    named_os_error,
+    umask,
+)
+
+__all__ = ["OutputExistsError", "check_output", "claim_output", "output_folder"]
 
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
-
-
-class OutputExistsError(AacmmError):
-    """The output folder exists and holds files; it is replaced only with ``force``."""
-
-    def __init__(self, path: Path, reason: str):
-        self.path = path
-        super().__init__(f"{path}: {reason}")
 
 
 def _exchange(a: Path, b: Path) -> bool:
@@ -59,63 +62,45 @@ def _fsync_tree(folder: Path) -> None:
             os.close(fd)
 
 
-def check_output(target: str | Path, force: bool = False) -> Path:
-    """Check that ``target`` can be written: absent, an empty folder, or ``force``; return it.
-
-    Raises:
-        OutputExistsError: if it is a non-empty folder (and not ``force``), not a folder, or a
-            file stands where one of its parent folders should be.
-    """
-    target = Path(target)
-    for above in target.absolute().parents:  # a file on the way: say so before any work
-        if above.exists():
-            if not above.is_dir():
-                raise OutputExistsError(above, "is a file, not a folder; choose another output")
-            break
-    if target.exists() or target.is_symlink():
-        if not target.is_dir() or target.is_symlink():
-            raise OutputExistsError(target, "exists and is not a folder; choose another output")
-        if not force and any(target.iterdir()):
-            raise OutputExistsError(target, "exists and is not empty; give --force (force=True) "
-                                            "to replace it whole, or choose another output")
-    return target
-
-
 @contextmanager
-def output_folder(target: str | Path, force: bool = False) -> Iterator[Path]:
+def output_folder(target: str | Path, force: bool = False, inputs: Iterable[str | Path] = ()
+                  ) -> Iterator[Path]:
     """Yield a temporary folder to write into; on success it replaces ``target`` whole.
 
     Args:
         target: the output folder.
         force: replace an existing, non-empty folder (its files are all removed).
+        inputs: files and folders the command reads: none may be the target or inside it.
 
     Raises:
-        OutputExistsError: see :func:`check_output` (checked before anything is written).
-        OSError: if the parent folder cannot be written (nothing is left behind).
+        OutputExistsError: see :func:`~aacmm_pin.data.output_claim.check_output` (checked
+            before anything is written), or another run holds the folder.
+        OSError: if the parent folder cannot be written or a write fails (full disk), naming
+            ``target``; nothing is left behind and the old folder is intact.
     """
-    target = check_output(target, force)
-    parent = target.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent))
-    try:
-        yield tmp
-        _fsync_tree(tmp)
-        tmp.chmod(0o755 & ~_umask())
-        if target.exists() and _exchange(tmp, target):
-            pass  # tmp now holds the old folder
-        elif target.exists():  # two renames: a kill between them leaves the old one aside
-            old = parent / f"{tmp.name[:-4]}.old"
-            os.replace(target, old)
-            os.replace(tmp, target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    target = Path(target)
+    with claim_output(target, force, inputs, folder=True):
+        parent = target.absolute().parent
+        with named_os_error(target, parent):
+            tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent))
+        try:
+            with named_os_error(target, tmp):
+                yield tmp
+                _fsync_tree(tmp)
+                tmp.chmod(0o755 & ~umask())
+                _put_in_place(tmp, target)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _umask() -> int:
-    """Return the process's umask."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+def _put_in_place(tmp: Path, target: Path) -> None:
+    """Replace ``target`` by ``tmp`` (``tmp`` then holds the old folder, if any, or is gone)."""
+    if target.exists() and _exchange(tmp, target):
+        return  # tmp now holds the old folder
+    if target.exists():  # two renames: a kill between them leaves the old one aside
+        old = target.absolute().parent / f"{tmp.name[:-4]}.old"
+        os.replace(target, old)
+        os.replace(tmp, target)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, target)

@@ -14,6 +14,7 @@ from pathlib import Path
 from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign, write_simulation
 from aacmm_pin.analyses.validation import ValidationResult, validate
 from aacmm_pin.data.campaign import read_campaign
+from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.model.arm import load_arm
 from aacmm_pin.outputs.export import write_calibration
@@ -24,29 +25,46 @@ MODELS = (("dh_rtest", "DH only, R-Test", "dh", True),
 """(folder, label, model, use_rtest) of the paper's three models."""
 
 
-def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, ValidationResult]:
-    """Run the demo, print its table and return each model's validation (keyed by folder name)."""
+def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0, force: bool = False
+             ) -> dict[str, ValidationResult]:
+    """Run the demo, print its table and return each model's validation (keyed by folder name).
+
+    ``out`` is written whole (:func:`~aacmm_pin.data.output_folder.output_folder`): an existing
+    folder with files is replaced only with ``force`` (the CLI's ``--force``), as every output.
+
+    Raises:
+        OutputExistsError: if ``out`` holds files and not ``force`` (checked before any work).
+    """
+    tic = time.perf_counter()
+    out = Path(out)
+    with output_folder(out, force) as tmp:  # claimed now; in place once all is written
+        results = _run_demo(out, tmp, seed)
+    print(f"figures: {out}/fig5_rtest_displacement.png, fig6_encoder_maps.png, "
+          f"fig9_length_errors.png ({time.perf_counter() - tic:.0f} s in all)")
+    return results
+
+
+def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
+    """Write the demo's files into ``tmp`` (which becomes ``out``: the paths printed)."""
     from aacmm_pin.outputs.plots import plot_encoder_maps, plot_length_errors, plot_rtest_displacement
     from aacmm_pin.progress import phase
 
-    tic = time.perf_counter()
-    out = Path(out)
     arm = load_arm()
     print(f"aacmm-pin demo: simulating a campaign on the default arm (seed {seed}) ...", flush=True)
     phase("simulating")
     sim = simulate_campaign(arm, SimulationConfig(seed=seed))
-    write_simulation(sim, out / "campaign", force=True)  # the demo redoes its own output
-    campaign = read_campaign(out / "campaign")  # what a user has: the files, not the truth
+    write_simulation(sim, tmp / "campaign")
+    campaign = read_campaign(tmp / "campaign")  # what a user has: the files, not the truth
     results: dict[str, ValidationResult] = {}
     calibrations = {}
     for folder, label, model, use_rtest in MODELS:
         print(f"  identifying {label} ...", flush=True)  # a line per step, on a terminal or not
         phase(f"identifying {label}")
         cal = identify(campaign, arm, model=model, use_rtest=use_rtest, progress=True)
-        write_calibration(cal, arm, out / folder, force=True)
+        write_calibration(cal, arm, tmp / folder)
         results[folder] = validate(arm, cal.parameters, campaign, cal.accuracy)
         calibrations[folder] = cal
-        (out / folder / "validation.json").write_text(
+        (tmp / folder / "validation.json").write_text(
             json.dumps(results[folder].to_dict(), indent=2) + "\n")
     labels = {folder: label for folder, label, _, _ in MODELS}
     print(_table(results, labels))
@@ -58,18 +76,16 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0) -> dict[str, Val
               f"-> {out / folder}")
     print("  writing figures 5, 6 and 9 ...", flush=True)
     phase("writing figures")
-    plot_rtest_displacement(campaign, out / "fig5_rtest_displacement.png")
+    plot_rtest_displacement(campaign, tmp / "fig5_rtest_displacement.png")
     best = calibrations["proposed_rtest"]
     truth = sim.truth
     plot_encoder_maps({a: best.parameters.map(a).values for a in best.node_identifiable},
-                      out / "fig6_encoder_maps.png", identifiable=best.node_identifiable,
+                      tmp / "fig6_encoder_maps.png", identifiable=best.node_identifiable,
                       std={a: best.node_std(a) for a in best.node_identifiable},
                       truth={a: best.equivalent(truth)[0].map(a).values
                              for a in best.node_identifiable})
     plot_length_errors({labels[k]: v for k, v in results.items()},
-                       out / "fig9_length_errors.png")
-    print(f"figures: {out}/fig5_rtest_displacement.png, fig6_encoder_maps.png, "
-          f"fig9_length_errors.png ({time.perf_counter() - tic:.0f} s in all)")
+                       tmp / "fig9_length_errors.png")
     return results
 
 

@@ -28,6 +28,7 @@ from aacmm_pin.outputs.calibration_folder import (
     CalibrationFolder,
     read_calibration,
 )
+from aacmm_pin.outputs.urdf_resources import rebase_resources
 from aacmm_pin.units import ARCSEC
 
 __all__ = ["CalibrationFolder", "read_calibration", "write_calibration", "write_calibration_files",
@@ -73,11 +74,14 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
     """Write the files of a calibration folder into an existing ``folder`` (not atomically).
 
     ``parameters.json`` names the plugins of the extensions' effects that are not built in
-    (:func:`aacmm_pin.effects.registry.write_parameters`).
+    (:func:`aacmm_pin.effects.registry.write_parameters`). ``calibrated.urdf``'s relative mesh
+    and texture paths are rewritten to hold from ``folder`` (or a folder beside it, as the
+    temporary folder of :func:`write_calibration` is: :mod:`aacmm_pin.outputs.urdf_resources`).
     """
     params = cal.parameters
-    (folder / URDF_FILE).write_text(arm.urdf_string(params.dh, tools=params.tool_vectors(arm)),
-                                    encoding="utf-8")
+    tree = arm.urdf_tree(params.dh, tools=params.tool_vectors(arm))
+    rebase_resources(tree.root, Path(str(arm.source)).parent, folder)  # meshes found from here
+    (folder / URDF_FILE).write_text(tree.xml(), encoding="utf-8")
     if sizes_path(arm.source).is_file():
         write_sizes(arm.sizes, sizes_path(folder / URDF_FILE))
     write_parameters(params.replace(arm=URDF_FILE), folder / PARAMETERS_FILE)

@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from aacmm_pin.data.campaign import Campaign, read_campaign
+from aacmm_pin.data.output_claim import claim_output, input_paths
+from aacmm_pin.data.output_file import write_text_file
 from aacmm_pin.model.parameters import Parameters
 
 if TYPE_CHECKING:
@@ -101,7 +103,7 @@ class View:
 
 def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str | Path | None = None,
          open_browser: bool = False, compare: Sequence[Source] = (), location: int | None = None,
-         scale: float | None = None, max_postures: int = 200) -> View:
+         scale: float | None = None, max_postures: int = 200, force: bool = False) -> View:
     """Show a calibration's residuals on its campaign in MeshCat, live or as one HTML file.
 
     Args:
@@ -115,15 +117,37 @@ def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str
         scale: magnification of the deviations from each R-Test nest (1000: 1 µm drawn as 1 mm);
             None: the first calibration's RMS residual drawn ~20 mm long (1-2-5 steps).
         max_postures: most postures in the animation (evenly subsampled beyond).
+        force: replace an existing ``html`` file (claimed before any work; never an input).
 
     Returns:
         The view; with a live server, call :meth:`View.close` (or use ``with``) to stop it.
 
     Raises:
+        OutputExistsError: if ``html`` exists and not ``force``, or is one of the inputs.
         FileFormatError: for an unreadable calibration.
         CampaignFormatError: for a bad campaign folder.
         ValueError: for an unknown location or a non-positive scale.
     """
+    if html is not None:  # the file claimed before the work (and checked against the inputs)
+        inputs = input_paths(
+            campaigns=[campaign if isinstance(campaign, (str, Path)) else None],
+            calibrations=[s for s in (caldir_or_params, *compare) if isinstance(s, (str, Path))])
+        with claim_output(html, force, inputs, folder=False):
+            scene = _scene(caldir_or_params, campaign, compare, location, scale, max_postures)
+            path = write_html(scene, html, force, inputs)
+        if open_browser:
+            webbrowser.open(path.resolve().as_uri())
+        return View(scene, html=path)
+    scene = _scene(caldir_or_params, campaign, compare, location, scale, max_postures)
+    vis = serve(scene)
+    if open_browser:
+        webbrowser.open(str(vis.url()), new=2)
+    return View(scene, visualizer=vis)
+
+
+def _scene(caldir_or_params: Source, campaign: Campaign | str | Path, compare: Sequence[Source],
+           location: int | None, scale: float | None, max_postures: int) -> Scene:
+    """Return the scene of :func:`view` (its arguments)."""
     from aacmm_pin.outputs._viewer_scene import build_scene, model_residuals
 
     if not isinstance(campaign, Campaign):
@@ -134,16 +158,7 @@ def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str
         seen[m.label] = seen.get(m.label, 0) + 1
         if seen[m.label] > 1:
             models[i] = replace(m, label=f"{m.label}_{seen[m.label]}")
-    scene = build_scene(models, campaign, scale=scale, location=location, max_postures=max_postures)
-    if html is not None:
-        path = write_html(scene, html)
-        if open_browser:
-            webbrowser.open(path.resolve().as_uri())
-        return View(scene, html=path)
-    vis = serve(scene)
-    if open_browser:
-        webbrowser.open(str(vis.url()), new=2)
-    return View(scene, visualizer=vis)
+    return build_scene(models, campaign, scale=scale, location=location, max_postures=max_postures)
 
 
 def serve(scene: Scene) -> Any:
@@ -203,10 +218,12 @@ def static_html(scene: Scene, title: str = "aacmm_pin viewer") -> str:
     return _PAGE.format(title=title, viewer_js=viewer_js, info=info, commands=commands)
 
 
-def write_html(scene: Scene, path: str | Path) -> Path:
-    """Write :func:`static_html` to ``path`` (parent folders created) and return the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(static_html(scene, title=f"aacmm_pin: {', '.join(m.label for m in scene.models)}"),
-                    encoding="utf-8")
-    return path
+def write_html(scene: Scene, path: str | Path, force: bool = False,
+               inputs: Sequence[str | Path] = ()) -> Path:
+    """Write :func:`static_html` to ``path`` (parent folders created) and return the path.
+
+    Whole or not at all (:func:`~aacmm_pin.data.output_file.write_text_file`): an existing file is
+    replaced only with ``force``, never when it is one of ``inputs``.
+    """
+    title = f"aacmm_pin: {', '.join(m.label for m in scene.models)}"
+    return write_text_file(path, static_html(scene, title=title), force, inputs)

@@ -1,0 +1,245 @@
+"""An output claimed at a command's start: :func:`claim_output`, :func:`check_output`.
+
+Every command that writes a folder or a file claims it before any work: an exclusive lock on a
+hidden file beside it (``.<name>.lock``; ``flock``, which the kernel releases when the process ends,
+even by SIGKILL), then a check of the target: absent, an empty folder, or ``force``; and none of
+the command's inputs (the files and folders it reads) is the target or inside it. A second run
+into the same output fails at once with one line, instead of replacing the first one's result
+unseen. The lock file is removed when the claim ends (a killed run leaves it; the next one takes it).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import sys
+import threading
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from aacmm_pin.errors import AacmmError
+
+if sys.platform != "win32":
+    import fcntl
+
+_HELD: dict[tuple[str, int], int] = {}
+"""(lock file, thread) -> depth of the claims this process holds (a writer inside a command's claim)."""
+
+
+class OutputExistsError(AacmmError):
+    """The output cannot be written: it holds files (without ``force``), it is an input, or it is busy."""
+
+    def __init__(self, path: Path, reason: str):
+        self.path = path
+        super().__init__(f"{path}: {reason}")
+
+
+CAMPAIGN_FILES = ("spat.csv", "locations.csv", "lengthbar.csv", "bar.csv", "points.csv",
+                  "campaign.json")
+"""The files the campaign reader reads in a campaign folder."""
+CALIBRATION_FILES = ("parameters.json", "calibrated.urdf", "calibrated.sizes.json", "report.json",
+                     "encoder_maps.csv")
+"""The files of a calibration folder (:mod:`aacmm_pin.outputs.calibration_folder`)."""
+
+
+def input_paths(*paths: str | Path | None, campaigns: Iterable[str | Path | None] = (),
+                calibrations: Iterable[str | Path | None] = ()) -> list[Path]:
+    """Return what a command reads, to be kept from its outputs (``inputs`` of :func:`check_output`).
+
+    Args:
+        paths: files (or folders) read; those that do not exist and None are left out.
+        campaigns: campaign folders: each with the files of :data:`CAMPAIGN_FILES` in it.
+        calibrations: calibration folders (or parameters files): each with the files of
+            :data:`CALIBRATION_FILES` in it.
+    """
+    found = [Path(p) for p in paths if p is not None]
+    for names, folders in ((CAMPAIGN_FILES, campaigns), (CALIBRATION_FILES, calibrations)):
+        for folder in (Path(f) for f in folders if f is not None):
+            found += [folder, *(folder / name for name in names)] if folder.is_dir() else [folder]
+    return [p for p in found if p.exists()]
+
+
+def lock_path(target: str | Path) -> Path:
+    """Return the lock file of an output: ``.<name>.lock`` beside it."""
+    target = Path(target).absolute()
+    return target.parent / f".{target.name}.lock"
+
+
+def _same_or_inside(inner: Path, outer: Path) -> bool:
+    """Whether ``inner`` is ``outer`` or lies inside it (links resolved; hard links too)."""
+    a, b = inner.resolve(), outer.resolve()
+    if a == b or b in a.parents:
+        return True
+    try:
+        return inner.exists() and outer.exists() and os.path.samefile(inner, outer)
+    except OSError:
+        return False
+
+
+def check_inputs(target: str | Path, inputs: Iterable[str | Path]) -> None:
+    """Refuse an output that is one of the command's inputs, or a folder that holds one.
+
+    Raises:
+        OutputExistsError: naming the output and the input (whatever ``force`` says: writing it
+            would destroy what the command reads).
+    """
+    target = Path(target)
+    for given in inputs:
+        path = Path(given)
+        if path.exists() and _same_or_inside(path, target):
+            what = "is" if path.resolve() == target.resolve() else "holds"
+            raise OutputExistsError(target, f"{what} an input of this command ({path}); "
+                                            "choose another output")
+
+
+def check_output(target: str | Path, force: bool = False, inputs: Iterable[str | Path] = (),
+                 folder: bool = True) -> Path:
+    """Check that ``target`` can be written; return it.
+
+    Args:
+        target: the output folder (``folder``) or file.
+        force: replace an existing output (a folder with files, an existing file).
+        inputs: the files and folders the command reads: none may be the target or inside it.
+        folder: whether the output is a folder (else a file).
+
+    Raises:
+        OutputExistsError: if it exists and holds data (and not ``force``), is of the other kind
+            (a file for a folder or the reverse), a file stands where one of its parent folders
+            should be, or it is (or holds) an input.
+    """
+    target = Path(target)
+    for above in target.absolute().parents:  # a file on the way: say so before any work
+        if above.exists():
+            if not above.is_dir():
+                raise OutputExistsError(above, "is a file, not a folder; choose another output")
+            break
+    check_inputs(target, inputs)
+    if not (target.exists() or target.is_symlink()):
+        return target
+    if folder:
+        if not target.is_dir() or target.is_symlink():
+            raise OutputExistsError(target, "exists and is not a folder; choose another output")
+        if not force and any(target.iterdir()):
+            raise OutputExistsError(target, "exists and is not empty; give --force (force=True) "
+                                            "to replace it whole, or choose another output")
+    elif target.is_dir():
+        raise OutputExistsError(target, "is a folder, not a file; choose another output")
+    elif not force:
+        raise OutputExistsError(target, "exists; give --force (force=True) to replace it, or "
+                                        "choose another output")
+    return target
+
+
+@contextmanager
+def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str | Path] = (),
+                 folder: bool = True) -> Iterator[Path]:
+    """Hold ``target`` for the block: lock it, check it (:func:`check_output`), yield it.
+
+    A writer inside the block (:func:`~aacmm_pin.data.output_folder.output_folder`,
+    :func:`~aacmm_pin.data.output_file.output_file`) claims the same target again in the same
+    thread: that only checks it. Parent folders are created.
+
+    Raises:
+        OutputExistsError: if another process (or thread) holds it, or see :func:`check_output`.
+        OSError: if the lock file cannot be created (read-only folder), naming the target.
+    """
+    target = Path(target)
+    inputs = list(inputs)
+    lock = lock_path(target)
+    key = (str(lock), threading.get_ident())
+    if key in _HELD:  # the command's own claim: check again, hold on
+        check_output(target, force, inputs, folder)
+        _HELD[key] += 1
+        try:
+            yield target
+        finally:
+            _HELD[key] -= 1
+        return
+    check_output(target, force, inputs, folder)  # a file on the way: before creating folders
+    created = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]
+    with named_os_error(target, lock.parent):  # a read-only folder: named by the output
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fd = _lock(lock, target)
+    _HELD[key] = 1
+    try:
+        check_output(target, force, inputs, folder)  # what the lock's holder may have written
+        yield target
+    finally:
+        del _HELD[key]
+        if sys.platform == "win32":  # an open file cannot be removed there
+            os.close(fd)
+        try:
+            lock.unlink()  # while locked (POSIX): a run waiting on it takes a new one
+        except OSError:
+            pass
+        if sys.platform != "win32":
+            os.close(fd)
+        for made in created if not target.exists() else []:  # nothing written: no empty folders
+            try:
+                made.rmdir()
+            except OSError:
+                break
+
+
+def _busy(target: Path, holder: str) -> OutputExistsError:
+    """Return the error of an output another run holds (``holder``: its process id, if read)."""
+    return OutputExistsError(target, "another run is writing it"
+                             + (f" (process {holder})" if holder.isdigit() else "")
+                             + "; wait for it to end or choose another output")
+
+
+def _lock(lock: Path, target: Path) -> int:
+    """Create or open ``lock``, take its exclusive lock without waiting; return its descriptor.
+
+    Without ``flock`` (Windows) the lock is the file's exclusive creation: a killed run's lock
+    file then stays until removed by hand.
+    """
+    if sys.platform == "win32":
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            raise _busy(target, lock.read_text("ascii", "replace").strip()) from None
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+        return fd
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip()
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise
+            raise _busy(target, holder) from None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(lock))
+        except FileNotFoundError:  # its holder removed it as we opened it: take a new one
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+            return fd
+        os.close(fd)
+
+
+@contextmanager
+def named_os_error(target: Path, hidden: Path | None = None) -> Iterator[None]:
+    """Re-raise an OSError of the block that names no file, or a file in ``hidden``, as one naming ``target``.
+
+    "No space left on device" alone names no file; a hidden temporary file means nothing to a user.
+    """
+    try:
+        yield
+    except OSError as exc:
+        name = exc.filename
+        if name is not None and (hidden is None or not _same_or_inside(Path(name), hidden)):
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), str(target)) from exc
+
+
+def umask() -> int:
+    """Return the process's umask."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
