@@ -281,7 +281,7 @@ def test_empty_and_header_only_files_are_reported(tmp_path: Path, name: str, tex
 
 def test_location_without_zero_position(tmp_path: Path) -> None:
     """A SPAT location absent from locations.csv is reported at its first line in spat.csv."""
-    spat = GOOD["spat.csv"] + "7,1,2,3,0,0,0\n" * 3
+    spat = GOOD["spat.csv"] + "".join(f"7,1,2,{3 + k},0,0,0\n" for k in range(3))
     problems = problems_of(make(tmp_path, spat_csv=spat))
     assert found(problems, "spat.csv", 8, "location", "location 7 has no zero position")
     assert len(problems) == 1
@@ -504,7 +504,9 @@ def test_readouts_in_radians_are_reported_with_file_line_and_column(tmp_path: Pa
 def test_small_motions_and_short_files_are_not_taken_for_radians(tmp_path: Path) -> None:
     """An arm that does not move (all readouts equal) or a short file is not flagged as radians."""
     still = np.tile([1.0, 2.0, 3.0], (40, 1))
-    assert read_campaign(make(tmp_path / "still", spat_csv=_spat_text(still))).spat is not None
+    lines = _spat_text(still).splitlines()  # timed: equal rows are distinct readings, not copies
+    timed = "\n".join([lines[0] + ",t_s"] + [f"{r},{k}" for k, r in enumerate(lines[1:])]) + "\n"
+    assert read_campaign(make(tmp_path / "still", spat_csv=timed)).spat is not None
     short = np.random.default_rng(0).uniform(-3, 3, (10, 3))
     assert read_campaign(make(tmp_path / "short", spat_csv=_spat_text(short))).spat is not None
 
