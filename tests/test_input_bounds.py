@@ -67,6 +67,8 @@ def test_a_flood_of_bad_rows_gives_a_few_lines_and_a_count(sample: Path) -> None
     assert all("1 cells, but the header has 11 columns" in p.reason for p in problems[:MAX_LIKE])
     assert problems[-1].line == MAX_LIKE + 2  # the first row left out
     assert f"{n - MAX_LIKE:,} more rows like it (to line {n + 1})" in problems[-1].reason
+    assert str(CampaignFormatError(problems)).startswith(
+        f"{n:,} problems in input files ({MAX_LIKE + 1} lines):")  # the count is every row
     # Nothing kept per row: the file's bytes, its text, the csv reader's buffer (a few times
     # the size) and the other files of the campaign, read whole (1 MB of the sample); storing
     # a problem per row takes about 300 bytes a row, 150 times this file's 2 bytes a row.

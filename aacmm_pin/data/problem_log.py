@@ -54,6 +54,7 @@ class ProblemLog:
         self._kinds: dict[Hashable, _Kind] = {}
         self._shown = 0
         self._other = 0
+        self._last_line: int | None = None
 
     def add(self, line: int | None, column: str | None, reason: str,
             kind: Hashable | None = None, unit: str | None = None) -> None:
@@ -62,6 +63,8 @@ class ProblemLog:
         ``unit``: what the problems of this kind are counted as (default: the log's).
         """
         self.count += 1
+        if line is not None:
+            self._last_line = max(line, self._last_line or 0)
         key = (column, reason) if kind is None else kind
         info = self._kinds.get(key)
         if info is None:
@@ -92,11 +95,12 @@ class ProblemLog:
                 detail = f" ({'; '.join(w for w in where if w)})" if any(where) else ""
                 self.out.append(Problem(self.path, info.first_line, info.column if one else None,
                                         f"... and {info.omitted:,} more {info.unit} like it"
-                                        f"{detail}"))
+                                        f"{detail}", info.omitted))
         hidden = self._other + sum(i.omitted for i in self._kinds.values() if not i.shown)
         if hidden:
-            self.out.append(Problem(self.path, None, None, f"... and {hidden:,} more problems "
-                                                           "of other kinds"))
+            self.out.append(Problem(self.path, self._last_line, None, f"... and {hidden:,} more "
+                                                                      "problems of other kinds",
+                                    hidden))
 
 
 def close_match(name: str, known: Iterable[str]) -> str | None:
