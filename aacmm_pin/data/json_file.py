@@ -9,6 +9,7 @@ allows; every refusal is one :class:`~aacmm_pin.errors.FileFormatError` line nam
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,13 @@ MAX_OBJECT_KEYS = 4096
 ``parameters.json``'s ``dh``: at most 6 error frames per axis, and an arm has at most 256 axes
 (:data:`aacmm_pin.data.csv_table.MAX_COLUMNS`), 1,536 keys; 4096 leaves room for the tools and
 for a plugin's extensions, and refuses a million keys in milliseconds instead of minutes."""
+
+
+MAX_FILE_KEYS = 4 * MAX_OBJECT_KEYS
+"""Most keys of a whole JSON file read: four objects of the largest size. Counted on the text
+before parsing (a colon outside strings is a key's), so that a million keys are refused without
+building them."""
+_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 
 
 class JsonKeyError(FileFormatError):
@@ -56,6 +64,9 @@ def loads(text: str, path: Path | str) -> Any:
         FileFormatError: one problem naming ``path`` (and the key, or the line and column of a
             syntax error); a :class:`JsonKeyError` for a repeated key or too many keys.
     """
+    if len(text) > MAX_FILE_KEYS and (keys := _STRING.sub("", text).count(":")) > MAX_FILE_KEYS:
+        raise JsonKeyError([Problem(path, None, None, f"{keys:,} keys; the package's files need "
+                                                      f"at most {MAX_FILE_KEYS:,}")])
     try:
         return json.loads(text, object_pairs_hook=_strict_object)
     except _Refused as exc:
