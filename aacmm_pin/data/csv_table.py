@@ -1,9 +1,11 @@
 """One CSV file of a campaign or of readouts, read and checked cell by cell into named columns.
 
 :func:`read_table` is told which columns a file must and may have, reads it with a bound on its
-size, and adds a :class:`~aacmm_pin.errors.Problem` (file, line, column, reason) for every bad
-header or cell instead of stopping at the first. Values stay in file units (mm, deg); the callers
-(:mod:`aacmm_pin.data.campaign`) convert them. Per-sample columns (``t_s``, ``temp_c``, ``sigma_um``
+size, one row at a time, and adds a :class:`~aacmm_pin.errors.Problem` (file, line, column, reason)
+for every bad header or cell instead of stopping at the first: a few of each kind, the others
+counted (:class:`~aacmm_pin.data.problem_log.ProblemLog`), so that memory and output stay
+bounded. Values stay in file units (mm, deg); the callers (:mod:`aacmm_pin.data.campaign`) convert
+them. Per-sample columns (``t_s``, ``temp_c``, ``sigma_um``
 and any extra numeric column) are checked against the column table, :mod:`aacmm_pin.data.columns`.
 """
 
