@@ -70,3 +70,7 @@ class FrameNotFound(AacmmError):
         self.name = name
         self.choices = list(choices)
         super().__init__(f"'{name}' is not in the arm; choose from: {', '.join(self.choices)}")
+
+
+class CampaignWarning(UserWarning):
+    """A campaign is read, but something in it deserves the user's eye (e.g. copied rows)."""

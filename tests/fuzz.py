@@ -10,7 +10,8 @@ calibration by ``read_parameters`` + ``load_arm`` + ``check_against_arm`` + ``pr
 - ``refused``: an :class:`~aacmm_pin.errors.AacmmError` or ``ValueError`` with a message;
 - ``same``: accepted, and the result equals the clean one within the tolerance;
 - ``flagged``: accepted with a different result that the API flags (``success`` False, outliers
-  or suspects, unidentifiable parameters);
+  or suspects, unidentifiable parameters, a :class:`~aacmm_pin.errors.CampaignWarning` of the
+  reader);
 - ``changed``: the user asked for something else (a plausible value changed in
   parameters.json): only "no traceback, no hang" is asserted;
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 import json
 import shutil
 import signal
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -30,6 +32,7 @@ from typing import Any
 import numpy as np
 
 import aacmm_pin as ap
+from aacmm_pin.errors import CampaignWarning
 from aacmm_pin.model.parameters import check_against_arm
 
 CAMPAIGN_FILES = ("spat.csv", "locations.csv", "lengthbar.csv", "bar.csv", "points.csv")
@@ -382,11 +385,19 @@ def _refused(exc: BaseException) -> bool:
     return isinstance(exc, (ap.AacmmError, ValueError)) and bool(str(exc).strip())
 
 
-def attempt(run: Callable[[], Any], seconds: float) -> tuple[Any, tuple[str, str] | None]:
-    """Return ``(run(), None)``, or ``(None, verdict)`` for a refusal, an exception or a hang."""
+def attempt(run: Callable[[], Any], seconds: float, notes: list[str] | None = None
+            ) -> tuple[Any, tuple[str, str] | None]:
+    """Return ``(run(), None)``, or ``(None, verdict)`` for a refusal, an exception or a hang.
+
+    ``notes``: where the campaign warnings the run emits are added (a flag the user sees).
+    """
     try:
-        with time_limit(seconds):
-            return run(), None
+        with time_limit(seconds), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", CampaignWarning)
+            out = run()
+        if notes is not None:
+            notes += [str(w.message) for w in caught if issubclass(w.category, CampaignWarning)]
+        return out, None
     except Hang as exc:
         return None, ("FAIL", f"hang: {exc}")
     except Exception as exc:  # noqa: BLE001 - the verdict names every other exception
@@ -419,7 +430,8 @@ def judge_campaign(folder: Path, arm: ap.Arm, clean: dict[Any, float], must_matc
 
     ``clean_unidentifiable`` is the clean fit's list: a different list is a flag.
     """
-    out, verdict = attempt(lambda: run_campaign(folder, arm), seconds)
+    notes: list[str] = []
+    out, verdict = attempt(lambda: run_campaign(folder, arm), seconds, notes)
     if verdict:
         return verdict
     cal, result = out
@@ -434,7 +446,7 @@ def judge_campaign(folder: Path, arm: ap.Arm, clean: dict[Any, float], must_matc
     detail = f"bar errors differ (max {diff * 1e6:.3g} um; pairs {len(errors)} vs {len(clean)})"
     if must_match:
         return "FAIL", detail + " for a mutation that keeps the meaning"
-    if (not cal.success or cal.outliers or cal.suspects or result.warnings
+    if (not cal.success or cal.outliers or cal.suspects or result.warnings or notes
             or cal.unidentifiable != clean_unidentifiable):
         return "flagged", detail
     return "FAIL", detail + ", accepted without a flag"
@@ -489,7 +501,8 @@ def judge_points(folder: Path, arm: ap.Arm, clean: np.ndarray, q_test: np.ndarra
     base frame (:func:`aligned_change`) within what the fit's noise explains
     (:func:`points_tolerance`, ``sigma`` the stated point noise).
     """
-    out, verdict = attempt(lambda: run_points(folder, arm, q_test, tool_test), seconds)
+    notes: list[str] = []
+    out, verdict = attempt(lambda: run_points(folder, arm, q_test, tool_test), seconds, notes)
     if verdict:
         return verdict
     cal, points = out
@@ -500,7 +513,7 @@ def judge_points(folder: Path, arm: ap.Arm, clean: np.ndarray, q_test: np.ndarra
     detail = f"new poses moved {change * 1e6:.3g} um (noise explains {tol * 1e6:.3g} um)"
     if must_match:
         return "FAIL", detail + " for a mutation that keeps the meaning"
-    if found := flags(cal, clean_unidentifiable):
+    if found := flags(cal, clean_unidentifiable) + notes:
         return "flagged", f"{detail}; {', '.join(found)}"
     return "FAIL", detail + ", accepted without a flag"
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import warnings
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -56,7 +57,7 @@ from aacmm_pin.data.logs import (
     read_noise,
 )
 from aacmm_pin.data.problem_log import ProblemLogs
-from aacmm_pin.errors import CampaignFormatError, Problem
+from aacmm_pin.errors import CampaignFormatError, CampaignWarning, Problem
 
 __all__ = ["MAX_ANGLE_DEG", "MAX_COLUMNS", "MAX_FILE_BYTES", "NOISE_FILE", "ArmNames", "Campaign",
            "LengthBarLog", "PointLog", "SpatLog", "StatedNoise", "read_campaign", "read_id_columns",
@@ -164,34 +165,31 @@ def _check_tools(points: Table, tool_names: list[str], out: ProblemLogs) -> None
                     "unknown tool")
 
 
-def _check_copies(table: Table, out: list[Problem]) -> None:
-    """Report rows of a measurement log that repeat an earlier row cell for cell.
+def _copies(table: Table) -> str | None:
+    """Return a note on the rows of a measurement log that repeat an earlier row cell for cell.
 
-    Refused rather than warned: a repeated row is the same measurement counted twice (a paste
-    or a logger's double write), and the fit would take it for an independent one, shrinking
-    every claimed standard deviation by sqrt(copies). A real reading repeats every readout and
-    the measured value to the last written digit only if the instrument's noise is below its
-    resolution on every column at once; readings that are truly distinct say so by a ``t_s``
-    column.
+    Noted, not refused: a static arm read twice within one clock tick gives equal rows (the
+    package's own ``acquire`` writes them on a loaded machine), and the file cannot tell such a
+    reading from a pasted copy. A copy counts one measurement twice, so the fit's claimed standard
+    deviations shrink as if it were independent (by sqrt(copies) for a row copied throughout).
     """
     if not table.n_axes or any(v is None for c in table.cols.values() for v in c):
-        return  # bad readout columns or cells, reported already
+        return None  # bad readout columns or cells, reported already
     codes = np.stack([np.unique(np.asarray(c, dtype=object if c and isinstance(c[0], str)
                                            else float), return_inverse=True)[1].reshape(-1)
                       for c in table.cols.values()], axis=1)
     _, first, inverse = np.unique(codes, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.reshape(-1)
     copies = np.flatnonzero(first[inverse] != np.arange(len(inverse)))
-    if copies.size:
-        lines = np.asarray(table.lines)
-        k = int(copies[0])
-        most = int(np.bincount(inverse).max())
-        out.append(Problem(table.path, int(lines[k]), None,
-                           f"{copies.size} row(s) repeat an earlier row cell for cell (this one "
-                           f"is line {lines[first[inverse[k]]]}; up to {most} copies of one "
-                           "row): a copy counts one measurement twice and shrinks the claimed "
-                           "std by sqrt(copies); remove the copies (distinct readings differ in "
-                           "t_s)"))
+    if not copies.size:
+        return None
+    lines = np.asarray(table.lines)
+    k = int(copies[0])
+    most = int(np.bincount(inverse).max())
+    return (f"{table.path}:{lines[k]}: {copies.size} row(s) repeat an earlier row cell for cell "
+            f"(this one is line {lines[first[inverse[k]]]}; up to {most} copies of one row): "
+            "each copy counts as one more measurement and shrinks the claimed std; remove "
+            "copies that are not distinct readings")
 
 
 def _log_fields(table: Table) -> dict[str, Any]:
@@ -275,8 +273,6 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
     for table in (spat, log, points):
         if table is not None:
             check_radians(table, problems)
-        if usable(table):
-            _check_copies(table, problems)
     first = next((t for t in (spat, log, points) if t and t.n_axes), None)
     for other in (log, points):
         if first and other and other is not first and other.n_axes and other.n_axes != first.n_axes:
@@ -288,8 +284,12 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
         order: dict[Path | str, int] = {path: k for k, path in enumerate(paths.values())}
         raise CampaignFormatError(sorted(problems, key=lambda p: (order[p.path], p.line or 0)))
     noise = read_noise(folder / NOISE_FILE) if (folder / NOISE_FILE).is_file() else None
+    notes = tuple(note for table in (spat, log, points) if usable(table)
+                  and (note := _copies(table)) is not None)
+    for note in notes:
+        warnings.warn(note, CampaignWarning, stacklevel=2)
     return Campaign(**_logs({k: v for k, v in tables.items() if v is not None}), source=folder,
-                    noise=noise)
+                    noise=noise, notes=notes)
 
 
 def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | None,

@@ -277,6 +277,9 @@ class Campaign:
     """Absolute tool points (laser tracker, motion capture), or None."""
     noise: StatedNoise | None = None
     """The measurement noise the campaign states (``campaign.json``), or None: the paper's."""
+    notes: tuple[str, ...] = ()
+    """What the reader noticed without refusing (rows that repeat others cell for cell), one line
+    each with file and line; also emitted as :class:`~aacmm_pin.errors.CampaignWarning`."""
 
     def __post_init__(self) -> None:
         axes = {log.q.shape[1] for log in self.logs}
