@@ -22,6 +22,9 @@ class Problem:
     """Column name (or 1-based column number as text), or None."""
     reason: str
     """What is wrong, in plain words."""
+    count: int = 1
+    """How many problems this one stands for: more than 1 for a line that counts the problems of
+    one kind left out ("... and 1,745 more rows like it")."""
 
     def __str__(self) -> str:
         """Format as ``path:line: column 'x': reason``."""
@@ -41,8 +44,9 @@ class FileFormatError(AacmmError):
 
     def __init__(self, problems: list[Problem]):
         self.problems = list(problems)
-        n = len(self.problems)
-        head = f"{n} problem{'s' if n != 1 else ''} in input files:"
+        n = sum(p.count for p in self.problems)
+        shown = f" ({len(self.problems)} lines)" if n != len(self.problems) else ""
+        head = f"{n:,} problem{'s' if n != 1 else ''} in input files{shown}:"
         super().__init__("\n".join([head, *(f"  {p}" for p in self.problems)]))
 
 
@@ -66,3 +70,7 @@ class FrameNotFound(AacmmError):
         self.name = name
         self.choices = list(choices)
         super().__init__(f"'{name}' is not in the arm; choose from: {', '.join(self.choices)}")
+
+
+class CampaignWarning(UserWarning):
+    """A campaign is read, but something in it deserves the user's eye (e.g. copied rows)."""

@@ -10,7 +10,8 @@ calibration by ``read_parameters`` + ``load_arm`` + ``check_against_arm`` + ``pr
 - ``refused``: an :class:`~aacmm_pin.errors.AacmmError` or ``ValueError`` with a message;
 - ``same``: accepted, and the result equals the clean one within the tolerance;
 - ``flagged``: accepted with a different result that the API flags (``success`` False, outliers
-  or suspects, unidentifiable parameters);
+  or suspects, unidentifiable parameters, a :class:`~aacmm_pin.errors.CampaignWarning` of the
+  reader);
 - ``changed``: the user asked for something else (a plausible value changed in
   parameters.json): only "no traceback, no hang" is asserted;
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 import json
 import shutil
 import signal
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -30,9 +32,11 @@ from typing import Any
 import numpy as np
 
 import aacmm_pin as ap
+from aacmm_pin.errors import CampaignWarning
 from aacmm_pin.model.parameters import check_against_arm
 
-CAMPAIGN_FILES = ("spat.csv", "locations.csv", "lengthbar.csv", "bar.csv")
+CAMPAIGN_FILES = ("spat.csv", "locations.csv", "lengthbar.csv", "bar.csv", "points.csv")
+"""The files a mutation picks from (those the folder holds, in this order)."""
 
 
 class Hang(Exception):
@@ -65,7 +69,8 @@ def _put(path: Path, rows: list[list[str]], end: str = "\n") -> None:
 
 
 def _pick_file(folder: Path, rng: np.random.Generator) -> Path:
-    return folder / CAMPAIGN_FILES[rng.integers(len(CAMPAIGN_FILES))]
+    names = [name for name in CAMPAIGN_FILES if (folder / name).is_file()] or list(CAMPAIGN_FILES)
+    return folder / names[rng.integers(len(names))]
 
 
 def _body_row(rows: list[list[str]], rng: np.random.Generator) -> int:
@@ -298,6 +303,64 @@ OTHER = (m_delete_row, m_duplicate_row, m_swap_rows, m_delete_column, m_duplicat
 """Campaign mutations that may change the meaning: refused, the clean result, or flagged."""
 
 
+# ---------------------------------------------------------------- points.csv mutations
+
+def _point_columns(rows: list[list[str]]) -> list[int]:
+    return [rows[0].index(c) for c in ("x_mm", "y_mm", "z_mm")]
+
+
+def p_shift_tail(folder: Path, rng: np.random.Generator) -> str:
+    """A bumped tracker: the last 10-50 % of the points moved by 0.2-2 mm along one direction."""
+    path = folder / "points.csv"
+    rows = _rows(path)
+    share, shift = float(rng.uniform(0.1, 0.5)), float(rng.uniform(0.2, 2.0))
+    direction = rng.normal(size=3)
+    direction *= shift / np.linalg.norm(direction)
+    first = int(len(rows) * (1 - share))
+    for r in rows[max(first, 1):]:
+        for k, d in zip(_point_columns(rows), direction):
+            r[k] = repr(float(r[k]) + float(d))
+    _put(path, rows)
+    return f"points.csv: lines {first + 1}.. moved {shift:.2f} mm"
+
+
+def p_gross_point(folder: Path, rng: np.random.Generator) -> str:
+    """One point off by 0.5-5 mm (a tracker reflector knocked, a wrong pose logged)."""
+    path = folder / "points.csv"
+    rows = _rows(path)
+    k = _body_row(rows, rng)
+    size = float(rng.uniform(0.5, 5.0))
+    for j, d in zip(_point_columns(rows), rng.normal(size=3)):
+        rows[k][j] = repr(float(rows[k][j]) + float(size * d / np.sqrt(3)))
+    _put(path, rows)
+    return f"points.csv: line {k + 1} off by about {size:.1f} mm"
+
+
+def p_relabel(folder: Path, rng: np.random.Generator) -> str:
+    """One row's tool or group exchanged for another one of the file (a wrong label)."""
+    path = folder / "points.csv"
+    rows = _rows(path)
+    names = [c for c in ("tool", "group") if c in rows[0]]
+    if not names:
+        return "points.csv: no label to change"
+    j = rows[0].index(names[int(rng.integers(len(names)))])
+    values = sorted({r[j] for r in rows[1:]})
+    k = _body_row(rows, rng)
+    others = [v for v in values if v != rows[k][j]]
+    if not others:
+        return "points.csv: one label only"
+    old, rows[k][j] = rows[k][j], others[int(rng.integers(len(others)))]
+    _put(path, rows)
+    return f"points.csv: line {k + 1} {rows[0][j]} {old} -> {rows[k][j]}"
+
+
+POINTS_OTHER = (p_relabel,)
+"""points.csv mutations that change the meaning: refused, within the noise, or flagged."""
+POINTS_NOISE = (p_shift_tail, p_gross_point)
+"""points.csv mutations only a fit judged against its stated noise can flag (issue 24 item 1):
+plausible cells, a residual far beyond the noise."""
+
+
 # ---------------------------------------------------------------- the verdicts
 
 CAMPAIGN_TOL = 3e-6
@@ -322,34 +385,136 @@ def _refused(exc: BaseException) -> bool:
     return isinstance(exc, (ap.AacmmError, ValueError)) and bool(str(exc).strip())
 
 
+def attempt(run: Callable[[], Any], seconds: float, notes: list[str] | None = None
+            ) -> tuple[Any, tuple[str, str] | None]:
+    """Return ``(run(), None)``, or ``(None, verdict)`` for a refusal, an exception or a hang.
+
+    ``notes``: where the campaign warnings the run emits are added (a flag the user sees).
+    """
+    try:
+        with time_limit(seconds), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", CampaignWarning)
+            out = run()
+        if notes is not None:
+            notes += [str(w.message) for w in caught if issubclass(w.category, CampaignWarning)]
+        return out, None
+    except Hang as exc:
+        return None, ("FAIL", f"hang: {exc}")
+    except Exception as exc:  # noqa: BLE001 - the verdict names every other exception
+        if _refused(exc):
+            return None, ("refused", str(exc).splitlines()[-1][:200])
+        return None, ("FAIL", f"{type(exc).__name__}: {exc}")
+
+
+def mutate(clean: Path, folder: Path, rng: np.random.Generator,
+           other: tuple[Mutation, ...]) -> tuple[bool, list[str]]:
+    """Copy the folder ``clean`` to ``folder`` and mutate it; return (kept the meaning, labels).
+
+    15 % of the time one mutation of :data:`SAME`, else one of ``other``, sometimes (20 %) two.
+    """
+    same = rng.random() < 0.15
+    pool = SAME if same else other
+    copy_folder(clean, folder)
+    labels = [pool[int(rng.integers(len(pool)))](folder, rng)]
+    if not same and rng.random() < 0.2:  # sometimes two at once
+        try:
+            labels.append(pool[int(rng.integers(len(pool)))](folder, rng))
+        except (OSError, IndexError, UnicodeDecodeError, ValueError):
+            pass  # the first mutation left nothing to mutate (a file deleted, binary)
+    return same, labels
+
+
 def judge_campaign(folder: Path, arm: ap.Arm, clean: dict[Any, float], must_match: bool,
                    clean_unidentifiable: list[str], seconds: float = 30.0) -> tuple[str, str]:
     """Return (verdict, detail) for a mutated campaign folder; verdict "FAIL" on a failure.
 
     ``clean_unidentifiable`` is the clean fit's list: a different list is a flag.
     """
-    try:
-        with time_limit(seconds):
-            cal, result = run_campaign(folder, arm)
-    except Hang as exc:
-        return "FAIL", f"hang: {exc}"
-    except Exception as exc:  # noqa: BLE001 - the verdict names every other exception
-        if _refused(exc):
-            return "refused", str(exc).splitlines()[-1][:200]
-        return "FAIL", f"{type(exc).__name__}: {exc}"
+    notes: list[str] = []
+    out, verdict = attempt(lambda: run_campaign(folder, arm), seconds, notes)
+    if verdict:
+        return verdict
+    cal, result = out
     errors = bar_errors(result)
-    same = errors.keys() == clean.keys() and all(
-        abs(errors[k] - clean[k]) <= CAMPAIGN_TOL for k in clean)
+    # rows removed (a truncated file) leave fewer pairs measured: each one reported must agree
+    same = bool(errors) and errors.keys() <= clean.keys() and all(
+        abs(errors[k] - clean[k]) <= CAMPAIGN_TOL for k in errors)
     if same:
         return "same", ""
-    diff = (max(abs(errors[k] - clean[k]) for k in clean) if errors.keys() == clean.keys()
+    diff = (max(abs(errors[k] - clean[k]) for k in errors) if errors and errors.keys() <= clean.keys()
             else float("nan"))
     detail = f"bar errors differ (max {diff * 1e6:.3g} um; pairs {len(errors)} vs {len(clean)})"
     if must_match:
         return "FAIL", detail + " for a mutation that keeps the meaning"
-    if (not cal.success or cal.outliers or cal.suspects or result.warnings
+    if (not cal.success or cal.outliers or cal.suspects or result.warnings or notes
             or cal.unidentifiable != clean_unidentifiable):
         return "flagged", detail
+    return "FAIL", detail + ", accepted without a flag"
+
+
+POINTS_TOL_SIGMAS = 5.0
+"""Largest change of a predicted point accepted as "the clean result", in standard deviations of
+a prediction: a fit of p parameters to m coordinates of noise sigma predicts a new pose to about
+sigma sqrt(p / (m - p)) per coordinate (the mean leverage); the largest of 30 poses' 3-D
+distances is about 3 sqrt(3) of these. A mutation that leaves fewer rows has the larger one."""
+
+
+def points_tolerance(cal: ap.Calibration, sigma: float) -> float:
+    """Return the change of predicted points that a fit's own noise explains, m."""
+    p = int(np.count_nonzero(cal.identifiable))
+    return POINTS_TOL_SIGMAS * sigma * float(np.sqrt(p / max(cal.fun.size - p, 1)))
+
+
+def aligned_change(a: np.ndarray, b: np.ndarray) -> float:
+    """Return the largest distance between points ``b`` and ``a`` after the best rigid motion of
+    ``b`` onto ``a`` (a points fit fixes the arm up to its base frame: the gauge), m."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((b - cb).T @ (a - ca))
+    d = np.sign(np.linalg.det(u @ vt))
+    rot = (u @ np.diag([1.0, 1.0, d]) @ vt).T
+    return float(np.max(np.linalg.norm((b - cb) @ rot.T + ca - a, axis=1)))
+
+
+def run_points(folder: Path, arm: ap.Arm, q_test: np.ndarray, tool_test: np.ndarray | None
+               ) -> tuple[ap.Calibration, np.ndarray]:
+    """Run the user's path on a points campaign: read, identify (DH), predict new poses."""
+    campaign = ap.read_campaign(folder, arm=arm)
+    cal = ap.identify(campaign, arm, "dh")
+    return cal, ap.predict(arm, cal.parameters, q_test, tool=tool_test)
+
+
+def flags(cal: ap.Calibration, clean_unidentifiable: list[str]) -> list[str]:
+    """Return what a calibration flags: failure, outliers, suspects, other unidentifiables."""
+    out = [] if cal.success else [f"success false: {cal.message[:120]}"]
+    out += ["outliers"] * bool(cal.outliers) + ["suspects"] * bool(cal.suspects)
+    if cal.unidentifiable != clean_unidentifiable:
+        out.append("unidentifiable parameters differ")
+    return out
+
+
+def judge_points(folder: Path, arm: ap.Arm, clean: np.ndarray, q_test: np.ndarray,
+                 tool_test: np.ndarray | None, sigma: float, must_match: bool,
+                 clean_unidentifiable: list[str], seconds: float = 30.0) -> tuple[str, str]:
+    """Return (verdict, detail) for a mutated points campaign; verdict "FAIL" on a failure.
+
+    The result is the prediction of new poses (``q_test``), compared with the clean one up to the
+    base frame (:func:`aligned_change`) within what the fit's noise explains
+    (:func:`points_tolerance`, ``sigma`` the stated point noise).
+    """
+    notes: list[str] = []
+    out, verdict = attempt(lambda: run_points(folder, arm, q_test, tool_test), seconds, notes)
+    if verdict:
+        return verdict
+    cal, points = out
+    change = aligned_change(clean, points) if np.all(np.isfinite(points)) else np.inf
+    tol = points_tolerance(cal, sigma)
+    if change <= tol:
+        return "same", ""
+    detail = f"new poses moved {change * 1e6:.3g} um (noise explains {tol * 1e6:.3g} um)"
+    if must_match:
+        return "FAIL", detail + " for a mutation that keeps the meaning"
+    if found := flags(cal, clean_unidentifiable) + notes:
+        return "flagged", f"{detail}; {', '.join(found)}"
     return "FAIL", detail + ", accepted without a flag"
 
 

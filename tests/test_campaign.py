@@ -281,7 +281,7 @@ def test_empty_and_header_only_files_are_reported(tmp_path: Path, name: str, tex
 
 def test_location_without_zero_position(tmp_path: Path) -> None:
     """A SPAT location absent from locations.csv is reported at its first line in spat.csv."""
-    spat = GOOD["spat.csv"] + "7,1,2,3,0,0,0\n" * 3
+    spat = GOOD["spat.csv"] + "".join(f"7,1,2,{3 + k},0,0,0\n" for k in range(3))
     problems = problems_of(make(tmp_path, spat_csv=spat))
     assert found(problems, "spat.csv", 8, "location", "location 7 has no zero position")
     assert len(problems) == 1

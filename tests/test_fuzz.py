@@ -56,15 +56,8 @@ def fuzz_campaign(arm: ap.Arm, clean: Clean, seed: int, n: int) -> Counter[str]:
     verdicts: Counter[str] = Counter()
     failures = []
     for i in range(n):
-        same = rng.random() < 0.15
-        pool = fuzz.SAME if same else fuzz.OTHER
-        folder = fuzz.copy_folder(root / "campaign", root / "mutated")
-        labels = [pool[int(rng.integers(len(pool)))](folder, rng)]
-        if not same and rng.random() < 0.2:  # sometimes two at once
-            try:
-                labels.append(pool[int(rng.integers(len(pool)))](folder, rng))
-            except (OSError, IndexError, UnicodeDecodeError, ValueError):
-                pass  # the first mutation left nothing to mutate (a file deleted, binary)
+        folder = root / "mutated"
+        same, labels = fuzz.mutate(root / "campaign", folder, rng, fuzz.OTHER)
         verdict, detail = fuzz.judge_campaign(folder, arm, clean.errors, same,
                                               clean.unidentifiable)
         verdicts[verdict] += 1
@@ -124,3 +117,107 @@ def test_fuzz_many_seeds(arm: ap.Arm, clean: Clean, seed: int) -> None:
     campaign = fuzz_campaign(arm, clean, seed=seed, n=400)
     calibration = fuzz_calibration(clean, seed=seed, n=400)
     print(f"seed {seed}: campaign {dict(campaign)}, calibration {dict(calibration)}")
+
+
+# ---------------------------------------------------------------- points.csv campaigns
+
+ROOT = Path(__file__).resolve().parents[1]
+POINT_CAMPAIGNS = {"groups": ("aacmm7", 60), "tree": (str(ROOT / "urdf" / "torso.urdf"), 120)}
+"""Points campaigns fuzzed: the default arm's points from two instrument set-ups (groups), and a
+tree (the two-armed torso, both tools) from two set-ups; (arm, points)."""
+
+
+class CleanPoints(NamedTuple):
+    """A clean points campaign folder (under ``root``), its arm and its results."""
+
+    root: Path
+    arm: ap.Arm
+    q_test: np.ndarray
+    tool_test: np.ndarray | None
+    predicted: np.ndarray
+    unidentifiable: list[str]
+    sigma: float
+
+
+@pytest.fixture(scope="module", params=sorted(POINT_CAMPAIGNS))
+def clean_points(request: pytest.FixtureRequest,
+                 tmp_path_factory: pytest.TempPathFactory) -> CleanPoints:
+    """A points campaign (DH errors, 20 um noise) in two groups, its fit and 30 new poses."""
+    name, n = POINT_CAMPAIGNS[request.param]
+    arm = ap.load_arm(name)
+    config = ap.SimulationConfig(seed=0, points=n, effects=("dh",))
+    sim = ap.simulate_campaign(arm, config)
+    pts = sim.campaign.points
+    assert pts is not None
+    group = np.where(np.arange(n) < n // 2, 1, 2)  # two set-ups of the instrument
+    campaign = ap.Campaign(spat=None, locations={}, lengthbar=None, bar={}, points=ap.PointLog(
+        group=group, q=pts.q, point=pts.point, tool=pts.tool))
+    root = tmp_path_factory.mktemp(f"fuzz_points_{request.param}")
+    ap.write_campaign(campaign, root / "campaign")
+    rng = np.random.default_rng(1)
+    lim = arm.joint_limits
+    q_test = rng.uniform(lim[:, 0], lim[:, 1], (30, arm.n_axes))
+    tool_test = (np.array(arm.tool_names)[np.arange(30) % arm.n_tools] if arm.n_tools > 1
+                 else None)
+    cal, predicted = fuzz.run_points(root / "campaign", arm, q_test, tool_test)
+    assert not fuzz.flags(cal, cal.unidentifiable), cal.message
+    return CleanPoints(root, arm, q_test, tool_test, predicted, cal.unidentifiable,
+                       config.sigma_point)
+
+
+def fuzz_points(clean: CleanPoints, seed: int, n: int, other: tuple[fuzz.Mutation, ...] = (
+        *fuzz.OTHER, *fuzz.POINTS_OTHER * 3)) -> tuple[Counter[str], list[str]]:
+    """Run ``n`` mutations of a points campaign (15 % from SAME, the others from ``other``);
+    return the verdict counts and the failures."""
+    rng = np.random.default_rng(seed)
+    verdicts: Counter[str] = Counter()
+    failures = []
+    for i in range(n):
+        folder = clean.root / "mutated"
+        same, labels = fuzz.mutate(clean.root / "campaign", folder, rng, other)
+        verdict, detail = fuzz.judge_points(folder, clean.arm, clean.predicted, clean.q_test,
+                                            clean.tool_test, clean.sigma, same,
+                                            clean.unidentifiable)
+        verdicts[verdict] += 1
+        if verdict == "FAIL":
+            failures.append(f"#{i} {' + '.join(labels)}: {detail}")
+    return verdicts, failures
+
+
+def test_fuzz_points(clean_points: CleanPoints) -> None:
+    """points.csv with groups, and a tree's: no traceback, no hang, nothing silently wrong."""
+    verdicts, failures = fuzz_points(clean_points, seed=24, n=40)  # 5 x 300 in the slow run
+    print(f"points, seed 24: {dict(verdicts)}")
+    assert not failures, "\n".join(failures)
+    assert verdicts["refused"] > 10 and verdicts["same"] > 4  # the mix is exercised
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_fuzz_points_many_seeds(clean_points: CleanPoints, seed: int) -> None:
+    verdicts, failures = fuzz_points(clean_points, seed=seed, n=300)
+    print(f"points, seed {seed}: {dict(verdicts)}")
+    assert not failures, "\n".join(failures)
+
+
+AWAITING_NOISE_JUDGE = pytest.mark.xfail(
+    strict=False, reason="identify does not yet judge points fits against their stated noise "
+                         "(issue 24 item 1, another branch): make strict once merged")
+
+
+@AWAITING_NOISE_JUDGE
+def test_fuzz_points_judged_by_noise(clean_points: CleanPoints) -> None:
+    """A bumped tracker, a gross point: plausible cells, only the residual against the noise
+    tells; within the noise, or flagged (issue 24 item 1: 0.5 mm on 30 % was silent)."""
+    verdicts, failures = fuzz_points(clean_points, seed=24, n=20, other=fuzz.POINTS_NOISE)
+    print(f"points judged by noise, seed 24: {dict(verdicts)}")
+    assert not failures, "\n".join(failures)
+
+
+@pytest.mark.slow
+@AWAITING_NOISE_JUDGE
+@pytest.mark.parametrize("seed", range(1, 3))
+def test_fuzz_points_judged_by_noise_many_seeds(clean_points: CleanPoints, seed: int) -> None:
+    verdicts, failures = fuzz_points(clean_points, seed=seed, n=100, other=fuzz.POINTS_NOISE)
+    print(f"points judged by noise, seed {seed}: {dict(verdicts)}")
+    assert not failures, "\n".join(failures)

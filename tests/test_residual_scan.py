@@ -171,7 +171,7 @@ def test_campaign_json_states_the_noise(tmp_path) -> None:
     ('{"noise_um": {"rtest": -1}}', "noise_um.rtest"),
     ('{"noise_um": {"gauge": 2}}', "noise_um.gauge"),
     ('{"noise_um": [2]}', "noise_um"),
-    ("not json", None)])
+    ("not json", "char 1")])  # a syntax error: its line and character
 def test_bad_campaign_json_names_file_and_key(tmp_path, content: str, column: str | None) -> None:
     """A bad campaign.json raises CampaignFormatError with the file and the key."""
     path = tmp_path / "campaign.json"

@@ -14,12 +14,12 @@ default nest)::
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from aacmm_pin.data.json_file import read_json
 from aacmm_pin.errors import FileFormatError, Problem
 
 MIN_DETERMINANT = 0.1
@@ -75,12 +75,7 @@ def read_nest(path: str | Path) -> Nest:
             vectors, each problem with the file.
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise FileFormatError([Problem(path, exc.lineno, str(exc.colno), exc.msg)]) from None
-    except OSError as exc:
-        raise FileFormatError([Problem(path, None, None, exc.strerror or str(exc))]) from None
+    data = read_json(path, 2**20, "a nest file")  # a nest file is about 100 bytes
     raw = data.get("directions") if isinstance(data, dict) else None
     problems: list[Problem] = []
     try:

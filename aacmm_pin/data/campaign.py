@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import warnings
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -55,8 +56,9 @@ from aacmm_pin.data.logs import (
     StatedNoise,
     read_noise,
 )
+from aacmm_pin.data.problem_log import ProblemLogs
 from aacmm_pin.data.spreadsheet import neutralise_formulas
-from aacmm_pin.errors import CampaignFormatError, Problem
+from aacmm_pin.errors import CampaignFormatError, CampaignWarning, Problem
 
 __all__ = ["MAX_ANGLE_DEG", "MAX_COLUMNS", "MAX_FILE_BYTES", "NOISE_FILE", "ArmNames", "Campaign",
            "LengthBarLog", "PointLog", "SpatLog", "StatedNoise", "read_campaign", "read_id_columns",
@@ -99,27 +101,27 @@ def _names(arm: ArmNames | None, axis_names: Sequence[str] | None,
     return (None if axes is None else list(axes)), (None if tools is None else list(tools))
 
 
-def _check_locations(spat: Table, locs: Table, min_samples: int, out: list[Problem]) -> None:
+def _check_locations(spat: Table, locs: Table, min_samples: int, out: ProblemLogs) -> None:
     """Check duplicated ids, locations without zero position and locations with too few samples."""
     zero_line: dict[int, int] = {}
     for line, v in zip(locs.lines, locs.cols["location"]):
         if v is not None and v in zero_line:
-            out.append(Problem(locs.path, line, "location",
-                               f"location {v} is duplicated (also on line {zero_line[v]})"))
+            out.add(locs.path, line, "location",
+                    f"location {v} is duplicated (also on line {zero_line[v]})", "duplicated")
         zero_line.setdefault(v, line)
     first_line = {v: line for line, v in reversed(list(zip(spat.lines, spat.cols["location"])))}
     counts, least = Counter(spat.cols["location"]), max(min_samples, 1)
     for v in sorted((set(first_line) | set(zero_line)) - {None}):
         path, line = (spat.path, first_line[v]) if v in first_line else (locs.path, zero_line[v])
         if v not in zero_line:
-            out.append(Problem(path, line, "location",
-                               f"location {v} has no zero position in locations.csv"))
+            out.add(path, line, "location", f"location {v} has no zero position in locations.csv",
+                    "no zero")
         elif counts[v] < least:
-            out.append(Problem(path, line, "location", f"location {v} has {counts[v]} samples "
-                                                       f"in spat.csv, fewer than {least}"))
+            out.add(path, line, "location", f"location {v} has {counts[v]} samples in spat.csv, "
+                                            f"fewer than {least}", "few samples")
 
 
-def _check_bar(log: Table, bar: Table, out: list[Problem]) -> None:
+def _check_bar(log: Table, bar: Table, out: ProblemLogs) -> None:
     """Check that every measured socket is in bar.csv and every bar.csv pair is measured once."""
     first_line = {s: line for line, s in reversed(list(zip(log.lines, log.cols["socket"])))}
     together: dict[int, set[str]] = {}
@@ -128,7 +130,7 @@ def _check_bar(log: Table, bar: Table, out: list[Problem]) -> None:
     pair_line: dict[frozenset[str], int] = {}
 
     def say(line: int, column: str | None, reason: str) -> None:
-        out.append(Problem(bar.path, line, column, reason))
+        out.add(bar.path, line, column, reason, (column, reason.split("'")[0]))
 
     for line, a, b in zip(bar.lines, bar.cols["from"], bar.cols["to"]):
         if a is None or b is None:
@@ -146,23 +148,49 @@ def _check_bar(log: Table, bar: Table, out: list[Problem]) -> None:
     named = {s for pair in pair_line for s in pair}
     for s, line in first_line.items():
         if s is not None and s not in named:
-            out.append(Problem(log.path, line, "socket", f"socket '{s}' is not named in bar.csv"))
+            out.add(log.path, line, "socket", f"socket '{s}' is not named in bar.csv", "unnamed")
 
 
-def _check_tools(points: Table, tool_names: list[str], out: list[Problem]) -> None:
+def _check_tools(points: Table, tool_names: list[str], out: ProblemLogs) -> None:
     """Check the ``tool`` column of points.csv against the arm's tools (names or tool joints)."""
     names = set(tool_names) | {n if n == "tool" else f"tool_{n}" for n in tool_names}
     listing = ", ".join(tool_names)
     if "tool" not in points.cols:
         if len(tool_names) > 1:
-            out.append(Problem(points.path, 1, "tool", f"missing column: the arm has "
-                                                       f"{len(tool_names)} tools ({listing}); say "
-                                                       "which one each point measures"))
+            out.add(points.path, 1, "tool", f"missing column: the arm has {len(tool_names)} tools "
+                                            f"({listing}); say which one each point measures")
         return
     for line, name in zip(points.lines, points.cols["tool"]):
         if name is not None and name not in names:
-            out.append(Problem(points.path, line, "tool",
-                               f"unknown tool '{name}'; the arm's tools: {listing}"))
+            out.add(points.path, line, "tool", f"unknown tool '{name}'; the arm's tools: {listing}",
+                    "unknown tool")
+
+
+def _copies(table: Table) -> str | None:
+    """Return a note on the rows of a measurement log that repeat an earlier row cell for cell.
+
+    Noted, not refused: a static arm read twice within one clock tick gives equal rows (the
+    package's own ``acquire`` writes them on a loaded machine), and the file cannot tell such a
+    reading from a pasted copy. A copy counts one measurement twice, so the fit's claimed standard
+    deviations shrink as if it were independent (by sqrt(copies) for a row copied throughout).
+    """
+    if not table.n_axes or any(v is None for c in table.cols.values() for v in c):
+        return None  # bad readout columns or cells, reported already
+    codes = np.stack([np.unique(np.asarray(c, dtype=object if c and isinstance(c[0], str)
+                                           else float), return_inverse=True)[1].reshape(-1)
+                      for c in table.cols.values()], axis=1)
+    _, first, inverse = np.unique(codes, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    copies = np.flatnonzero(first[inverse] != np.arange(len(inverse)))
+    if not copies.size:
+        return None
+    lines = np.asarray(table.lines)
+    k = int(copies[0])
+    most = int(np.bincount(inverse).max())
+    return (f"{table.path}:{lines[k]}: {copies.size} row(s) repeat an earlier row cell for cell "
+            f"(this one is line {lines[first[inverse[k]]]}; up to {most} copies of one row): "
+            "each copy counts as one more measurement and shrinks the claimed std; remove "
+            "copies that are not distinct readings")
 
 
 def _log_fields(table: Table) -> dict[str, Any]:
@@ -235,12 +263,14 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
     spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
     log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
     points = tables.get("points.csv")
+    checks = ProblemLogs(problems)
     if usable(spat, "location") and usable(locs, "location"):
-        _check_locations(spat, locs, min_samples_per_location, problems)
+        _check_locations(spat, locs, min_samples_per_location, checks)
     if usable(log, "placement", "socket") and usable(bar, "from", "to"):
-        _check_bar(log, bar, problems)
+        _check_bar(log, bar, checks)
     if points is not None and tools is not None and points.lines:
-        _check_tools(points, tools, problems)
+        _check_tools(points, tools, checks)
+    checks.close()
     for table in (spat, log, points):
         if table is not None:
             check_radians(table, problems)
@@ -255,8 +285,12 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
         order: dict[Path | str, int] = {path: k for k, path in enumerate(paths.values())}
         raise CampaignFormatError(sorted(problems, key=lambda p: (order[p.path], p.line or 0)))
     noise = read_noise(folder / NOISE_FILE) if (folder / NOISE_FILE).is_file() else None
+    notes = tuple(note for table in (spat, log, points) if usable(table)
+                  and (note := _copies(table)) is not None)
+    for note in notes:
+        warnings.warn(note, CampaignWarning, stacklevel=2)
     return Campaign(**_logs({k: v for k, v in tables.items() if v is not None}), source=folder,
-                    noise=noise)
+                    noise=noise, notes=notes)
 
 
 def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | None,
@@ -271,7 +305,9 @@ def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | 
     table = read_table(Path(path), (), True, optional, problems, extras="readouts",
                        axis_names=axes)
     if table is not None and tools is not None and "tool" in optional and table.lines:
-        _check_tools(table, tools, problems)
+        checks = ProblemLogs(problems)
+        _check_tools(table, tools, checks)
+        checks.close()
     if problems or table is None:
         raise CampaignFormatError(problems)
     return table

@@ -1,9 +1,11 @@
 """One CSV file of a campaign or of readouts, read and checked cell by cell into named columns.
 
 :func:`read_table` is told which columns a file must and may have, reads it with a bound on its
-size, and adds a :class:`~aacmm_pin.errors.Problem` (file, line, column, reason) for every bad
-header or cell instead of stopping at the first. Values stay in file units (mm, deg); the callers
-(:mod:`aacmm_pin.data.campaign`) convert them. Per-sample columns (``t_s``, ``temp_c``, ``sigma_um``
+size, one row at a time, and adds a :class:`~aacmm_pin.errors.Problem` (file, line, column, reason)
+for every bad header or cell instead of stopping at the first: a few of each kind, the others
+counted (:class:`~aacmm_pin.data.problem_log.ProblemLog`), so that memory and output stay
+bounded. Values stay in file units (mm, deg); the callers (:mod:`aacmm_pin.data.campaign`) convert
+them. Per-sample columns (``t_s``, ``temp_c``, ``sigma_um``
 and any extra numeric column) are checked against the column table, :mod:`aacmm_pin.data.columns`.
 """
 
@@ -13,14 +15,16 @@ import csv
 import io
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeGuard
 
 import numpy as np
 
+from aacmm_pin.data.bounded_read import read_bounded
 from aacmm_pin.data.columns import MAX_ANGLE_DEG, Column, column, has_unit
+from aacmm_pin.data.problem_log import MAX_SHOWN, ProblemLog, close_match
 from aacmm_pin.errors import Problem
 from aacmm_pin.units import (
     BAR_LENGTH_MAX,
@@ -65,6 +69,9 @@ class Table:
     per_sample: list[str] = field(default_factory=list)
     """The per-sample columns read (optional ones of the column table and extra ones), in file
     order; their cells are checked against :func:`aacmm_pin.data.columns.column`."""
+    complete: bool = True
+    """Whether every row with the header's number of cells is kept (False: the file has so many
+    problems that the rows after them are only checked, and cross-file checks are skipped)."""
 
     @property
     def n_axes(self) -> int:
@@ -72,17 +79,20 @@ class Table:
         return len(self.q_columns)
 
 
-def _parse(text: str, kind: str, col: Column | None = None) -> tuple[Any, str | None]:
-    """Return (value, None) for a good cell, or (None, reason)."""
+def _parse(text: str, kind: str, col: Column | None = None) -> tuple[Any, str | None, str]:
+    """Return (value, None, "") for a good cell, or (None, reason, kind of problem).
+
+    The kind is the reason without the cell's text: the cells alike are counted together.
+    """
     if not text or kind == "text":
-        return (text, None) if text else (None, "empty cell")
+        return (text, None, "") if text else (None, "empty cell", "empty cell")
     try:
         value = int(text) if kind == "id" else float(text)
     except ValueError:
-        return None, f"'{text}' is not {'an integer' if kind == 'id' else 'a number'}"
-    why = col.check(value) if col is not None else _bad_value(value, kind)
-    reason = None if why is None else f"{text} {why}"
-    return (None if reason else value), reason
+        why = f"is not {'an integer' if kind == 'id' else 'a number'}"
+        return None, f"'{text}' {why}", why
+    bad = col.check(value) if col is not None else _bad_value(value, kind)
+    return (None, f"{text} {bad}", bad) if bad else (value, None, "")
 
 
 def _bad_value(value: float, kind: str) -> str | None:
@@ -100,35 +110,61 @@ def _bad_value(value: float, kind: str) -> str | None:
         return (f"mm is not a plausible bar length ({BAR_LENGTH_MIN * 1e3:g} mm to "
                 f"{BAR_LENGTH_MAX:g} m)")
     if kind == "displacement" and abs(value) > RTEST_RANGE * 1e3:
+        # a value within range once divided by 1000 is most likely written in um
+        unit = ("; in um? write mm" if abs(value) <= RTEST_RANGE * 1e6 else "")
         return (f"mm is beyond an R-Test's measuring range (+-{RTEST_RANGE * 1e3:g} mm): a unit "
-                "or sensor error")
+                f"or sensor error{unit}")
     if kind == "coordinate" and abs(value) > MAX_COORDINATE * 1e3:
         return f"mm is beyond +-{MAX_COORDINATE:g} m: not a position an arm or tracker measures"
     return None
 
 
-def _rows(path: Path, add: Any) -> list[tuple[int, list[str]]] | None:
-    """Return the (line, stripped cells) of a CSV file read within the size bound, or None."""
+Rows = Iterator[tuple[int, list[str]]]
+"""The (1-based line, stripped cells) of each data row of a CSV file, read as they come."""
+
+
+def _text(path: Path, log: ProblemLog) -> str | None:
+    """Return a CSV file's text read within the size bound, or None (its problem added)."""
     try:
-        with path.open("rb") as f:
-            data = f.read(MAX_FILE_BYTES + 1)  # bounded: a huge file or /dev/zero fails fast
-        if len(data) > MAX_FILE_BYTES:
-            add(None, None, f"larger than {MAX_FILE_BYTES // 2**20} MiB: split the campaign or "
-                            "decimate it")
+        data = read_bounded(path, MAX_FILE_BYTES)  # a huge file or /dev/zero fails fast
+        if data is None:
+            log.add(None, None, f"larger than {MAX_FILE_BYTES // 2**20} MiB: split the campaign "
+                                "or decimate it")
             return None
-        reader = csv.reader(io.StringIO(data.decode("utf-8-sig")))
-        rows = [(reader.line_num, [c.strip() for c in row]) for row in reader]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        return data.decode("utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else f"{exc}"
-        add(None, None, "file not found" if isinstance(exc, FileNotFoundError) else why)
+        log.add(None, None, "file not found" if isinstance(exc, FileNotFoundError) else why)
         return None
-    while rows and not any(rows[-1][1]):
-        rows.pop()  # blank trailing lines
-    if not rows or not any(rows[0][1]):
-        add(1 if rows else None, None, "blank first line instead of a header row" if rows
-            else "empty file: no header row")
+
+
+def _records(text: str, log: ProblemLog) -> Rows:
+    """Yield the (line, stripped cells) of every row of a CSV text but trailing blank ones.
+
+    One row at a time: the rows are never all held. A CSV syntax error ends the rows, added as a
+    problem at its line.
+    """
+    # the last line with content: rows after it are blank (trailing newlines, empty cells)
+    end = len(text)
+    while end and text[end - 1] in " \t\r\n,":
+        end -= 1
+    last = text.count("\n", 0, end) + 1 if end else 0
+    reader = csv.reader(io.StringIO(text))
+    try:
+        for row in reader:
+            if reader.line_num > last:
+                return
+            yield reader.line_num, [c.strip() for c in row]
+    except csv.Error as exc:
+        log.add(reader.line_num, None, f"{exc}")
+
+
+def _separator(header: list[str]) -> str | None:
+    """Return the separator a one-cell header seems to use instead of commas, or None."""
+    if len(header) != 1:
         return None
-    return rows
+    return next((sep for sep in (";", "\t", "|", " ")
+                 if len([c for c in header[0].split(sep) if c.strip()]) > 1), None)
 
 
 @dataclass
@@ -182,33 +218,69 @@ def _header(header: list[str], top: int, required: tuple[str, ...], has_q: bool,
     return _Header(index, q_columns, unknown, missing)
 
 
-def _take_extras(head: _Header, rows: list[tuple[int, list[str]]], extras: Extras, add: Any
+def _numeric_columns(head: _Header, rows: Rows, width: int) -> set[int]:
+    """Return the unknown columns (by index) whose every cell of a full row is a number."""
+    numeric = {k for k, _ in head.unknown}
+    for _, cells in rows:
+        if len(cells) == width and any(cells):
+            numeric = {k for k in numeric if _parse(cells[k], "number")[1] is None}
+            if not numeric:
+                break
+    return numeric
+
+
+def _take_extras(head: _Header, top: int, numeric: set[int], extras: Extras, add: Any
                  ) -> list[str]:
-    """Move the unknown columns a file may carry into its index; return their names."""
+    """Move the unknown columns a file may carry into its index; return their names.
+
+    ``numeric``: the unknown columns whose every cell is a number (a readouts file's).
+    """
     if extras == "readouts":
-        width = len(rows[0][1])
-
-        def numeric(k: int) -> bool:
-            cells = [c[k] for _, c in rows[1:] if len(c) == width and any(c)]
-            return all(_parse(c, "number")[1] is None for c in cells)
-
         taken = [(k, name) for k, name in head.unknown
-                 if name not in POINT and (has_unit(name) or numeric(k))]
+                 if name not in POINT and (has_unit(name) or k in numeric)]
     else:
         taken = list(head.unknown)
     head.unknown = [u for u in head.unknown if u not in taken]
     for k, name in taken:
         if name in head.index:
-            add(rows[0][0], name, f"duplicated column (columns {head.index[name] + 1} and {k + 1})")
+            add(top, name, f"duplicated column (columns {head.index[name] + 1} and {k + 1})")
         else:
             head.index[name] = k
     return list(dict.fromkeys(name for _, name in taken))
+
+
+def _unknown_columns(head: _Header, top: int, expected: list[str], listing: str, has_q: bool,
+                     add: Any) -> None:
+    """Report a header's unknown columns in one line, with the names they likely mean.
+
+    ``expected``: the names a column may have; ``listing``: the same, as shown.
+    """
+    names = [name for _, name in head.unknown]
+    if not names:
+        return
+    # a <name>_deg column is a joint's: guessed among the joint names only (L2_deg is not q2_deg)
+    joints = [n for n in expected if n.endswith("_deg") and not Q_COLUMN.fullmatch(n)]
+    meant = [close_match(name, joints if name.endswith("_deg") else expected) for name in names]
+    guesses = ([m for m in meant if m] if all(meant)
+               else [f"{m} for {n}" for n, m in zip(names, meant) if m])
+    deg = [n for n in names if n.endswith("_deg")]
+    hint = ("; <joint name>_deg columns are read only with the arm (arm=..., --arm)"
+            if has_q and deg and not any(m for n, m in zip(names, meant) if n in deg) else "")
+    shown = ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else "")
+    what = "unknown column" if len(names) == 1 else f"unknown columns {shown} ({len(names)})"
+    mean = f"; did you mean {', '.join(guesses[:8])}?" if guesses else ""
+    add(top, names[0], f"{what}{mean}{hint}; expected: {listing}")
 
 
 def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
                problems: list[Problem], *, extras: Extras = "refuse",
                axis_names: Iterable[str] | None = None) -> Table | None:
     """Read and check one CSV file, adding its problems; return None if it has no usable header.
+
+    The rows are read one at a time and the problems capped (:class:`ProblemLog`: a few of each
+    kind shown, the others counted), so memory and output stay bounded for any file under
+    :data:`MAX_FILE_BYTES`; once a file has :data:`~aacmm_pin.data.problem_log.MAX_SHOWN`
+    problems its further rows are checked but no longer kept (the table is not ``complete``).
 
     Args:
         path: the file.
@@ -220,29 +292,49 @@ def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tup
             column reports them as unknown (a misspelt name).
         axis_names: the arm's joint names, when known: allows ``<joint name>_deg`` readouts.
     """
+    log = ProblemLog(problems, path)
+    try:
+        return _read_table(path, required, has_q, optional, log, extras, axis_names)
+    finally:
+        log.close()
 
-    def add(line: int | None, column: str | None, reason: str) -> None:
-        problems.append(Problem(path, line, column, reason))
 
-    if (rows := _rows(path, add)) is None:
+def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
+                log: ProblemLog, extras: Extras, axis_names: Iterable[str] | None) -> Table | None:
+    """:func:`read_table` with its problems going to ``log``."""
+    add = log.add
+    if (text := _text(path, log)) is None:
         return None
-    top, header = rows[0]
+    first = next(_records(text, log), None)
+    if first is None and log.count:
+        return None  # a CSV syntax error on the first line
+    if first is None or not any(first[1]):
+        add(1 if first else None, None, "blank first line instead of a header row" if first
+            else "empty file: no header row")
+        return None
+    top, header = first
+    if sep := _separator(header):
+        add(top, None, f"the header is separated by {sep!r}, not by commas: write a CSV file "
+                       "with ',' between cells and '.' as decimal point (12.5, not 12,5)")
+        return None
     if len(header) > MAX_COLUMNS:
         add(top, None, f"{len(header)} columns in the header; at most {MAX_COLUMNS} are read")
         return None
     named = [f"{n}_deg" for n in axis_names or []] if has_q else []
     head = _header(header, top, required, has_q, optional, named, add)
-    taken = [] if extras == "refuse" or head.missing else _take_extras(head, rows, extras, add)
+    taken: list[str] = []
+    if extras != "refuse" and not head.missing:
+        quiet = ProblemLog([], path)  # a syntax error is reported by the reading pass below
+        numeric = (_numeric_columns(head, _data_rows(text, quiet), len(header))
+                   if extras == "readouts" and head.unknown else set())
+        taken = _take_extras(head, top, numeric, extras, add)
     if extras == "refuse" or (extras == "numbers" and head.missing):
-        expected = ", ".join([*required, *(["q1_deg..qn_deg"] if has_q else []), *optional])
+        expected = [*required, *optional,
+                    *([*named, *q_names(max(len(header), 9))] if has_q else [])]
+        listing = ", ".join([*required, *(["q1_deg..qn_deg"] if has_q else []), *optional])
         if named:
-            expected += f" (or {', '.join(named)} instead of q1_deg..q{len(named)}_deg)"
-        for _, name in head.unknown:
-            hint = ("; <joint name>_deg columns are read only with the arm (arm=..., --arm)"
-                    if has_q and not named and name.endswith("_deg") else "")
-            add(top, name, f"unknown column; expected: {expected}{hint}")
-    if len(rows) == 1:
-        add(None, None, "header only: no data rows")
+            listing += f" (or {', '.join(named)} instead of q1_deg..q{len(named)}_deg)"
+        _unknown_columns(head, top, expected, listing, has_q and not named, add)
     per_sample = [name for name in header if name in taken
                   or (name in optional and name in head.index and has_unit(name))]
     table = Table(path, head.q_columns, [], {name: [] for name in head.index}, per_sample)
@@ -250,21 +342,37 @@ def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tup
                     or name in named else "column" if name in per_sample
                     else _KINDS.get(name, "number")) for name in head.index}
     checks = {name: column(name) for name in per_sample}
-    for line, cells in rows[1:]:
+    n_rows = 0
+    for line, cells in _data_rows(text, log):
+        n_rows += 1
         if not any(cells):
             add(line, None, "blank line among the data rows")
-        elif len(cells) != len(header):
-            add(line, None, f"{len(cells)} cells, but the header has {len(header)} columns")
-        else:
+            continue
+        if len(cells) != len(header):
+            add(line, None, f"{len(cells)} cells, but the header has {len(header)} columns",
+                kind=("cells", len(cells)))
+            continue
+        keep = table.complete = table.complete and log.count < MAX_SHOWN
+        if keep:
             table.lines.append(line)
-            for name, k in head.index.items():
-                value, reason = _parse(cells[k], kinds[name], checks.get(name))
+        for name, k in head.index.items():
+            value, reason, why = _parse(cells[k], kinds[name], checks.get(name))
+            if keep:
                 table.cols[name].append(value)
-                if reason and name in taken and value is None and reason.startswith("'"):
-                    reason += f"; {path.name}'s further columns hold numbers"
-                if reason:
-                    add(line, name, reason)
+            if reason and name in taken and value is None and reason.startswith("'"):
+                reason += f"; {path.name}'s further columns hold numbers"
+            if reason:
+                add(line, name, reason, kind=why, unit="cells")
+    if not n_rows:
+        add(None, None, "header only: no data rows")
     return table
+
+
+def _data_rows(text: str, log: ProblemLog) -> Rows:
+    """Yield the data rows of a CSV text (the rows after its header)."""
+    rows = _records(text, log)
+    next(rows, None)
+    yield from rows
 
 
 def q_names(n: int) -> list[str]:
@@ -291,7 +399,7 @@ def check_radians(table: Table, out: list[Problem]) -> None:
     axis through a whole measurement (a SPAT, bar or tracker campaign moves axes by tens of
     degrees), in radians an ordinary one.
     """
-    if len(table.lines) < RADIAN_MIN_ROWS or not table.q_columns:
+    if len(table.lines) < RADIAN_MIN_ROWS or not table.q_columns or not table.complete:
         return
     cols = [np.array([math.nan if v is None else v for v in table.cols[name]], dtype=float)
             for name in table.q_columns]
@@ -308,4 +416,5 @@ def check_radians(table: Table, out: list[Problem]) -> None:
 
 def usable(table: Table | None, *columns: str) -> TypeGuard[Table]:
     """Tell whether a table has data rows and these columns (else its problems are reported)."""
-    return table is not None and bool(table.lines) and set(columns) <= table.cols.keys()
+    return (table is not None and table.complete and bool(table.lines)
+            and set(columns) <= table.cols.keys())

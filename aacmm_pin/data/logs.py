@@ -9,7 +9,6 @@ read ``columns``. The readers and writers are :mod:`aacmm_pin.data.campaign`.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
@@ -19,7 +18,8 @@ from typing import Any, TypeVar
 import numpy as np
 
 from aacmm_pin.data.columns import BUILT_IN
-from aacmm_pin.errors import CampaignFormatError, Problem
+from aacmm_pin.data.json_file import read_json
+from aacmm_pin.errors import CampaignFormatError, FileFormatError, Problem
 from aacmm_pin.units import (
     SIGMA_LOCATION,
     SIGMA_POINT,
@@ -47,6 +47,8 @@ class _Keep:
 _KEEP: Any = _Keep()
 
 
+MAX_NOISE_BYTES = 2**20
+"""Largest campaign.json read, bytes (one is about 100 bytes)."""
 NOISE_FILE = "campaign.json"
 """Optional file beside the CSVs stating the campaign's noise: ``{"noise_um": {"rtest": 2.0,
 "location": 3.0, "point": 20.0, "socket": 2.0}}`` (any subset of the keys; the others keep the paper's
@@ -89,9 +91,9 @@ def read_noise(path: str | Path) -> StatedNoise:
     """
     path = Path(path)
     try:
-        content = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise CampaignFormatError([Problem(path, None, None, f"not readable as JSON: {exc}")]) from exc
+        content = read_json(path, MAX_NOISE_BYTES, "a campaign.json")
+    except FileFormatError as exc:
+        raise CampaignFormatError(exc.problems) from None
     noise = content.get("noise_um", {}) if isinstance(content, dict) else None
     if not isinstance(noise, dict):
         raise CampaignFormatError([Problem(path, None, "noise_um", "an object {\"rtest\": 2.0, "
@@ -285,6 +287,9 @@ class Campaign:
     """Absolute tool points (laser tracker, motion capture), or None."""
     noise: StatedNoise | None = None
     """The measurement noise the campaign states (``campaign.json``), or None: the paper's."""
+    notes: tuple[str, ...] = ()
+    """What the reader noticed without refusing (rows that repeat others cell for cell), one line
+    each with file and line; also emitted as :class:`~aacmm_pin.errors.CampaignWarning`."""
 
     def __post_init__(self) -> None:
         axes = {log.q.shape[1] for log in self.logs}

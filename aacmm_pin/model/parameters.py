@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from aacmm_pin.data.json_file import read_json
+from aacmm_pin.data.problem_log import ProblemLog, close_match
 from aacmm_pin.errors import FileFormatError, Problem
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import DEFAULT_STEP_DEG, EncoderMap
@@ -165,9 +167,10 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         FileFormatError: listing every problem, each with the JSON path of the bad field.
     """
     problems: list[Problem] = []
+    log = ProblemLog(problems, path, unit="keys")
 
     def bad(key: str, reason: str) -> None:
-        problems.append(Problem(path, None, key, reason))
+        log.add(None, key, reason)
 
     def vector(value: Any, key: str, n: int) -> np.ndarray:
         if not _numbers(value):  # numpy would take "0.001" and True for numbers
@@ -244,6 +247,7 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
             if np.any(np.abs(maps[int(key)].values) > MAX_PARAMETER):
                 bad(f"encoder_maps.axes.{key}", f"a value {_IMPLAUSIBLE}")
     extensions = _extensions(data.get("extensions") or {}, bad)
+    log.close()
     if problems:
         raise FileFormatError(problems)
     return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, tools=tools, rotation_abc=rot,
@@ -317,22 +321,7 @@ def read_parameters(path: str | Path) -> Parameters:
     path = Path(path)
     if path.is_dir():
         path = path / "parameters.json"
-    try:
-        with path.open("rb") as f:
-            raw = f.read(MAX_PARAMETERS_BYTES + 1)  # bounded: a huge file or /dev/zero fails fast
-        if len(raw) > MAX_PARAMETERS_BYTES:
-            raise FileFormatError([Problem(path, None, None, f"larger than "
-                                           f"{MAX_PARAMETERS_BYTES // 2**20} MiB: not a "
-                                           "parameters file")])
-        data = json.loads(raw.decode("utf-8-sig"))
-    except FileNotFoundError:
-        raise FileFormatError([Problem(path, None, None, "no such file")]) from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError([Problem(path, None, None, f"not UTF-8 text: {exc}")]) from None
-    except json.JSONDecodeError as exc:
-        raise FileFormatError([Problem(path, exc.lineno, f"char {exc.colno}", exc.msg)]) from None
-    except RecursionError:
-        raise FileFormatError([Problem(path, None, None, "JSON nested too deeply")]) from None
+    data = read_json(path, MAX_PARAMETERS_BYTES, "a parameters file")
     if _depth(data) > MAX_JSON_DEPTH:
         raise FileFormatError([Problem(path, None, None, f"JSON nested deeper than "
                                        f"{MAX_JSON_DEPTH} levels: not a parameters file")])
@@ -354,11 +343,18 @@ def check_against_arm(params: Parameters, arm: Arm) -> None:
     Raises:
         FileFormatError: naming the unknown or missing parameters.
     """
-    problems = [Problem(params.arm, None, f"dh.{n}", "not an error frame of the arm "
-                        f"(error frames: {', '.join(arm.error_names)})")
-                for n in params.dh if n not in arm.error_names]
-    problems += [Problem(params.arm, None, f"dh.{n}", "missing") for n in arm.error_names
-                 if n not in params.dh]
+    problems: list[Problem] = []
+    log = ProblemLog(problems, params.arm, unit="keys")
+    known = set(arm.error_names)
+    for n in (unknown := [n for n in params.dh if n not in known]):
+        meant = close_match(n, arm.error_names)
+        listing = (f"; did you mean {meant}?" if meant else "") + (
+            f" (error frames: {', '.join(arm.error_names)})" if n == unknown[0] else "")
+        log.add(None, f"dh.{n}", f"not an error frame of the arm{listing}", kind="unknown")
+    for n in arm.error_names:
+        if n not in params.dh:
+            log.add(None, f"dh.{n}", "missing", kind="missing")
+    log.close()
     if params.tools and set(params.tools) != set(arm.tool_joints):
         problems.append(Problem(params.arm, None, "tools", f"the arm's tools are "
                                 f"{', '.join(arm.tool_joints)}; got {', '.join(params.tools)}"))

@@ -36,9 +36,13 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from aacmm_pin.data.json_file import read_json
+from aacmm_pin.data.problem_log import ProblemLog, close_match
 from aacmm_pin.errors import FileFormatError, Problem
 from aacmm_pin.units import ARCSEC
 
+MAX_SIZES_BYTES = 2**20
+"""Largest sizes file read, bytes (one is about 1 kB)."""
 SUFFIX = ".sizes.json"
 """A URDF's sizes file is the URDF's path with this suffix instead of ``.urdf``."""
 DEFAULT_EFFECTS: Mapping[str, float] = MappingProxyType({
@@ -102,8 +106,10 @@ def sizes_from_dict(data: Any, path: Path | str = "<sizes>") -> Sizes:
     """
     problems: list[Problem] = []
 
+    log = ProblemLog(problems, path, unit="keys")
+
     def bad(key: str, reason: str) -> None:
-        problems.append(Problem(path, None, key, reason))
+        log.add(None, key, reason)
 
     def positive(value: Any, key: str) -> float | None:
         ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -140,7 +146,11 @@ def sizes_from_dict(data: Any, path: Path | str = "<sizes>") -> Sizes:
             if number is not None:
                 values[key] = number
         else:
-            bad(key, f"unknown key; the keys are units, source, {', '.join(_NUMBERS)}, effects")
+            meant = close_match(key, ("units", "source", *_NUMBERS, "effects"))
+            log.add(None, key, f"unknown key{f'; did you mean {meant}?' if meant else ''}; the "
+                               f"keys are units, source, {', '.join(_NUMBERS)}, effects",
+                    kind="unknown")
+    log.close()
     if problems:
         raise FileFormatError(problems)
     return Sizes(**values)
@@ -153,13 +163,7 @@ def read_sizes(path: str | Path) -> Sizes:
         FileFormatError: for a missing file, invalid JSON (with line and column) or bad keys.
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileFormatError([Problem(path, None, None, "no such file")]) from None
-    except json.JSONDecodeError as exc:
-        raise FileFormatError([Problem(path, exc.lineno, f"char {exc.colno}", exc.msg)]) from None
-    return sizes_from_dict(data, path)
+    return sizes_from_dict(read_json(path, MAX_SIZES_BYTES, "a sizes file"), path)
 
 
 def sizes_of_urdf(urdf: str | Path) -> Sizes:

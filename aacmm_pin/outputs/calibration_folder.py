@@ -8,13 +8,14 @@ needs neither the identification nor the solver: only the parameters and the rep
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aacmm_pin.data.json_file import JsonKeyError, read_json
 from aacmm_pin.effects.registry import check_extensions, read_parameters
+from aacmm_pin.errors import FileFormatError
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import MAX_PARAMETERS_BYTES, Parameters, check_against_arm
 from aacmm_pin.model.sizes import sizes_path
@@ -115,9 +116,9 @@ def read_report(caldir: str | Path) -> dict[str, Any] | None:
         return None
     report = (path if path.is_dir() else path.parent) / REPORT_FILE
     try:
-        with report.open("rb") as f:
-            raw = f.read(MAX_PARAMETERS_BYTES + 1)  # bounded: a huge file or /dev/zero
-        data = json.loads(raw.decode("utf-8-sig")) if len(raw) <= MAX_PARAMETERS_BYTES else None
-    except (OSError, ValueError, RecursionError):
+        data = read_json(report, MAX_PARAMETERS_BYTES, "a report")
+    except JsonKeyError:
+        raise  # well formed but ambiguous: refused, not ignored
+    except FileFormatError:
         return None
     return data if isinstance(data, dict) else None
