@@ -200,12 +200,6 @@ def test_fuzz_points_many_seeds(clean_points: CleanPoints, seed: int) -> None:
     assert not failures, "\n".join(failures)
 
 
-AWAITING_NOISE_JUDGE = pytest.mark.xfail(
-    strict=False, reason="identify does not yet judge points fits against their stated noise "
-                         "(issue 24 item 1, another branch): make strict once merged")
-
-
-@AWAITING_NOISE_JUDGE
 def test_fuzz_points_judged_by_noise(clean_points: CleanPoints) -> None:
     """A bumped tracker, a gross point: plausible cells, only the residual against the noise
     tells; within the noise, or flagged (issue 24 item 1: 0.5 mm on 30 % was silent)."""
@@ -215,7 +209,6 @@ def test_fuzz_points_judged_by_noise(clean_points: CleanPoints) -> None:
 
 
 @pytest.mark.slow
-@AWAITING_NOISE_JUDGE
 @pytest.mark.parametrize("seed", range(1, 3))
 def test_fuzz_points_judged_by_noise_many_seeds(clean_points: CleanPoints, seed: int) -> None:
     verdicts, failures = fuzz_points(clean_points, seed=seed, n=100, other=fuzz.POINTS_NOISE)
