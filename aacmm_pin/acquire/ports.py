@@ -9,6 +9,13 @@ half-width of that interval as its uncertainty. A reader that falls behind its d
 reads a backlog of lines of unknown age (measured: 4 KB chunks with 4 KB more waiting, lines
 ~0.2 s old stamped as new, paired with readings of a later posture); their uncertainty grows until
 the backlog is drained, and the pairing (:mod:`aacmm_pin.acquire.pairing`) leaves them unpaired.
+
+A line is complete only at its line end, however its bytes arrive: a real port delivers a line in
+fragments, and under load the rest of a line may come after a timeout. Timeouts and new requests
+never drop the bytes already read; only a port lost and reopened starts a new line. (Dropping them
+at each request of a polled gauge cut a reply in two under load: the reader had read its sign, the
+request timed out, the rest came as a garbled line.)
+
 Faults are put on the same queue and never stop the reader:
 
 * a bad line (garbled, checksum, out of range) is counted and dropped;
@@ -174,7 +181,8 @@ class PortReader(threading.Thread):
                     if not awaiting and wait > 0:
                         self.stop.wait(min(wait, READ_TIMEOUT))
                         continue
-                    buf.clear()  # nothing is pending now; drop the rest of an unanswered reply
+                    # the bytes already read stay: they may be the start of the reply, the rest
+                    # still on its way (a line is complete only at its end, however late)
                     self.port.write(cfg.request)
                     # a late answer to an earlier request may still come: it dates from then
                     t_asked = t_asked if awaiting else now
