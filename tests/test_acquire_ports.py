@@ -11,10 +11,20 @@ from __future__ import annotations
 import queue
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
 
 import pytest
+import serial
 
-from aacmm_pin.acquire.ports import READ_TIMEOUT, PortEvent, PortReader, arm_port, gauge_port
+from aacmm_pin.acquire.ports import (
+    READ_TIMEOUT,
+    PortConfig,
+    PortEvent,
+    PortReader,
+    arm_port,
+    gauge_port,
+)
 from aacmm_pin.acquire.protocols import HEIDENHAIN_REQUEST, format_arm_line, format_heidenhain
 
 TIMEOUT = 0.05
@@ -26,10 +36,14 @@ class ScriptedPort:
 
     Args:
         on_request: request number (1, 2, ...) -> bytes released when the reader writes it.
+        late_writes: requests whose write raises pyserial's write timeout once it is done, as
+            pyserial does when the writing thread was not run for ``write_timeout``.
     """
 
-    def __init__(self, on_request: dict[int, bytes] | None = None):
+    def __init__(self, on_request: dict[int, bytes] | None = None,
+                 late_writes: tuple[int, ...] = ()):
         self.on_request = on_request or {}
+        self.late_writes = late_writes
         self.requests = 0
         self._data = bytearray()
         self._cond = threading.Condition()
@@ -57,13 +71,16 @@ class ScriptedPort:
         for _ in range(data.count(HEIDENHAIN_REQUEST)):
             self.requests += 1
             self.feed(self.on_request.get(self.requests, b""))
+        if self.requests in self.late_writes:
+            raise serial.SerialTimeoutException("Write timeout")
         return len(data)
 
     def close(self) -> None:
         pass
 
 
-def read_events(config, port: ScriptedPort, until, seconds: float = 3.0) -> list[PortEvent]:
+def read_events(config: PortConfig, port: ScriptedPort, until: Callable[[list[PortEvent]], bool],
+                seconds: float = 3.0) -> list[PortEvent]:
     """Run a PortReader on ``port`` until ``until(events)`` holds (or ``seconds``); return its events."""
     out: queue.Queue[PortEvent] = queue.Queue()
     stop = threading.Event()
@@ -86,7 +103,7 @@ def read_events(config, port: ScriptedPort, until, seconds: float = 3.0) -> list
     return events
 
 
-def values(events: list[PortEvent]) -> list:
+def values(events: list[PortEvent]) -> list[Any]:
     return [value for what, _, _, payload in events if what == "data" for _, value, _ in payload]
 
 
@@ -101,7 +118,7 @@ REPLY = format_heidenhain(0.0100)  # b"+   0.0100 \r\n"
     [b"+", REPLY[1:]],  # seen under load: the sign read at once, the rest after the timeout
     [REPLY[:3], REPLY[3:7], REPLY[7:-1], REPLY[-1:]],  # cut inside the value and the line end
 ], ids=["sign-then-rest", "four-pieces"])
-def test_polled_reply_in_fragments_across_timeouts_is_one_good_line(fragments):
+def test_polled_reply_in_fragments_across_timeouts_is_one_good_line(fragments: list[bytes]) -> None:
     """A gauge reply whose pieces come only after the reader timed out and asked again: one line.
 
     Each fragment is released by one request, so each after a timeout of the previous one. The
@@ -115,7 +132,7 @@ def test_polled_reply_in_fragments_across_timeouts_is_one_good_line(fragments):
     assert values(events) == [(1, pytest.approx(1e-5, abs=1e-15))]
 
 
-def test_streamed_line_in_fragments_across_timeouts_is_one_good_line():
+def test_streamed_line_in_fragments_across_timeouts_is_one_good_line() -> None:
     """An arm line in pieces with silences longer than the timeout between them: one line, once."""
     q = [10.0, -20.5, 30.25, 0.0, 45.0, -90.0, 179.999999]
     line = format_arm_line(7, q) + format_arm_line(8, q)
@@ -135,3 +152,17 @@ def test_streamed_line_in_fragments_across_timeouts_is_one_good_line():
     assert "timeout" in faults(events)  # the silences were seen ...
     assert "garbled" not in faults(events), events  # ... and cut no line
     assert [counter for counter, _ in values(events)] == [7, 8]
+
+
+def test_write_timeout_of_a_sent_request_is_no_lost_port() -> None:
+    """pyserial's write timeout after a request went out (a thread not run for 20 ms) loses nothing.
+
+    The first two requests "time out" although sent; their replies come. The port is not closed and
+    reopened (which drops its input): no port_lost fault, no reconnect, both readings.
+    """
+    port = ScriptedPort({1: REPLY, 2: REPLY}, late_writes=(1, 2))
+    config = gauge_port("heidenhain:1", "scripted", "heidenhain", 1, 1e-3, timeout=TIMEOUT)
+    events = read_events(config, port, lambda ev: len(values(ev)) >= 2)
+    assert "port_lost" not in faults(events), events
+    assert [e for e in events if e[0] in ("reconnect", "gone")] == []
+    assert values(events) == [(1, pytest.approx(1e-5, abs=1e-15))] * 2
