@@ -73,10 +73,19 @@ def recorded(fakes, tmp_path_factory):
     folder = tmp_path_factory.mktemp("campaign")
     summaries = {}
     for location in (1, 2):
-        status = run(["acquire", str(folder), *fakes[location]["acquire_args"], "--seconds", "2",
-                      *ACQUIRE])
-        assert status == 0
-        summaries[location] = json.loads((folder / f"acquire-location{location}.json").read_text())
+        # Under load fewer arm samples are paired (lines read from a backlog are of unknown age,
+        # left unpaired: measured 73 rows in 2 s at load 9.7 instead of ~300 on an idle machine):
+        # record on, appending 2 s runs, until the location has more than 100 rows (at most 5).
+        runs: list[dict] = []
+        while sum(r["rows_written"] for r in runs) <= 100 and len(runs) < 5:
+            status = run(["acquire", str(folder), *fakes[location]["acquire_args"], "--seconds",
+                          "2", *ACQUIRE])
+            assert status == 0
+            runs.append(json.loads((folder / f"acquire-location{location}.json").read_text()))
+        summaries[location] = {
+            **runs[-1], "runs": len(runs), "rows_written": sum(r["rows_written"] for r in runs),
+            "status": max(r["status"] for r in runs),
+            "faults": {k: sum(r["faults"][k] for r in runs) for k in runs[0]["faults"]}}
     return folder, summaries
 
 
@@ -152,21 +161,28 @@ def test_port_that_disappears_stops_the_run_cleanly(tmp_path):
     nest = Nest(np.array([[1.0, 0, 0], [0.6, 0.8, 0], [0, 0.6, 0.8]]))  # a skewed nest
     devices = FakeDevices(FakeConfig(location=3, postures=20, rate=500, nest=nest,
                                      effects=("dh", "rtest"))).start()
-    timer = threading.Timer(1.5, devices.stop)  # the devices vanish after 1.5 s
+    vanish = 1.5
+    timer = threading.Timer(vanish, devices.stop)  # the devices vanish after 1.5 s
     timer.start()
+    # The devices are threads of this process: under load they fall silent while the process is
+    # not run (longest silence of every port at once before the vanishing, measured: 0.17 s at
+    # load 6, over 0.4 s at load 7.5, where a gauge was "gone" before its port was closed).
+    # give_up is above those silences: the port is lost before a silence ends the run.
+    give_up = 1.5
     try:
         config = AcquisitionConfig(
             tmp_path, 3, devices.arm_path, tuple(devices.gauges), zero=devices.zero, nest=nest,
-            seconds=10.0, give_up=0.4, timeout=0.1, poll_interval=1 / 500)
+            seconds=10.0, give_up=give_up, timeout=0.1, poll_interval=1 / 500)
         tic = time.monotonic()
         summary = acquire(config)
         elapsed = time.monotonic() - tic
     finally:
         timer.cancel()
         devices.stop()
-    assert summary.status == 1 and "gone" in summary.stop_reason
-    assert elapsed < 4.0
-    assert summary.ports["arm"].port_lost >= 1
+    state = (summary.stop_reason, summary.ports)
+    assert summary.status == 1 and "gone" in summary.stop_reason, state
+    assert elapsed < vanish + give_up + 2.0 < config.seconds  # ended by the port, not the time
+    assert summary.ports["arm"].port_lost >= 1, state
     campaign = read_campaign(tmp_path)
     assert campaign.spat is not None and len(campaign.spat.q) == summary.rows_written > 100
     sent = devices.displacement_mm  # the skewed nest's readings give back the displacement
