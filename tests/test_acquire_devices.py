@@ -73,10 +73,19 @@ def recorded(fakes, tmp_path_factory):
     folder = tmp_path_factory.mktemp("campaign")
     summaries = {}
     for location in (1, 2):
-        status = run(["acquire", str(folder), *fakes[location]["acquire_args"], "--seconds", "2",
-                      *ACQUIRE])
-        assert status == 0
-        summaries[location] = json.loads((folder / f"acquire-location{location}.json").read_text())
+        # Under load fewer arm samples are paired (lines read from a backlog are of unknown age,
+        # left unpaired: measured 73 rows in 2 s at load 9.7 instead of ~300 on an idle machine):
+        # record on, appending 2 s runs, until the location has more than 100 rows (at most 5).
+        runs: list[dict] = []
+        while sum(r["rows_written"] for r in runs) <= 100 and len(runs) < 5:
+            status = run(["acquire", str(folder), *fakes[location]["acquire_args"], "--seconds",
+                          "2", *ACQUIRE])
+            assert status == 0
+            runs.append(json.loads((folder / f"acquire-location{location}.json").read_text()))
+        summaries[location] = {
+            **runs[-1], "runs": len(runs), "rows_written": sum(r["rows_written"] for r in runs),
+            "status": max(r["status"] for r in runs),
+            "faults": {k: sum(r["faults"][k] for r in runs) for k in runs[0]["faults"]}}
     return folder, summaries
 
 
@@ -152,26 +161,51 @@ def test_port_that_disappears_stops_the_run_cleanly(tmp_path):
     nest = Nest(np.array([[1.0, 0, 0], [0.6, 0.8, 0], [0, 0.6, 0.8]]))  # a skewed nest
     devices = FakeDevices(FakeConfig(location=3, postures=20, rate=500, nest=nest,
                                      effects=("dh", "rtest"))).start()
-    timer = threading.Timer(1.5, devices.stop)  # the devices vanish after 1.5 s
-    timer.start()
+    vanished: list[float] = []
+    done = threading.Event()
+
+    def vanish() -> None:
+        """Stop the devices once 100 rows are on disk (under load that takes longer), 10 s at most."""
+        spat, deadline = tmp_path / "spat.csv", time.monotonic() + 10.0
+        while not done.is_set() and time.monotonic() < deadline:
+            if spat.exists() and spat.read_bytes().count(b"\n") > 101:  # header + 100 rows
+                break
+            time.sleep(0.02)
+        vanished.append(time.monotonic())
+        devices.stop()
+
+    # The devices are threads of this process: under load they fall silent while the process is
+    # not run (longest silence of every port at once before the vanishing, measured: 0.17 s at
+    # load 6, over 0.4 s at load 7.5, where a gauge was "gone" before its port was closed).
+    # give_up is above those silences: the port is lost before a silence ends the run.
+    give_up = 1.5
+    remover = threading.Thread(target=vanish)
     try:
         config = AcquisitionConfig(
             tmp_path, 3, devices.arm_path, tuple(devices.gauges), zero=devices.zero, nest=nest,
-            seconds=10.0, give_up=0.4, timeout=0.1, poll_interval=1 / 500)
-        tic = time.monotonic()
+            seconds=30.0, give_up=give_up, timeout=0.1, poll_interval=1 / 500)
+        remover.start()
         summary = acquire(config)
-        elapsed = time.monotonic() - tic
+        end = time.monotonic()
     finally:
-        timer.cancel()
+        done.set()
+        remover.join()
         devices.stop()
-    assert summary.status == 1 and "gone" in summary.stop_reason
-    assert elapsed < 4.0
-    assert summary.ports["arm"].port_lost >= 1
+    state = (summary.stop_reason, summary.ports)
+    assert summary.status == 1 and "gone" in summary.stop_reason, state
+    assert end - vanished[0] < give_up + 2.0  # ended by the lost port, soon after
+    assert summary.ports["arm"].port_lost >= 1, state
     campaign = read_campaign(tmp_path)
     assert campaign.spat is not None and len(campaign.spat.q) == summary.rows_written > 100
-    sent = devices.displacement_mm  # the skewed nest's readings give back the displacement
-    d = campaign.spat.displacement * 1e3
-    assert np.mean([np.abs(sent - row).max(axis=1).min() < 2e-9 for row in d]) > 0.95
+    # The skewed nest's conversion is undone exactly: the readings behind every row are readings
+    # its gauges sent. Channels are checked one by one: a row near a jump of the fake arm may take
+    # a channel from the posture before it (the share of such rows grows with the load: 6 % at
+    # load 4.4, so a share of whole-posture rows is no check). Tolerance: spat.csv's 1e-9 mm
+    # rounding of d through a row of unit directions, <= sqrt(3) * 0.5e-9 mm.
+    readings = nest.readings(campaign.spat.displacement) * 1e3
+    for k in range(3):
+        sent = devices.readings_mm[:, k]
+        assert np.abs(readings[:, k, None] - sent[None, :]).min(axis=1).max() < 2e-9
     assert json.loads(config.summary_path.read_text())["status"] == 1
 
 
@@ -324,7 +358,7 @@ def test_idle_gaps_and_a_slow_device_count_every_line_once(tmp_path):
     finally:
         devices.close()
     counters = check_rows(tmp_path, summary, devices.sent)
-    assert summary["rows_written"] >= devices.sent // 2, summary
+    assert summary["rows_written"] >= devices.sent // 2, (summary["unpaired"], summary["ports"])
     assert (np.diff(counters) > 0).all()
 
 
