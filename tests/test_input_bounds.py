@@ -278,3 +278,16 @@ def test_campaign_json_is_read_as_before(tmp_path: Path) -> None:
     path.write_text(json.dumps({"noise_um": {"rtest": 2.5, "point": 15.0}}))
     noise = read_noise(path)
     assert noise.rtest == pytest.approx(2.5e-6) and noise.point == pytest.approx(15e-6)
+
+
+def test_the_cli_prints_a_copied_row_note_as_one_line(sample: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """On the command line the note is one line of its own, not Python's warning with a source line."""
+    from aacmm_pin.cli import main
+
+    path = sample / "spat.csv"
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:11] + [lines[10]] * 2 + lines[11:]) + "\n")
+    assert main(["identify", str(sample), "--model", "dh", "--out", str(tmp_path / "cal")]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "repeat" in line]
+    assert len(err) == 1 and err[0].startswith(f"aacmm-pin identify: warning: {path}:12: 2 row(s)")

@@ -17,12 +17,13 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, load_effect_files
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AacmmError, CampaignWarning
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
 
@@ -107,7 +108,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     beat = args.command not in QUIET_COMMANDS
     try:
         handler: Handler = args.handler
-        with Heartbeat(f"aacmm-pin {args.command}", enabled=beat):
+        with Heartbeat(f"aacmm-pin {args.command}", enabled=beat), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(args.command)
             load_effect_files(args)  # --effects-file: before anything reads parameters
             return handler(args)
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
@@ -120,6 +122,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:  # read-only or full disk, a folder where a file should be, permissions
         print(f"aacmm-pin {args.command}: error: {os_error_message(exc)}", file=sys.stderr)
         return 2
+
+
+def _one_line_warning(command: str) -> Callable[..., None]:
+    """Return a ``warnings.showwarning`` that prints a campaign warning as one line, no source."""
+    default = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, CampaignWarning):
+            print(f"aacmm-pin {command}: warning: {message}", file=sys.stderr)
+        else:
+            default(message, category, *args, **kwargs)
+    return show
 
 
 def os_error_message(exc: OSError) -> str:
