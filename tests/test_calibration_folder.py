@@ -39,3 +39,15 @@ def test_read_calibration_gives_back_what_write_calibration_wrote(arm: ap.Arm,
     assert bare.urdf is None and bare.sizes is None
     with pytest.raises(ap.FileFormatError):
         read_calibration(tmp_path / "missing")
+
+
+def test_a_report_with_every_sample_an_outlier_reads_back(tmp_path: Path) -> None:
+    """A report lists each outlier with 3 keys: a robust fit of 20,000 points with a third off
+    writes more keys than any hand-written file needs, and the package must read what it wrote."""
+    from aacmm_pin.fit.robust import Outlier
+    from aacmm_pin.outputs.calibration_folder import read_report
+
+    outliers = [Outlier("points.csv", k + 2, k, 3e-3, 150.0).to_dict() for k in range(20_000)]
+    (tmp_path / "report.json").write_text(json.dumps({"success": True, "outliers": outliers}))
+    report = read_report(tmp_path)
+    assert report is not None and len(report["outliers"]) == 20_000

@@ -57,16 +57,20 @@ def _strict_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def loads(text: str, path: Path | str) -> Any:
+def loads(text: str, path: Path | str, max_file_keys: int | None = MAX_FILE_KEYS) -> Any:
     """Return the content of JSON text, refusing repeated and too many keys.
+
+    ``max_file_keys``: most keys in the whole text (None: bounded by its size only, for a file the
+    package writes with one small object per sample, such as ``report.json``'s outliers).
 
     Raises:
         FileFormatError: one problem naming ``path`` (and the key, or the line and column of a
             syntax error); a :class:`JsonKeyError` for a repeated key or too many keys.
     """
-    if len(text) > MAX_FILE_KEYS and (keys := _STRING.sub("", text).count(":")) > MAX_FILE_KEYS:
+    if (max_file_keys is not None and len(text) > max_file_keys
+            and (keys := _STRING.sub("", text).count(":")) > max_file_keys):
         raise JsonKeyError([Problem(path, None, None, f"{keys:,} keys; the package's files need "
-                                                      f"at most {MAX_FILE_KEYS:,}")])
+                                                      f"at most {max_file_keys:,}")])
     try:
         return json.loads(text, object_pairs_hook=_strict_object)
     except _Refused as exc:
@@ -77,13 +81,15 @@ def loads(text: str, path: Path | str) -> Any:
         raise FileFormatError([Problem(path, None, None, "JSON nested too deeply")]) from None
 
 
-def read_json(path: str | Path, max_bytes: int, what: str) -> Any:
+def read_json(path: str | Path, max_bytes: int, what: str,
+              max_file_keys: int | None = MAX_FILE_KEYS) -> Any:
     """Read a JSON file of at most ``max_bytes`` bytes (UTF-8, a BOM allowed).
 
     Args:
         path: the file.
         max_bytes: largest size read, bytes.
         what: what the file is, for the message on a too large file ("a parameters file").
+        max_file_keys: most keys in the file (see :func:`loads`).
 
     Raises:
         FileFormatError: one problem naming the file: missing, unreadable, too large, not UTF-8,
@@ -103,4 +109,4 @@ def read_json(path: str | Path, max_bytes: int, what: str) -> Any:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise FileFormatError([Problem(path, None, None, f"not UTF-8 text: {exc}")]) from None
-    return loads(text, path)
+    return loads(text, path, max_file_keys)

@@ -116,7 +116,9 @@ def read_report(caldir: str | Path) -> dict[str, Any] | None:
         return None
     report = (path if path.is_dir() else path.parent) / REPORT_FILE
     try:
-        data = read_json(report, MAX_PARAMETERS_BYTES, "a report")
+        # a report lists every outlier sample (3 keys each): its keys grow with the campaign, so
+        # only its size bounds them (each object still at most MAX_OBJECT_KEYS keys)
+        data = read_json(report, MAX_PARAMETERS_BYTES, "a report", max_file_keys=None)
     except JsonKeyError:
         raise  # well formed but ambiguous: refused, not ignored
     except FileFormatError:
