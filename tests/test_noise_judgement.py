@@ -3,6 +3,7 @@ fit in breakdown and a model error above the noise; implausible stated noise ref
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -240,3 +241,15 @@ def test_a_drift_fails_unless_a_temperature_varies() -> None:
     temp = 20.0 + 2.0 * np.arange(len(spat.q)) / len(spat.q)
     warming = ap.identify(campaign.with_spat(displacement=disp, temp=temp), model="proposed")
     assert warming.success and "x the stated noise" in warming.message
+
+
+def test_the_noise_campaign_json_states_is_the_one_judged_against(arm: ap.Arm) -> None:
+    """Points with 60 um noise: judged against the campaign's stated 60 um, no note; against the
+    default 20 um (no campaign.json) a note of about 3 x the stated noise."""
+    noisy = _points_campaign(arm, _truth(arm, 2), N, 2, sigma=60e-6)
+    default = ap.identify(_with(noisy), arm, model="dh")
+    ratio = float(default.message.split("the residual is ")[1].split(" x ")[0])
+    assert abs(ratio / 3 - 1) < 0.15  # 450 coordinates: the RMS is within ~3 % of 60/20
+    stated = dataclasses.replace(_with(noisy), noise=ap.StatedNoise(point=60e-6))
+    cal = ap.identify(stated, arm, model="dh")
+    assert cal.success and "stated noise" not in cal.message

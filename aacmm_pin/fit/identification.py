@@ -441,8 +441,8 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     if enough and success:
         success, message = _parts_dof(success, message, problem, x_full, setup, kept)
     if enough:
-        success, message = _judged(success, message, _judgement(campaign, setup, residual, kept,
-                                                                n_det), robust, campaign, setup,
+        judged = _judgement(campaign, setup, residual, kept, n_det, options.sigma)
+        success, message = _judged(success, message, judged, robust, campaign, setup,
                                    _points_rms(campaign, setup, residual, kept))
     return Calibration(parameters=unknowns.parameters(x_full[:problem.n_arm]), model=options.model,
                        use_rtest=options.use_rtest,
@@ -559,12 +559,17 @@ def _point_rows(campaign: Campaign, meas: Measurements) -> np.ndarray:
 
 
 def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np.ndarray,
-               n_det: int) -> Judgement:
+               n_det: int, given: float | None) -> Judgement:
     """Return the kept residual judged against the stated noise (:mod:`~aacmm_pin.fit.noise_judgement`).
 
-    ``residual``: every sample's residual, shape (N, 3), m; ``kept``: the samples fitted, (N,).
+    ``residual``: every sample's residual, shape (N, 3), m; ``kept``: the samples fitted, (N,);
+    ``given``: the noise the user gave (``--sigma-um``), m. Without it, the noise the campaign
+    states (``campaign.json``, per kind; ``sigma_um`` cells) is what the residual is judged by.
     """
-    stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
+    if given is None and campaign.noise is not None:
+        stated = stated_noise(campaign, setup.meas, campaign.noise)
+    else:
+        stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
     white = residual[kept] / stated[kept, None]
     time = setup.meas.samples.t
     warms = any(name.endswith("_c") and column(name).varies(values[kept])
