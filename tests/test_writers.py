@@ -362,3 +362,20 @@ def test_pairs_of_identify_runs_started_together(tmp_path, small_sim):
         done = [(procs[i].returncode, procs[i].communicate()[1]) for i in order]
         assert [status for status, _ in done] == [2, 0], done  # the refused one ends first
         assert str(out) in one_line(done[0][1]) and BUSY in done[0][1]
+
+
+def test_predict_keeps_the_files_its_parameters_folder_and_effects_file_hold(predict_inputs,
+                                                                             tmp_path):
+    """A parameters.json stands for its calibration folder (its URDF, report, maps are read), and
+    an --effects-file module is read: neither is an output, even with --force."""
+    params, readouts = predict_inputs
+    urdf = tmp_path / "calibrated.urdf"
+    urdf.write_text("<robot name='kept'/>\n")
+    plugin = tmp_path / "plugin.py"
+    plugin.write_text("# no effect in it\n")
+    for out in (urdf, plugin):
+        before = out.read_bytes()
+        status, err = run_cli(["predict", str(params), str(readouts), "--effects-file",
+                               str(plugin), "--out", str(out), "--force"])
+        assert status == 2 and "is an input of this command" in one_line(err)
+        assert out.read_bytes() == before

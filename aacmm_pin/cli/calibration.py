@@ -44,7 +44,7 @@ def _simulate(args: argparse.Namespace) -> int:
     config = SimulationConfig(seed=args.seed, effects=effects,
                               samples_per_location=args.samples_per_location,
                               samples_per_socket=args.samples_per_socket, points=args.points)
-    with claim_output(args.out, args.force, input_paths(_arm_file(args.arm))):
+    with claim_output(args.out, args.force, input_paths(*_read_files(args))):
         return _simulate_into(args, config, effects)  # the folder held from before the work
 
 
@@ -72,7 +72,7 @@ def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ..
 
 
 def _predict(args: argparse.Namespace) -> int:
-    inputs = input_paths(args.readouts, _arm_file(args.arm), calibrations=[args.params])
+    inputs = input_paths(args.readouts, *_read_files(args), calibrations=[args.params])
     with claim_output(args.out, args.force, inputs, folder=False):  # before reading anything
         return _predict_into(args, inputs)
 
@@ -221,7 +221,8 @@ def _discover_into(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    inputs = input_paths(calibrations=[args.caldir], campaigns=[args.campaign])
+    inputs = input_paths(*_read_files(args), calibrations=[args.caldir],
+                         campaigns=[args.campaign])
     with claim_file(args.json, args.force, inputs):  # before the work, not after it
         return _validate_into(args, inputs)
 
@@ -361,7 +362,15 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _campaign_inputs(args: argparse.Namespace) -> list[Path]:
     """Return what a command of a campaign and ``--arm`` reads (kept from its outputs)."""
-    return input_paths(_arm_file(args.arm), campaigns=[args.campaign])
+    return input_paths(*_read_files(args), campaigns=[args.campaign])
+
+
+def _read_files(args: argparse.Namespace) -> list[str | None]:
+    """Return the files read beside the campaign and calibration (kept from the outputs).
+
+    ``--arm``'s URDF and the ``--effects-file`` modules.
+    """
+    return [_arm_file(getattr(args, "arm", None)), *(getattr(args, "effects_file", None) or [])]
 
 
 def _arm_file(arm: str | None) -> str | None:

@@ -64,7 +64,7 @@ def _inputs(args: argparse.Namespace) -> list[Path]:
     from aacmm_pin.data.output_claim import input_paths
 
     arm = args.arm if args.arm is not None and Path(args.arm).is_file() else None
-    return input_paths(getattr(args, "points", None), arm,
+    return input_paths(getattr(args, "points", None), arm, *(getattr(args, "effects_file", None) or []),
                        campaigns=[getattr(args, "campaign", None)], calibrations=[args.params])
 
 

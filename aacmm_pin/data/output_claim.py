@@ -50,12 +50,14 @@ def input_paths(*paths: str | Path | None, campaigns: Iterable[str | Path | None
     Args:
         paths: files (or folders) read; those that do not exist and None are left out.
         campaigns: campaign folders: each with the files of :data:`CAMPAIGN_FILES` in it.
-        calibrations: calibration folders (or parameters files): each with the files of
-            :data:`CALIBRATION_FILES` in it.
+        calibrations: calibration folders (or parameters files; a ``parameters.json`` stands for
+            its folder): each with the files of :data:`CALIBRATION_FILES` in it.
     """
     found = [Path(p) for p in paths if p is not None]
     for names, folders in ((CAMPAIGN_FILES, campaigns), (CALIBRATION_FILES, calibrations)):
         for folder in (Path(f) for f in folders if f is not None):
+            if not folder.is_dir() and folder.name == names[0] == CALIBRATION_FILES[0]:
+                folder = folder.parent  # a parameters.json: its folder's report, URDF, maps are read
             found += [folder, *(folder / name for name in names)] if folder.is_dir() else [folder]
     return [p for p in found if p.exists()]
 
