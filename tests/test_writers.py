@@ -129,6 +129,38 @@ def test_the_demo_refuses_a_folder_with_files(tmp_path):
     assert (tmp_path / "campaign" / "notes.txt").read_text() == "mine"
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="flock is POSIX")
+def test_a_file_system_without_flock_claims_by_exclusive_creation(tmp_path, monkeypatch):
+    """flock refused (ENOLCK: some NFS and FUSE mounts): the claim is the lock file's exclusive
+    creation, so commands still write and a second claim still fails at once."""
+    import errno
+    import fcntl
+
+    def no_flock(fd: int, op: int) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_flock)
+    out = tmp_path / "new"
+    with claim_output(out):  # a second claim from another thread (this one's would be nested)
+        failed: list[BaseException] = []
+        other = threading.Thread(target=lambda: _claim_into(out, failed))
+        other.start()
+        other.join(10)
+        assert len(failed) == 1 and isinstance(failed[0], OutputExistsError)
+        assert "another run is writing it" in str(failed[0])
+    with claim_output(out):
+        pass
+    assert list(tmp_path.iterdir()) == []  # the lock file is gone
+
+
+def _claim_into(out: Path, failed: list[BaseException]) -> None:
+    try:
+        with claim_output(out):
+            pass
+    except OutputExistsError as exc:
+        failed.append(exc)
+
+
 def test_a_claim_is_exclusive_across_threads(tmp_path):
     """While one thread holds an output, another's claim fails at once; after it, it succeeds."""
     out = tmp_path / "new"

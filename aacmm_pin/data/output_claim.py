@@ -194,23 +194,27 @@ def _busy(target: Path, holder: str) -> OutputExistsError:
 def _lock(lock: Path, target: Path) -> int:
     """Create or open ``lock``, take its exclusive lock without waiting; return its descriptor.
 
-    Without ``flock`` (Windows) the lock is the file's exclusive creation: a killed run's lock
-    file then stays until removed by hand.
+    Without ``flock`` (Windows, or a file system that refuses it: some NFS and FUSE mounts) the
+    lock is the file's exclusive creation: a killed run's lock file then stays until removed by
+    hand.
     """
     if sys.platform == "win32":
-        try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            raise _busy(target, lock.read_text("ascii", "replace").strip()) from None
-        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
-        return fd
+        return _lock_by_creation(lock, target)
     while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        try:
+            fd, made = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644), True
+        except FileExistsError:
+            fd, made = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644), False
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
+            if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL) and made:
+                os.write(fd, f"{os.getpid()}\n".encode("ascii"))  # no flock on this file system:
+                return fd  # the exclusive creation is the claim, as on Windows
             holder = os.read(fd, 32).decode("ascii", "replace").strip()
             os.close(fd)
+            if exc.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
+                raise _busy(target, holder) from None  # a lock file made by another run
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise
             raise _busy(target, holder) from None
@@ -223,6 +227,16 @@ def _lock(lock: Path, target: Path) -> int:
             os.write(fd, f"{os.getpid()}\n".encode("ascii"))
             return fd
         os.close(fd)
+
+
+def _lock_by_creation(lock: Path, target: Path) -> int:
+    """Create ``lock`` exclusively and write the process id in it; return its descriptor."""
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:
+        raise _busy(target, lock.read_text("ascii", "replace").strip()) from None
+    os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+    return fd
 
 
 @contextmanager
