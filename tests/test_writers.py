@@ -411,3 +411,48 @@ def test_predict_keeps_the_files_its_parameters_folder_and_effects_file_hold(pre
                                str(plugin), "--out", str(out), "--force"])
         assert status == 2 and "is an input of this command" in one_line(err)
         assert out.read_bytes() == before
+
+
+def test_the_umask_is_read_without_changing_it(monkeypatch):
+    """umask() gives the process's umask and never sets another one, even for a moment (threads
+    creating files meanwhile would get it)."""
+    from aacmm_pin.data import output_claim
+
+    seen: list[int] = []
+    real = os.umask
+
+    def spy(mask: int) -> int:
+        seen.append(mask)
+        return real(mask)
+
+    before = real(0o027)
+    try:
+        monkeypatch.setattr(os, "umask", spy)
+        assert output_claim.umask() == 0o027
+        if Path("/proc/self/status").exists():
+            assert seen == []
+    finally:
+        real(before)
+
+
+def test_a_written_file_and_folder_sync_the_folder_that_holds_them(tmp_path, monkeypatch):
+    """After the rename, the folder holding the output is flushed too (else a power loss can
+    undo the rename)."""
+    from aacmm_pin.data.output_file import write_text_file
+    from aacmm_pin.data.output_folder import output_folder
+
+    synced: list[str] = []
+    real = os.fsync
+
+    def spy(fd: int) -> None:
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        real(fd)
+
+    if not Path("/proc/self/fd").exists():
+        pytest.skip("needs /proc to name the flushed descriptors")
+    monkeypatch.setattr(os, "fsync", spy)
+    write_text_file(tmp_path / "a.json", "{}\n")
+    assert synced[-1] == str(tmp_path)
+    with output_folder(tmp_path / "cal") as tmp:
+        (tmp / "x.txt").write_text("x")
+    assert synced[-1] == str(tmp_path)

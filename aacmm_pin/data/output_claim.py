@@ -255,7 +255,38 @@ def named_os_error(target: Path, hidden: Path | None = None) -> Iterator[None]:
 
 
 def umask() -> int:
-    """Return the process's umask."""
-    mask = os.umask(0)
+    """Return the process's umask.
+
+    Read from ``/proc/self/status`` where there is one (Linux): setting it to read it, the only
+    portable way, changes it for a moment for every thread (acquisition runs threads).
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o077)  # the brief change errs on the private side
     os.umask(mask)
     return mask
+
+
+def sync_folder(folder: str | Path) -> None:
+    """Flush a folder's entries to disk (after a rename in it), where the system allows it.
+
+    Without it a power loss right after ``os.replace`` can lose the rename on some file systems.
+    Folders cannot be opened on Windows, and some file systems refuse ``fsync`` on one: skipped.
+    """
+    if sys.platform == "win32":
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)

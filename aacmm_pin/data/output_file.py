@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from aacmm_pin.data.output_claim import claim_output, named_os_error, umask
+from aacmm_pin.data.output_claim import claim_output, named_os_error, sync_folder, umask
 
 
 @contextmanager
@@ -51,6 +51,7 @@ def output_file(target: str | Path, force: bool = False, inputs: Iterable[str | 
                     os.close(fd)
                 os.chmod(tmp, 0o666 & ~umask())
                 os.replace(tmp, target)
+                sync_folder(target.absolute().parent)  # the rename itself on disk
         finally:
             tmp.unlink(missing_ok=True)
 

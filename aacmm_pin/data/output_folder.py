@@ -27,6 +27,7 @@ from aacmm_pin.data.output_claim import (
     check_output,
     claim_output,
     named_os_error,
+    sync_folder,
     umask,
 )
 
@@ -89,6 +90,7 @@ def output_folder(target: str | Path, force: bool = False, inputs: Iterable[str 
                 _fsync_tree(tmp)
                 tmp.chmod(0o755 & ~umask())
                 _put_in_place(tmp, target)
+                sync_folder(parent)  # the rename itself on disk
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
 
