@@ -253,3 +253,24 @@ def test_the_noise_campaign_json_states_is_the_one_judged_against(arm: ap.Arm) -
     stated = dataclasses.replace(_with(noisy), noise=ap.StatedNoise(point=60e-6))
     cal = ap.identify(stated, arm, model="dh")
     assert cal.success and "stated noise" not in cal.message
+
+
+def test_a_model_error_in_a_sweep_is_not_a_moved_instrument() -> None:
+    """Poses measured in a sweep of joint 1 (the outer loop of a grid) with a model error of q1
+    (5 noise sigmas): along the rows it looks like a step (81 % of sin over a period), but the order
+    of q1 explains it as well: not failed. A step of the same size on random poses still fails."""
+    from aacmm_pin.fit.noise_judgement import judge_residual
+
+    rng = np.random.default_rng(7)
+    m = 300
+    q1 = np.linspace(-np.pi, np.pi, m)
+    state = np.column_stack([q1, rng.uniform(-np.pi, np.pi, (m, 5))])
+    error = 5.0 * np.column_stack([np.sin(q1), 0.3 * np.cos(q1), np.zeros(m)])
+    white = error + rng.normal(0.0, 1.0, (m, 3))
+    one = np.zeros(m, dtype=int)
+    assert judge_residual(white, 25, one).row_order is not None  # row order alone: fooled
+    assert judge_residual(white, 25, one, state=state).row_order is None
+    bumped = rng.normal(0.0, 1.0, (m, 3))
+    bumped[m // 2:] += 5.0
+    random = rng.uniform(-np.pi, np.pi, (m, 6))
+    assert judge_residual(bumped, 25, one, state=random).row_order is not None

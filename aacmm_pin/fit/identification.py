@@ -28,7 +28,6 @@ from scipy.special import chdtrc
 
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.data.campaign import Campaign, StatedNoise
-from aacmm_pin.data.columns import column
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.fit import identifiability as ident
@@ -572,10 +571,11 @@ def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np
         stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
     white = residual[kept] / stated[kept, None]
     time = setup.meas.samples.t
-    warms = any(name.endswith("_c") and column(name).varies(values[kept])
-                for name, values in setup.meas.samples.columns.items())
+    variables = [values for name, values in setup.meas.samples.columns.items()
+                 if name.endswith("_c")]  # an arm that warms drifts: a temperature's order
+    state = np.column_stack([setup.meas.q, *variables])[kept]
     judged = judge_residual(white, n_det, _segments(campaign, setup.meas)[kept],
-                            None if time is None else time[kept], drift_explained=warms)
+                            None if time is None else time[kept], state)
     if judged.row_order is None:
         return judged
     return judged._replace(row_order=judged.row_order._replace(  # a sample of the campaign
