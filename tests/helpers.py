@@ -7,6 +7,8 @@ about X, Y, Z), multiplied left to right.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 from pathlib import Path
 
@@ -115,3 +117,16 @@ def central_differences(f, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
         e[j] = h
         columns.append((np.ravel(f(x + e)) - np.ravel(f(x - e))) / (2 * h))
     return np.column_stack(columns)
+
+
+def run_cli(argv: list[str]) -> tuple[int, str]:
+    """Run ``aacmm-pin argv`` in-process; return (status, stderr)."""
+    from aacmm_pin.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            status = main(argv)
+        except SystemExit as exc:  # argparse
+            status = int(exc.code or 0)
+    return status, err.getvalue()

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import signal
@@ -16,22 +14,10 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.cli import main
 from aacmm_pin.data.output_folder import OutputExistsError, output_folder
 from aacmm_pin.errors import ArmModelError, FileFormatError
 from aacmm_pin.model.arm import resolve_arm_path
-from tests.helpers import ENV
-
-
-def run_cli(argv: list[str]) -> tuple[int, str]:
-    """Run ``aacmm-pin argv`` in-process; return (status, stderr)."""
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            status = main(argv)
-        except SystemExit as exc:  # argparse
-            status = int(exc.code or 0)
-    return status, err.getvalue()
+from tests.helpers import ENV, run_cli
 
 
 def tree(folder: Path) -> dict[str, bytes]:

@@ -5,10 +5,8 @@ Issue 24 items 2, 6, 8, 9, 11 (writers) and issue 26 item 1 (the demo's folder).
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import errno
-import io
 import os
 import resource
 import signal
@@ -22,24 +20,12 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.cli import main
 from aacmm_pin.data.output_claim import OutputExistsError, claim_output
 from aacmm_pin.data.spreadsheet import neutralise_formula
 from aacmm_pin.model.arm import resolve_arm_path
-from tests.helpers import ENV
+from tests.helpers import ENV, run_cli
 
 BUSY = "another run is writing it"
-
-
-def run_cli(argv: list[str]) -> tuple[int, str]:
-    """Run ``aacmm-pin argv`` in-process; return (status, stderr)."""
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            status = main(argv)
-        except SystemExit as exc:  # argparse
-            status = int(exc.code or 0)
-    return status, err.getvalue()
 
 
 def one_line(err: str) -> str:
