@@ -228,3 +228,13 @@ def claim_file(path: Path | None, force: bool, inputs: Sequence[str | Path] = ()
     from aacmm_pin.data.output_claim import claim_output
 
     return claim_output(path, force, inputs, folder=False)
+
+
+def read_files(args: argparse.Namespace) -> list[str | None]:
+    """Return the files a command reads beside its campaign and calibration (kept from its outputs).
+
+    ``--arm``'s URDF (None for an embedded arm's name) and the ``--effects-file`` modules.
+    """
+    arm = getattr(args, "arm", None)
+    return [arm if arm is not None and Path(arm).is_file() else None,
+            *(getattr(args, "effects_file", None) or [])]

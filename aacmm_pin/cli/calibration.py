@@ -26,6 +26,7 @@ from aacmm_pin.cli._options import (
     noise_um_or_zero,
     out_option,
     positive,
+    read_files,
     seed_option,
     write_json,
 )
@@ -44,7 +45,7 @@ def _simulate(args: argparse.Namespace) -> int:
     config = SimulationConfig(seed=args.seed, effects=effects,
                               samples_per_location=args.samples_per_location,
                               samples_per_socket=args.samples_per_socket, points=args.points)
-    with claim_output(args.out, args.force, input_paths(*_read_files(args))):
+    with claim_output(args.out, args.force, input_paths(*read_files(args))):
         return _simulate_into(args, config, effects)  # the folder held from before the work
 
 
@@ -72,7 +73,7 @@ def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ..
 
 
 def _predict(args: argparse.Namespace) -> int:
-    inputs = input_paths(args.readouts, *_read_files(args), calibrations=[args.params])
+    inputs = input_paths(args.readouts, *read_files(args), calibrations=[args.params])
     with claim_output(args.out, args.force, inputs, folder=False):  # before reading anything
         return _predict_into(args, inputs)
 
@@ -221,7 +222,7 @@ def _discover_into(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    inputs = input_paths(*_read_files(args), calibrations=[args.caldir],
+    inputs = input_paths(*read_files(args), calibrations=[args.caldir],
                          campaigns=[args.campaign])
     with claim_file(args.json, args.force, inputs):  # before the work, not after it
         return _validate_into(args, inputs)
@@ -362,20 +363,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _campaign_inputs(args: argparse.Namespace) -> list[Path]:
     """Return what a command of a campaign and ``--arm`` reads (kept from its outputs)."""
-    return input_paths(*_read_files(args), campaigns=[args.campaign])
-
-
-def _read_files(args: argparse.Namespace) -> list[str | None]:
-    """Return the files read beside the campaign and calibration (kept from the outputs).
-
-    ``--arm``'s URDF and the ``--effects-file`` modules.
-    """
-    return [_arm_file(getattr(args, "arm", None)), *(getattr(args, "effects_file", None) or [])]
-
-
-def _arm_file(arm: str | None) -> str | None:
-    """Return ``--arm`` if it names a file (a URDF path, read), None for an embedded arm's name."""
-    return arm if arm is not None and Path(arm).is_file() else None
+    return input_paths(*read_files(args), campaigns=[args.campaign])
 
 
 def _axes(args: argparse.Namespace) -> int:

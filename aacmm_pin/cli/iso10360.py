@@ -20,6 +20,7 @@ from aacmm_pin.cli._options import (
     json_option,
     no_rtest_option,
     params_option,
+    read_files,
     write_json,
 )
 
@@ -63,8 +64,7 @@ def _inputs(args: argparse.Namespace) -> list[Path]:
     """Return the files and folders the figure reads (kept from ``--json``)."""
     from aacmm_pin.data.output_claim import input_paths
 
-    arm = args.arm if args.arm is not None and Path(args.arm).is_file() else None
-    return input_paths(getattr(args, "points", None), arm, *(getattr(args, "effects_file", None) or []),
+    return input_paths(getattr(args, "points", None), *read_files(args),
                        campaigns=[getattr(args, "campaign", None)], calibrations=[args.params])
 
 
