@@ -5,9 +5,9 @@ placements) on a virtual arm with DH errors, encoder errors, the sphere moving i
 gravity-induced joint deflection (compliance of axes A2 and A4, which the paper's model does not
 have). Starting from the paper's proposed model, :func:`aacmm_pin.discover` scores every
 effect of the library on held-out data (left-out R-Test locations and the length bar) and names
-what is missing; the script prints each step (effect, axes, held-out RMS and the length-bar errors
-before -> after: plain RMS, RMS inside the SPATs' coverage, normalised by their predicted
-covariance), the true compliances next to the identified ones, and writes ``discovery.json``,
+what is missing; the script prints each step as it is found (effect, axes, held-out RMS and
+the length-bar errors before -> after: plain RMS, RMS inside the SPATs' coverage, normalised by
+their predicted covariance), the true compliances next to the identified ones, and writes ``discovery.json``,
 the figures and the final calibration with :func:`aacmm_pin.write_discovery`. Exits with status 1
 if compliance is not named first.
 
@@ -24,6 +24,7 @@ import sys
 
 from aacmm_pin import SimulationConfig, discover, load_arm, simulate_campaign, write_discovery
 from aacmm_pin.analyses.bar_linear import covered_readouts
+from aacmm_pin.analyses.discovery_results import Step
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="discovery-example", help="output folder")
@@ -35,15 +36,26 @@ arm = load_arm()
 sim = simulate_campaign(arm, SimulationConfig(
     seed=0, effects=("dh", "encoder", "rtest", "compliance"), samples_per_location=args.samples,
     bar_placements=args.placements))
-result = discover(sim.campaign, arm, start="proposed")
+print(f"simulated 4 SPATs of {args.samples} samples and {args.placements} bar placements, "
+      "compliance of A2 and A4 hidden; discovering ...", flush=True)
 
-print(f"start: proposed model, held-out RMS {result.heldout_rms[0] * 1e6:.2f} um, "
-      f"length-bar RMS {(result.bar_rms[0] or 0.0) * 1e6:.2f} um")
-for k, step in enumerate(result.steps, start=1):
+
+def print_start(heldout_rms: float, fit_rms: float, bar_rms: float | None,
+                size_factors: dict[str, float]) -> None:
+    """Print the start model's line as soon as it is fitted."""
+    print(f"start: proposed model, held-out RMS {heldout_rms * 1e6:.2f} um, "
+          f"length-bar RMS {(bar_rms or 0.0) * 1e6:.2f} um", flush=True)
+
+
+def print_step(k: int, step: Step) -> None:
+    """Print each step as soon as it is found."""
     axes = ", ".join(f"A{a}" for a in step.axes) or "arm-wide"
     print(f"step {k}: {step.effect} ({axes}): held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
           f"{step.heldout_rms_after * 1e6:.2f} um")
-    print(f"  length bar: {step.bar_summary()}")
+    print(f"  length bar: {step.bar_summary()}", flush=True)
+
+
+result = discover(sim.campaign, arm, start="proposed", on_start=print_start, on_step=print_step)
 spat_q, bar_q = sim.campaign.spat.q, sim.campaign.lengthbar.q
 outside = [f"A{a + 1}" for a in range(arm.n_axes)
            if not covered_readouts(spat_q[:, [a]], bar_q[:, [a]], 5.0).all()]

@@ -51,6 +51,8 @@ for m in np.unique(spat.location):
     since = t[sel] - t[sel].min()
     displacement[sel] += np.outer(since / since.max(), direction) * args.creep_um * 1e-6
 campaign = campaign.with_spat(t=t, displacement=displacement)
+print(f"simulated 4 SPATs of 100 samples, the fixture creeping {args.creep_um:g} um over each "
+      "location; discovering with the library alone ...", flush=True)
 
 # 2. discovery with the library alone: nothing to name, but the residual says where it disagrees
 first = discover(campaign, arm, start="proposed")

@@ -244,3 +244,45 @@ def test_tilt_columns_equal_pinocchio_central_differences(which, model_kind):
             rows = tool_index == arm.tool_names.index(tool)
             cols_other = [c for c, name in enumerate(arm.axis_names) if name.startswith(other)]
             assert rows.any() and not cols[rows][:, :, cols_other].any()
+
+
+@pytest.mark.parametrize("model_kind", ["identification", "runtime"])
+def test_joint_jacobians_equal_pinocchio_columns(any_arm, model_kind):
+    """The joint columns alone (inverse kinematics) equal Pinocchio's frame Jacobian's, to 1e-12:
+    joints moving per sample, fixed after a moving one (the DH error joints) and one sample."""
+    rng = np.random.default_rng(8)
+    n = 40
+    if model_kind == "identification":
+        ident = any_arm.identification
+        model, chain, frames = ident.model, ident.chain, np.asarray(ident.tool_frames)
+        joints = np.asarray(ident.axis_idx)
+        q = np.tile(rng.uniform(-1.0, 1.0, model.nq), (n, 1))
+    else:
+        model = any_arm.runtime_model()
+        chain = BatchedChain(model)
+        frames = np.array([model.getFrameId(link) for link in any_arm.tool_links])
+        joints = np.array([model.joints[model.getJointId(a)].idx_q for a in any_arm.axis_names])
+        q = np.zeros((n, model.nq))
+    q[:, joints] = rng.uniform(-4.0, 4.0, (n, joints.size))
+    fids = frames[_tools(any_arm, rng, n)]
+    ref_pos, ref_jac = _pinocchio(model, q, fids)
+    for rows in (slice(None), slice(0, 1)):
+        pos, jac = chain.joint_jacobians(q[rows], fids[rows], joints)
+        np.testing.assert_allclose(pos, ref_pos[rows], rtol=0, atol=TOL)
+        np.testing.assert_allclose(jac, ref_jac[rows][:, :, joints], rtol=0, atol=TOL)  # nq == nv
+
+
+def test_joint_kinematics_equal_the_full_jacobians_readout_columns(any_arm):
+    """JointKinematics gives stylus_jacobians' r-CS positions and readout columns (maps' slopes,
+    extensions' offsets, tilts and scale included) without forming the DH, tool and map columns."""
+    params, samples = _off_nominal(any_arm, 9)
+    params = params.replace(extensions={**params.extensions,  # and a tilt
+                                        "lateral_compliance[A2]": np.array([3e-5, 2e-5])})
+    change = kinematics.extension_adjustment(any_arm, params, samples.q, samples)
+    assert change is not None and change.tilted
+    full = model_kinematics.stylus_jacobians(any_arm, params, samples.q, "r", samples,
+                                             adjust=change)
+    pos, jac = model_kinematics.JointKinematics(any_arm, params).position_jacobian(
+        samples.q, samples.tool, change)
+    np.testing.assert_allclose(pos, full.position, rtol=0, atol=TOL)
+    np.testing.assert_allclose(jac, full.readouts, rtol=0, atol=TOL)

@@ -218,6 +218,31 @@ def test_cli_writes_report_figures_and_a_caldir_predict_and_validate_use(arm: ap
     assert np.abs(points - no_thermal).max() > 1e-6  # the scale is not lost on the way
 
 
+def test_cli_prints_each_result_before_any_figure(arm: ap.Arm, tmp_path, monkeypatch,
+                                                  capsys) -> None:
+    """discover prints the start model's line and each step as they are found, then writes its
+    figures (issue 26: figures were two thirds of the run, and came first): what is on stdout
+    when the writer is called holds every result line."""
+    import aacmm_pin.outputs.discovery_figures as figures
+
+    sim = _campaign(arm, 5, ("dh", "encoder", "rtest", "thermal"), n=40)
+    ap.write_simulation(sim, tmp_path / "camp")
+    printed_before: list[str] = []
+
+    def writer(result, arm, folder, force=False):  # the figures' writer, recording what came first
+        printed_before.append(capsys.readouterr().out)
+        return folder
+
+    monkeypatch.setattr(figures, "write_discovery", writer)
+    assert main(["discover", str(tmp_path / "camp"), "--start", "proposed", "--max-steps", "1",
+                 "--out", str(tmp_path / "disc")]) == 0
+    before = printed_before[0].splitlines()
+    assert before and before[0].startswith("start proposed: held-out RMS "), before
+    assert any(line.startswith("step 1: thermal: held-out RMS ") for line in before)
+    assert before[-1].startswith(("stopped: ", "residual: ", "unexplained: "))
+    assert capsys.readouterr().out.startswith("wrote ")  # only the file list after the figures
+
+
 @pytest.mark.parametrize("model, seed, rtol", [("dh", 6, 1e-3), ("proposed", 4, 0.1)])
 def test_linearised_heldout_equals_refits_without_each_location(arm: ap.Arm, model: str, seed: int,
                                                                  rtol: float) -> None:

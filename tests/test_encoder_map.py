@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles, node_count
+from aacmm_pin.model.encoder_map import (
+    EncoderMap,
+    correct_readouts,
+    correct_with_slopes,
+    node_angles,
+    node_count,
+)
 from tests.helpers import map_error
 
 
@@ -83,3 +89,19 @@ def test_node_columns_are_angle_columns_times_weights(emap):
     np.testing.assert_array_equal(emap.node_columns(readout, d_angle).toarray(),
                                   (d_angle[:, :, None] * weights[:, None, :]).reshape(
                                       3 * readout.size, -1))
+
+
+@pytest.mark.parametrize("steps", [(5.0, 5.0), (5.0, 2.5)])
+def test_correct_with_slopes_equals_the_per_axis_functions(steps):
+    """All axes in one pass (one node step) or axis by axis (several): the same angles and
+    slopes as correct_readouts and 1 + EncoderMap.slope, axes without a map unchanged."""
+    rng = np.random.default_rng(11)
+    maps = {a: EncoderMap(rng.normal(0.0, 1e-4, node_count(s)), s) for a, s in zip((2, 5), steps)}
+    q = rng.uniform(-7.0, 7.0, (30, 6))
+    angles, slopes = correct_with_slopes(q, maps)
+    np.testing.assert_array_equal(angles, correct_readouts(q, maps))
+    expected = np.ones_like(q)
+    for a, m in maps.items():
+        expected[:, a - 1] += m.slope(q[:, a - 1])
+    np.testing.assert_array_equal(slopes, expected)
+    assert np.all(slopes[:, [0, 2, 3, 5]] == 1.0) and np.all(slopes[:, [1, 4]] != 1.0)

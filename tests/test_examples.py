@@ -63,6 +63,8 @@ def test_01_reproduce_paper_prints_fig9_and_copies_the_figures(tmp_path: Path) -
 def _check_02(out: str, folder: Path) -> None:
     """What example 02 prints and writes whatever the campaign size."""
     lines = out.splitlines()
+    assert lines[0].startswith("simulated 4 SPATs of ")  # a line before discovery's minute
+    lines = lines[1:]
     assert re.fullmatch(rf"start: proposed model, held-out RMS {NUMBER} um, length-bar RMS "
                         rf"{NUMBER} um", lines[0]), lines[0]
     step = re.fullmatch(rf"step 1: compliance \(A2, A4\): held-out RMS ({NUMBER}) -> ({NUMBER}) um",

@@ -116,6 +116,40 @@ def test_effects_switch_on_and_off():
         seed=1, effects=("dh", "encoder", "thermal"), **small)).campaign.spat.temp is not None)
 
 
+@pytest.mark.parametrize("effects", [("dh", "encoder", "rtest"),
+                                     ("dh", "encoder", "compliance", "backlash")])
+def test_inverse_kinematics_forms_no_identification_columns(monkeypatch, effects):
+    """The simulator's and the planner's IK use the joint Jacobian only (issue 26): the full
+    Jacobian of the identification model (DH, tool and map columns: ~40 columns formed thousands
+    of times to use 7) is never asked for, and every posture still puts the true stylus on its
+    target (the SPAT sphere on its nest plus the seat displacement; the bar sockets)."""
+    from aacmm_pin.effects.calibrated import stylus_ik, stylus_positions
+    from aacmm_pin.model._chain import BatchedChain
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("inverse kinematics formed the full identification Jacobian")
+
+    monkeypatch.setattr(BatchedChain, "jacobians", refuse)
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=2, effects=effects, samples_per_location=8,
+                                                  samples_per_socket=2, bar_placements=1))
+    camp, truth = sim.campaign, sim.truth
+    # targets rebuilt from the truth record: nest + seat displacement (the R-Test reading less
+    # its noise: within 5 sigma of 2 um) for SPATs, the socket for the bar
+    nests = {int(m): np.array(p) * 1e-3 for m, p in
+             truth.extra["effects"]["locations_true_mm"].items()}
+    reached = sim.sphere_mt - np.array([nests[m] for m in camp.spat.location])
+    assert np.abs(reached - camp.spat.displacement).max() < 5 * 2e-6
+    if "compliance" not in effects:  # kinematic: the bar readouts reach their sockets
+        bar = stylus_positions(arm, truth, camp.lengthbar.q)
+        sockets = np.array([sim.sockets_r[k][s] for k, s in
+                            zip(camp.lengthbar.placement, camp.lengthbar.socket)])
+        assert np.abs(bar - sockets).max() < 1e-9  # 9-decimal degrees in the file: ~1e-11 m
+    target = np.array([[0.4, 0.1, 0.2], [0.3, -0.3, 0.1]])
+    q = stylus_ik(arm, truth, target, np.random.default_rng(0))
+    np.testing.assert_allclose(stylus_positions(arm, truth, q), target, rtol=0, atol=1e-12)
+
+
 @pytest.mark.skipif(not SAMPLE.is_dir(), reason="shared sample campaign not beside the project")
 def test_predict_on_independent_sample_campaign(tmp_path):
     """With the sample's truth, predicted spheres match the R-Test within its noise, bars exactly."""

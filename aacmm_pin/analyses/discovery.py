@@ -32,6 +32,7 @@ the bar).
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -54,6 +55,11 @@ from aacmm_pin.progress import Progress
 STARTS = ("dh", "proposed")
 ALPHA = 1e-3
 """Family-wise error rate of one step's F tests (Bonferroni over the candidates)."""
+StartReport = Callable[[float, float, "float | None", dict[str, float]], None]
+"""``(held-out RMS m, fit RMS m, length-bar RMS m or None, size factors)`` of the start model,
+called once it is fitted."""
+StepReport = Callable[[int, Step], None]
+"""``(k, step)``: step k (1-based), called as soon as it is found (before any figure)."""
 
 
 def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
@@ -69,7 +75,8 @@ def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | N
 def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
              effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
              alpha: float = ALPHA, max_nfev: int = 200, progress: bool = False,
-             noise: StatedNoise | None = None) -> Discovery:
+             noise: StatedNoise | None = None, on_start: StartReport | None = None,
+             on_step: StepReport | None = None) -> Discovery:
     """Find the effects the ``start`` model is missing on a campaign, add them and refit.
 
     Args:
@@ -89,6 +96,10 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         noise: the measurement noise stated per kind (default: the campaign's ``campaign.json``,
             else the paper's values); the nest offsets' prior is its ``location``, and the final
             residual is judged against it (:attr:`Discovery.unexplained`).
+        on_start: called with the start model's held-out, fit and length-bar RMS (m) and size
+            factors as soon as it is fitted (to print results as they are found, see
+            :data:`StartReport`).
+        on_step: called with each step's number (1-based) and the step as soon as it is found.
 
     Returns:
         The steps, the final calibration, why the loop stopped and what the final residual shows
@@ -108,12 +119,22 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(known)}")
     with single_threaded_blas():  # many small products: threads only spin
         return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, max_nfev,
-                         progress, noise or campaign.noise or StatedNoise())
+                         progress, noise or campaign.noise or StatedNoise(),
+                         (on_start or _quiet_start, on_step or _quiet_step))
+
+
+def _quiet_start(heldout_rms: float, fit_rms: float, bar_rms: float | None,
+                 size_factors: dict[str, float]) -> None:
+    """Report nothing (the default of :func:`discover`'s ``on_start``)."""
+
+
+def _quiet_step(k: int, step: Step) -> None:
+    """Report nothing (the default of :func:`discover`'s ``on_step``)."""
 
 
 def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
-              max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise
-              ) -> Discovery:
+              max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise,
+              report: tuple[StartReport, StepReport]) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
     meas = measurements(campaign, arm, use_rtest)
@@ -139,6 +160,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     steps: list[Step] = []
     held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [bar_now]
     factors = [lin.size_factors]
+    report[0](lin.heldout_rms, cal.fit_rms, None if bar_now is None else bar_now.rms,
+              lin.size_factors)
     n_candidates: list[int] = []
     stopped, missing = "", []
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
@@ -174,6 +197,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
                      samples)
         steps.append(step)
+        report[1](len(steps), step)
         cal, lin, bar_now = new_cal, new_lin, new_bar
         held.append(lin.heldout_rms)
         factors.append(lin.size_factors)

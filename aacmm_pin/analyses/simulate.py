@@ -36,12 +36,12 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.data.campaign import Campaign, LengthBarLog, PointLog, SpatLog
-from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
+from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.effects.registry import adjustment
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
-from aacmm_pin.model.kinematics import Adjustment, ToolIndex, solve_ik
+from aacmm_pin.model.kinematics import Adjustment, JointKinematics, ToolIndex, solve_ik
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples, motion_direction
 from aacmm_pin.units import (
@@ -132,6 +132,7 @@ class TrueArm:
         self.arm, self.truth, self.config = arm, truth, config
         self._model = arm.runtime_model(truth.dh, truth.tool)
         self._data = self._model.createData()
+        self._joints = JointKinematics(arm, truth)  # the IK's positions and joint Jacobian only
 
     def angle_offsets(self, q_readout: np.ndarray, direction: np.ndarray | None = None
                       ) -> np.ndarray:
@@ -166,19 +167,21 @@ class TrueArm:
     def _position_jacobian(self, q_readout: np.ndarray, temp: np.ndarray | None,
                            direction: np.ndarray | None, tool: ToolIndex = None
                            ) -> tuple[np.ndarray, np.ndarray]:
-        """Return true r-CS positions (N, 3) and d(position)/d(readouts) (N, 3, n_axes)."""
+        """Return true r-CS positions (N, 3) and d(position)/d(readouts) (N, 3, n_axes).
+
+        The joint columns only (:class:`~aacmm_pin.model.kinematics.JointKinematics`): no DH,
+        tool or map columns.
+        """
         offsets = self.angle_offsets(q_readout, np.zeros_like(q_readout) if direction is None
                                      else direction)
         if self.truth.extensions:  # through the model's kinematics, extensions at the readouts
-            jac = kinematics.stylus_jacobians(self.arm, self.truth, q_readout, frame="r",
-                                              tool=tool,
-                                              adjust=self.adjustment(q_readout, offsets))
+            pos, jac = self._joints.position_jacobian(q_readout, tool,
+                                                      self.adjustment(q_readout, offsets))
         else:
-            jac = stylus_jacobians(self.arm, self.truth, q_readout + offsets, frame="r", tool=tool)
-        pos = jac.position
+            pos, jac = self._joints.position_jacobian(q_readout + offsets, tool)
         if "thermal" in self.config.effects and temp is not None:
             pos = pos * (1.0 + self.config.thermal_alpha * (temp - REFERENCE_TEMPERATURE_C))[:, None]
-        return pos, jac.readouts
+        return pos, jac
 
     def positions(self, q_readout: np.ndarray, temp: np.ndarray | None, frame: str = "r",
                   tool: ToolIndex = None) -> np.ndarray:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -35,6 +37,7 @@ from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
 
 if TYPE_CHECKING:
+    from aacmm_pin.analyses.discovery_results import Step
     from aacmm_pin.fit.identification_result import Calibration
 
 
@@ -195,30 +198,41 @@ def _discover_into(args: argparse.Namespace) -> int:
         raise SystemExit(f"discover: --sigma-*-um: {exc}") from exc
     result = discover(campaign, arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
-                      max_nfev=args.max_nfev, progress=True, noise=noise)
-    write_discovery(result, arm, args.out, force=args.force)
-    held = result.heldout_rms
-    print(f"start {result.start}: held-out RMS {held[0] * 1e6:.2f} um, fit RMS "
-          f"{result.fit_rms[0] * 1e6:.2f} um")
-    widened = result.size_factors[0] if result.size_factors else {}
-    if widened:
-        print("  the fit rejects the arm's sizes of " + ", ".join(
-            f"{g} (x{f:.3g})" for g, f in widened.items()) + ": held-out priors widened")
-    for k, step in enumerate(result.steps, start=1):
-        axes = f" on {', '.join(f'A{a}' for a in step.axes)}" if step.axes else ""
-        print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
-              f"{step.heldout_rms_after * 1e6:.2f} um, fit RMS {step.fit_rms_before * 1e6:.2f} -> "
-              f"{step.fit_rms_after * 1e6:.2f} um")
-        if step.bar_rms_before is not None:
-            print(f"  length bar: {step.bar_summary()}")
+                      max_nfev=args.max_nfev, progress=True, noise=noise,
+                      on_start=functools.partial(_print_discovery_start, args.start),
+                      on_step=_print_discovery_step)  # results as they are found, figures after
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
     if result.scan is not None:
         print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
+    sys.stdout.flush()
+    write_discovery(result, arm, args.out, force=args.force)
     print(f"wrote {args.out / 'discovery.json'}, figures and the final model (CALDIR) "
           f"in {args.out} ({result.runtime_s:.1f} s)")
     return 0
+
+
+def _print_discovery_start(start: str, heldout_rms: float, fit_rms: float, bar_rms: float | None,
+                           size_factors: dict[str, float]) -> None:
+    """Print the start model's line as soon as it is fitted (RMS in m; the bar's is not shown)."""
+    print(f"start {start}: held-out RMS {heldout_rms * 1e6:.2f} um, fit RMS "
+          f"{fit_rms * 1e6:.2f} um")
+    if size_factors:
+        print("  the fit rejects the arm's sizes of " + ", ".join(
+            f"{g} (x{f:.3g})" for g, f in size_factors.items()) + ": held-out priors widened")
+    sys.stdout.flush()
+
+
+def _print_discovery_step(k: int, step: Step) -> None:
+    """Print step k's lines as soon as it is found."""
+    axes = f" on {', '.join(f'A{a}' for a in step.axes)}" if step.axes else ""
+    print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
+          f"{step.heldout_rms_after * 1e6:.2f} um, fit RMS {step.fit_rms_before * 1e6:.2f} -> "
+          f"{step.fit_rms_after * 1e6:.2f} um")
+    if step.bar_rms_before is not None:
+        print(f"  length bar: {step.bar_summary()}")
+    sys.stdout.flush()
 
 
 def _validate(args: argparse.Namespace) -> int:

@@ -16,7 +16,13 @@ from aacmm_pin.effects.base import Term, TiltTerm
 from aacmm_pin.effects.registry import adjustment
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.kinematics import Adjustment, StylusJacobians, ToolIndex, solve_ik
+from aacmm_pin.model.kinematics import (
+    Adjustment,
+    JointKinematics,
+    StylusJacobians,
+    ToolIndex,
+    solve_ik,
+)
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 
@@ -102,9 +108,11 @@ def stylus_ik(arm: Arm, params: Parameters, targets: np.ndarray, rng: np.random.
     """Return readouts (N, n_axes) putting the stylus centre of ``params`` on targets in the r-CS.
 
     See :func:`~aacmm_pin.model.kinematics.solve_ik` (the same arguments); targets shape (N, 3), m.
+    The Newton steps use the joint Jacobian only (:class:`~aacmm_pin.model.kinematics.JointKinematics`).
     """
+    joints = JointKinematics(arm, params)
+
     def position_jacobian(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        jac = stylus_jacobians(arm, params, q, frame="r")
-        return jac.position, jac.readouts
+        return joints.position_jacobian(q, adjust=extension_adjustment(arm, params, q, None))
 
     return solve_ik(position_jacobian, targets, arm.joint_limits, rng, iterations, starts)

@@ -86,16 +86,21 @@ class BatchedChain:
             self.offset[j] = back @ placement.translation
         self._bases = bases
         self._model = model
+        self._frames: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}
 
     def frame(self, frame_id: int) -> tuple[int, np.ndarray, np.ndarray]:
         """Return a frame's parent joint, its supporting joints (root excluded) and its offset.
 
         The offset is the frame's translation in the parent joint's basis (see the module).
         """
-        frame = self._model.frames[frame_id]
-        joint = int(frame.parentJoint)
-        support = np.array([int(j) for j in self._model.supports[joint]][1:], dtype=np.int64)
-        return joint, support, self._bases[joint].T @ frame.placement.translation
+        if frame_id not in self._frames:  # read once: the kinematics ask for it on every call
+            frame = self._model.frames[frame_id]
+            joint = int(frame.parentJoint)
+            support = np.array([int(j) for j in self._model.supports[joint]][1:], dtype=np.int64)
+            support.setflags(write=False)
+            self._frames[frame_id] = (joint, support,
+                                      self._bases[joint].T @ frame.placement.translation)
+        return self._frames[frame_id]
 
     def _forward(self, q: np.ndarray) -> _Pose:
         """Return the joints' placements for configurations q (one chunk, shape (n, nq))."""
@@ -197,6 +202,61 @@ class BatchedChain:
                         block[np.ix_(self.idx_v[joints], np.arange(3), rows)] = cols
             jac[lo:lo + size] = block[columns].transpose(2, 1, 0)
         return pos, jac
+
+    def joint_jacobians(self, q: np.ndarray, frames: np.ndarray, joints: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Return frame origins (N, 3) and their Jacobian's columns of a few joints (N, 3, J).
+
+        The columns of :meth:`jacobians` for the configuration indices ``joints`` only, each taken
+        directly in the world frame (:math:`z_j \times (p - o_j)` or :math:`z_j`): the cheap
+        Jacobian of inverse kinematics, which needs no other column.
+
+        Args:
+            q: configurations, shape (N, nq).
+            frames: Pinocchio frame id per sample, shape (N,).
+            joints: configuration indices of the joints, shape (J,).
+        """
+        by_q = {int(self.idx_q[j]): j for j in range(1, len(self.parents))}
+        ids = [by_q[int(k)] for k in np.asarray(joints, dtype=np.int64)]
+        n = q.shape[0]
+        pos = np.empty((n, 3))
+        jac = np.zeros((n, 3, len(ids)))
+        for lo in range(0, n, CHUNK):
+            pose = self._forward(q[lo:lo + CHUNK])
+            for fid, rows in _groups(frames[lo:lo + CHUNK]):
+                point = self._point(pose, fid, rows)
+                pos[lo + rows] = point
+                support = set(self.frame(fid)[1].tolist())
+                cols = [c for c, j in enumerate(ids) if j in support]
+                axes = np.empty((len(cols), rows.size, 3))
+                arms = np.empty((len(cols), rows.size, 3))
+                for i, c in enumerate(cols):
+                    axes[i], origin = self._axis(pose, ids[c], rows)
+                    arms[i] = point - origin
+                block = np.empty((len(cols), rows.size, 3))  # z x (p - o), or z (prismatic)
+                for k, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):
+                    block[:, :, k] = axes[..., a] * arms[..., b] - axes[..., b] * arms[..., a]
+                prismatic = ~self.revolute[[ids[c] for c in cols]]
+                block[prismatic] = axes[prismatic]
+                if rows.size == min(CHUNK, n - lo) and len(cols) == len(ids):
+                    jac[lo:lo + rows.size] = block.transpose(1, 2, 0)
+                else:
+                    jac[np.ix_(lo + rows, np.arange(3), np.array(cols))] = block.transpose(1, 2, 0)
+        return pos, jac
+
+    def _axis(self, pose: _Pose, joint: int, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return a joint's world axis and origin for the chunk's ``rows``, each (len(rows), 3).
+
+        Shape (1, 3) (the same for every row) where the joint does not move in this chunk.
+        """
+        anchor = pose.anchor[joint]
+        if anchor == joint:
+            return pose.frames[joint][rows][:, :, 2], pose.origins[joint][rows]
+        rot, off = pose.rotation[joint], pose.offset[joint]
+        if anchor == 0:
+            return rot[None, :, 2], off[None]
+        frame = pose.frames[anchor][rows]
+        return frame @ rot[:, 2], pose.origins[anchor][rows] + frame @ off
 
     def tilt_columns(self, q: np.ndarray, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:
         r"""Return d(frame origin)/d(lateral tilts of joints), shape (N, 3, J, 2), m/rad.

@@ -22,7 +22,7 @@ import scipy.sparse as sp
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.encoder_map import correct_readouts
+from aacmm_pin.model.encoder_map import correct_readouts, correct_with_slopes
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
 
@@ -305,6 +305,52 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
     return scaled
 
 
+class JointKinematics:
+    """Stylus centres and their joint Jacobian only (n_axes columns), for inverse kinematics.
+
+    The runtime model of one set of parameters (:meth:`Arm.runtime_model`: error frames and tool
+    vectors fixed at their values) evaluated for N readouts at once
+    (:class:`~aacmm_pin.model._chain.BatchedChain`); no DH, tool or map columns are formed. The
+    positions are the model's (:func:`stylus_positions` in the r-CS) to rounding.
+
+    Args:
+        arm: the arm.
+        params: the parameters (DH values, tool vectors, encoder maps; X0 is not used: r-CS).
+    """
+
+    def __init__(self, arm: Arm, params: Parameters):
+        model = arm.runtime_model(params.dh, tools=params.tool_vectors(arm))
+        self.arm, self.params = arm, params
+        self.chain = BatchedChain(model)
+        self.frames = np.array([model.getFrameId(link) for link in arm.tool_links])
+        self.axes = np.array([model.joints[model.getJointId(n)].idx_q for n in arm.axis_names])
+
+    def position_jacobian(self, readouts: np.ndarray, tool: ToolIndex = None,
+                          adjust: Adjustment | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Return r-CS stylus centres (N, 3), m, and d(centre)/d(readouts) (N, 3, n_axes), m/rad.
+
+        Args:
+            readouts: encoder readouts, shape (N, n_axes), in rad.
+            tool: which tool each sample measures (see :data:`ToolIndex`).
+            adjust: the extension terms' change of the arm (angle offsets, lateral tilts and scale
+                enter the positions; the Jacobian holds the offsets and the scale, as
+                :func:`stylus_jacobians` does).
+        """
+        q_read = _readouts_2d(readouts, self.arm)
+        fids = self.frames[tool_rows(self.arm, len(q_read), tool)]
+        change = _adjusted(adjust, q_read)
+        q = np.zeros((len(q_read), self.chain.nq))
+        angles, slope = correct_with_slopes(q_read, self.params.encoder_maps)
+        q[:, self.axes] = angles + change.offsets
+        pos, jac = self.chain.joint_jacobians(q, fids, self.axes)
+        if change.tilted:
+            pos = pos + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
+        if adjust is not None:
+            pos = pos * change.scale[:, None]
+            jac = jac * change.scale[:, None, None]
+        return pos, jac * slope[:, None, :]
+
+
 PositionJacobian = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``(q, rows) -> (positions (M, 3), d(positions)/d(q) (M, 3, n_axes))`` for readouts q (M, n_axes)
 of the targets ``rows`` (M,) (so that per-target inputs such as temperature can be selected)."""
@@ -335,6 +381,7 @@ def solve_ik(position_jacobian: PositionJacobian, targets: np.ndarray, limits: n
     n_axes = limits.shape[0]
     q = np.empty((targets.shape[0], n_axes))
     todo = np.arange(targets.shape[0])
+    damping = 1e-8 * np.eye(3)
     for attempt in range(100):
         qs = rng.uniform(box[:, 0], box[:, 1], size=(todo.size, n_axes))
         if attempt == 0 and q_init is not None:
@@ -348,7 +395,7 @@ def solve_ik(position_jacobian: PositionJacobian, targets: np.ndarray, limits: n
             active, err, jac = active[moving], err[moving], jac[moving]
             if active.size == 0:
                 break
-            jjt = jac @ jac.transpose(0, 2, 1) + 1e-8 * np.eye(3)
+            jjt = jac @ jac.transpose(0, 2, 1) + damping
             step = (jac.transpose(0, 2, 1) @ np.linalg.solve(jjt, err[:, :, None]))[:, :, 0]
             scale = np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))
             qs[active] = np.clip(qs[active] + scale[:, None] * step, limits[:, 0], limits[:, 1])
