@@ -13,7 +13,7 @@ and after. Writes both runs' ``discovery.json`` and figures (``discovery_unexpla
 residual against time) in ``--out``. Exits with status 1 if the creep is not reported first, not
 named on the rerun, or something is still unexplained.
 
-Run: ``python examples/04_unexplained_drift.py [--out unexplained-example]`` (about 15 s).
+Run: ``python examples/04_unexplained_drift.py [--out unexplained-example]`` (about 5 s).
 """
 
 from __future__ import annotations

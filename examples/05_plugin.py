@@ -19,7 +19,7 @@ the campaign column ``temp_base_c``, of which aacmm_pin knows nothing. The scrip
    which apply the term (and ``predict`` without the plugin, which says which plugin is missing).
 
 Exits with status 1 if discovery does not name the effect, the gap does not shrink, or a command
-fails. Run: ``python examples/05_plugin.py [--out plugin-example]`` (about 30 s).
+fails. Run: ``python examples/05_plugin.py [--out plugin-example]`` (about 6 s).
 """
 
 from __future__ import annotations
