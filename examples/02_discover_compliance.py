@@ -11,7 +11,7 @@ their predicted covariance), the true compliances next to the identified ones, a
 the figures and the final calibration with :func:`aacmm_pin.write_discovery`. Exits with status 1
 if compliance is not named first.
 
-Run: ``python examples/02_discover_compliance.py [--out discovery-example]`` (about 10 s).
+Run: ``python examples/02_discover_compliance.py [--out discovery-example]`` (about 7 s).
 ``--samples N`` (SPAT samples per location, default 200) and ``--placements N`` (length-bar
 placements, default 7) simulate a smaller campaign: ``--samples 60 --placements 3`` still names
 compliance first, in half the time (the test suite runs it so; the paper-sized run is its slow test).

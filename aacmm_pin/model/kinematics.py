@@ -8,6 +8,10 @@ Pinocchio model, the products along the chain are vectorised over samples with n
 check them against Pinocchio's per-sample functions). Map nodes enter through the chain rule:
 :math:`\partial p / \partial \Delta\theta_{n,map}(k) = \partial p / \partial \theta_n \cdot w_k(\theta^*_n)`
 with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
+
+Inverse kinematics (:func:`solve_ik`, the simulator's postures, the planner's candidates) needs
+only the n_axes joint columns: :class:`JointKinematics` computes them on the runtime model, not the
+identification model's DH, tool and map columns.
 """
 
 from __future__ import annotations
