@@ -14,6 +14,7 @@ Linearised: the covariance of :attr:`Calibration.covariance` propagated to the l
 from __future__ import annotations
 
 import os
+import signal
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -202,6 +203,19 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
     return std
 
 
+def _ignore_interrupt() -> None:
+    """A worker's start: Ctrl-C (SIGINT to the whole process group) is the main process's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End a pool's workers at once (Ctrl-C): queued batches cancelled, running ones terminated."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
 def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                 sigma_rtest: float = SIGMA_RTEST, sigma_location: float = SIGMA_LOCATION, seed: int = 0,
                 executor: Executor | None = None, workers: int | None = None,
@@ -237,7 +251,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                         bar=campaign.bar) if has_bar else None
     results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
-    pool = ProcessPoolExecutor(workers) if own else executor
+    pool = ProcessPoolExecutor(workers, initializer=_ignore_interrupt) if own else executor
     with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
             from aacmm_pin._blas import single_threaded_blas
@@ -254,6 +268,11 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                 for future, batch in zip(futures, batches):
                     results.append(future.result())
                     bar.update(len(batch))
+            except KeyboardInterrupt:  # Ctrl-C: stop the workers now, not after their batches
+                if own:
+                    assert isinstance(pool, ProcessPoolExecutor)
+                    _stop_workers(pool)
+                raise
             finally:
                 if own:
                     pool.shutdown()

@@ -94,6 +94,9 @@ def one_blas_thread_at_start() -> bool:
     return True
 
 
+INTERRUPTED = 128 + 2
+"""Exit status after Ctrl-C (SIGINT): 128 + the signal's number, as the shells report it."""
+
 QUIET_COMMANDS = ("acquire", "fake-devices")
 """Commands without a heartbeat: they run until stopped and print their own status."""
 
@@ -102,7 +105,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
     from aacmm_pin.progress import Heartbeat
 
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:  # Ctrl-C while the parser loads (a slow disk)
+        print("aacmm-pin: interrupted", file=sys.stderr)
+        return INTERRUPTED
     one_blas_thread_at_start()
     # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
     beat = args.command not in QUIET_COMMANDS
@@ -115,6 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: one line; the claims and atomic writers left nothing partial
+        print(f"aacmm-pin {args.command}: interrupted", file=sys.stderr)
+        return INTERRUPTED
     except BrokenPipeError:  # `aacmm-pin ... | head`: the reader left; so do we, quietly
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
