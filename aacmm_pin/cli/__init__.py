@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
-from aacmm_pin.cli._options import Handler, HelpFormatter, load_effect_files
+from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
 from aacmm_pin.errors import AacmmError, CampaignWarning
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
@@ -101,12 +101,29 @@ QUIET_COMMANDS = ("acquire", "fake-devices")
 """Commands without a heartbeat: they run until stopped and print their own status."""
 
 
+def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Parse ``aacmm-pin``'s arguments; stray ones are reported by the subcommand they were given to.
+
+    (argparse reports them with the top-level usage: ``aacmm-pin iso10360 euni CALDIR CAMPAIGN``
+    would print the list of commands instead of ``euni``'s usage.)
+
+    Raises:
+        SystemExit: 2 after the usage and the error, as ``ArgumentParser.error``.
+    """
+    parser = build_parser()
+    args, stray = parser.parse_known_args(argv)
+    if stray:
+        command: argparse.ArgumentParser = getattr(args, "command_parser", parser)
+        command.error(f"unrecognized arguments: {' '.join(stray)}")
+    return args
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
     from aacmm_pin.progress import Heartbeat
 
     try:
-        args = build_parser().parse_args(argv)
+        args = parse_arguments(argv)
     except KeyboardInterrupt:  # Ctrl-C while the parser loads (a slow disk)
         print("aacmm-pin: interrupted", file=sys.stderr)
         return INTERRUPTED
@@ -115,6 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     beat = args.command not in QUIET_COMMANDS
     try:
         handler: Handler = args.handler
+        check_input_paths(args.command_parser, args)  # a wrong path: before the heavy imports
         with Heartbeat(f"aacmm-pin {args.command}", enabled=beat), warnings.catch_warnings():
             warnings.showwarning = _one_line_warning(args.command)
             load_effect_files(args)  # --effects-file: before anything reads parameters

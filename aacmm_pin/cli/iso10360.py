@@ -17,6 +17,7 @@ from aacmm_pin.cli._options import (
     claim_file,
     effects_file_option,
     force_option,
+    input_path,
     json_option,
     no_rtest_option,
     params_option,
@@ -157,24 +158,24 @@ def add_parsers(subparsers: Any) -> None:
     q = add_command(sub, "spat", "point articulation figures of a SPAT log, per location",
                     parents=[*common, no_rtest_option("do not remove the R-Test displacement "
                                                       "(conventional SPAT)")])
-    q.add_argument("campaign", type=Path, help="campaign folder with spat.csv")
+    q.add_argument("campaign", type=input_path, help="campaign folder with spat.csv")
     q.set_defaults(handler=_claiming(_spat))
 
     points_help = ("CSV with x_mm,y_mm,z_mm (points) or q1_deg..qn_deg (readouts, with --params); "
                    "optional column group")
     q = add_command(sub, "sphere", "P_Size and P_Form from 25 points on a calibrated sphere",
                     parents=common)
-    q.add_argument("points", type=Path, help=points_help)
+    q.add_argument("points", type=input_path, help=points_help)
     q.add_argument("--diameter-mm", type=float, required=True,
                    help="calibrated sphere diameter, mm")
     q.set_defaults(handler=_claiming(_sphere))
 
     q = add_command(sub, "ldia", "L_Dia from 5 x 5 articulated points on a sphere",
                     parents=common)
-    q.add_argument("points", type=Path, help=points_help + " (else consecutive groups)")
+    q.add_argument("points", type=input_path, help=points_help + " (else consecutive groups)")
     q.add_argument("--group-size", type=int, default=5, help="points per articulation")
     q.set_defaults(handler=_claiming(_ldia))
 
     q = add_command(sub, "euni", "E_UNI from the length bar", parents=common)
-    q.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
+    q.add_argument("campaign", type=input_path, help="campaign folder with lengthbar.csv and bar.csv")
     q.set_defaults(handler=_claiming(_euni))
