@@ -10,7 +10,7 @@ import numpy as np
 from aacmm_pin.analyses.bar_scatter import SocketScatter, socket_scatter
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import predict, stylus_positions
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AacmmError, CampaignFormatError, Problem
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
@@ -318,13 +318,50 @@ def _socket_warnings(campaign: Campaign, points: np.ndarray) -> list[str]:
             for i in np.flatnonzero(dist > limit)]
 
 
+LENGTH_UNITS = {"inches": 25.4, "cm": 10.0, "m": 1000.0, "um": 1e-3}
+"""Unit of bar.csv lengths a user may have written by mistake -> measured / stated length it gives
+(the file's ``length_mm`` column wants mm)."""
+
+
 def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) -> list[str]:
-    """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length."""
-    out = []
-    for (i, j), e, length in zip(pairs.index, errors, pairs.length):
-        if abs(e) > LENGTH_ERROR_MAX * length:
-            a, b = pairs.pairs[j]
-            out.append(f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error "
-                       f"{e * 1e3:.4g} mm is over {LENGTH_ERROR_MAX:.0%} of the calibrated "
-                       f"{length * 1e3:.6g} mm: a wrong length (units?) or calibration")
-    return out
+    """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length: one line.
+
+    Returns:
+        one warning naming the first such error and how many more there are, or none.
+
+    Raises:
+        CampaignFormatError: if every pair of bar.csv is off by more than :data:`LENGTH_ERROR_MAX`
+            on average over its placements: no arm errs so much, the lengths (or the calibration)
+            are wrong; the error names a unit of :data:`LENGTH_UNITS` the lengths agree with.
+    """
+    bad = [k for k, e in enumerate(errors) if abs(e) > LENGTH_ERROR_MAX * pairs.length[k]]
+    if not bad:
+        return []
+    columns = np.array([j for _, j in pairs.index])
+    ratio = np.array([1.0 + float(np.mean(errors[columns == j] / pairs.length[columns == j]))
+                      for j in range(len(pairs.pairs))])
+    if np.all(np.abs(ratio - 1.0) > LENGTH_ERROR_MAX):
+        _refuse_lengths(campaign, pairs, ratio)
+    i, j = pairs.index[bad[0]]
+    (a, b), e, length = pairs.pairs[j], errors[bad[0]], pairs.length[bad[0]]
+    more = f" (and {len(bad) - 1} more like it)" if len(bad) > 1 else ""
+    return [f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error {e * 1e3:.4g} mm "
+            f"is over {LENGTH_ERROR_MAX:.0%} of the calibrated {length * 1e3:.6g} mm{more}: a "
+            "wrong length (units?) or calibration"]
+
+
+def _refuse_lengths(campaign: Campaign, pairs: BarPairs, ratio: np.ndarray) -> None:
+    """Raise the error of a bar.csv whose every length is off by ``ratio`` (measured / stated)."""
+    path = "bar.csv" if campaign.source is None else campaign.source / "bar.csv"
+    common = float(np.median(ratio))
+    (a, b), stated = pairs.pairs[0], campaign.bar[pairs.pairs[0]]
+    first = f"{a}-{b}: {stated * 1e3:.6g} mm in the file, {ratio[0] * stated * 1e3:.6g} mm measured"
+    same = bool(np.all(np.abs(ratio / common - 1.0) <= LENGTH_ERROR_MAX))
+    unit = next((u for u, f in LENGTH_UNITS.items() if abs(common / f - 1.0) <= LENGTH_ERROR_MAX),
+                None)
+    hint = (f"the lengths look like {unit} (measured / stated = {common:.4g}); length_mm wants mm"
+            if same and unit else
+            f"every length is off by the same factor {common:.4g}: other units, or a wrong "
+            "calibration" if same else "no arm errs so much: a wrong bar file or a wrong calibration")
+    raise CampaignFormatError([Problem(path, None, "length_mm", f"every length is off by more "
+                                       f"than {LENGTH_ERROR_MAX:.0%} ({first}): {hint}")])

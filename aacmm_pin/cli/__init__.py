@@ -130,25 +130,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     one_blas_thread_at_start()
     # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
     beat = args.command not in QUIET_COMMANDS
+    name = args.command_parser.prog  # "aacmm-pin iso10360 euni": the whole command
     try:
         handler: Handler = args.handler
         check_input_paths(args.command_parser, args)  # a wrong path: before the heavy imports
-        with Heartbeat(f"aacmm-pin {args.command}", enabled=beat), warnings.catch_warnings():
-            warnings.showwarning = _one_line_warning(args.command)
+        with Heartbeat(name, enabled=beat), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(name)
             load_effect_files(args)  # --effects-file: before anything reads parameters
             return handler(args)
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
-        print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C: one line; the claims and atomic writers left nothing partial
-        print(f"aacmm-pin {args.command}: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted", file=sys.stderr)
         return INTERRUPTED
     except BrokenPipeError:  # `aacmm-pin ... | head`: the reader left; so do we, quietly
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
         return 1  # as the Python documentation recommends for a broken pipe
     except OSError as exc:  # read-only or full disk, a folder where a file should be, permissions
-        print(f"aacmm-pin {args.command}: error: {os_error_message(exc)}", file=sys.stderr)
+        print(f"{name}: error: {os_error_message(exc)}", file=sys.stderr)
         return 2
 
 
@@ -158,7 +159,7 @@ def _one_line_warning(command: str) -> Callable[..., None]:
 
     def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
         if issubclass(category, CampaignWarning):
-            print(f"aacmm-pin {command}: warning: {message}", file=sys.stderr)
+            print(f"{command}: warning: {message}", file=sys.stderr)
         else:
             default(message, category, *args, **kwargs)
     return show
