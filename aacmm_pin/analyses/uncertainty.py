@@ -31,7 +31,21 @@ from aacmm_pin.fit.unknowns import NodeKey, UnknownKey
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
 
 AGREE = 0.2
-"""Relative difference of Monte Carlo and linearised standard uncertainty still called agreement."""
+"""Relative difference of Monte Carlo and linearised standard uncertainty still called agreement
+(when the trials resolve it: :meth:`MonteCarloResult.agree_limit`)."""
+
+
+def std_resolution(trials: int) -> float:
+    """Relative standard uncertainty of a standard deviation estimated from ``trials`` samples.
+
+    ``1 / sqrt(2 (n - 1))`` for normal samples: 20 trials give a std to +-16 %, 100 to +-7 %.
+    """
+    return 1.0 / float(np.sqrt(2.0 * (trials - 1)))
+
+
+def trials_to_resolve(relative: float) -> int:
+    """Fewest trials whose std estimate is within ``relative`` at two sigmas (``2 x std_resolution``)."""
+    return int(np.ceil(1.0 + 2.0 / relative ** 2))
 
 
 @dataclass(frozen=True)
@@ -74,10 +88,28 @@ class MonteCarloResult:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(self.identifiable, self.std / self.linear_std, np.nan)
 
+    @property
+    def agree_limit(self) -> float:
+        """Relative difference beyond which the two stds disagree.
+
+        :data:`AGREE`, or two :func:`std_resolution` of the trials where that is larger
+        (20 trials: 32 %; a smaller difference is the chance of so few trials).
+        """
+        return max(AGREE, 2.0 * std_resolution(self.trials))
+
     def disagreements(self) -> list[str]:
-        """Names of identifiable entries whose two uncertainties differ by more than 20%."""
+        """Names of identifiable entries whose two uncertainties differ by more than :attr:`agree_limit`."""
         ratio = self.ratio()
-        return [n for n, r in zip(self.names, ratio) if np.isfinite(r) and abs(r - 1) > AGREE]
+        return [n for n, r in zip(self.names, ratio)
+                if np.isfinite(r) and abs(r - 1) > self.agree_limit]
+
+    def resolution_note(self) -> str | None:
+        """One line when the trials cannot resolve :data:`AGREE` (else None): what they resolve."""
+        if self.agree_limit <= AGREE:
+            return None
+        return (f"{self.trials} trials resolve a std to +-{std_resolution(self.trials):.0%} "
+                f"(1/sqrt(2(n-1))): differences up to {self.agree_limit:.0%} are chance; "
+                f"--trials {trials_to_resolve(AGREE)} or more resolve {AGREE:.0%}")
 
     def node_std(self, axis: int, nodes_deg: np.ndarray, linear: bool = False) -> np.ndarray:
         """Return the std of each node of a map, rad (NaN where not estimated)."""
@@ -315,8 +347,10 @@ def uncertainty_report(cal: Calibration, mc: MonteCarloResult) -> dict[str, Any]
         "sigma_location_um": mc.sigma_location * 1e6, "units": "SI (m, rad) unless named",
         "parameters": params, "maps": maps,
         "disagreements": mc.disagreements(),
-        "agreement_note": f"Monte Carlo and linearised std differ by more than {AGREE:.0%} for the "
-                          "entries listed in 'disagreements' (empty: they agree everywhere)",
+        "agreement_note": f"Monte Carlo and linearised std differ by more than "
+                          f"{mc.agree_limit:.0%} for the entries listed in 'disagreements' (empty: "
+                          "they agree everywhere)" + (f"; {note}" if (note := mc.resolution_note())
+                                                     else ""),
     }
     if mc.length_std is not None and mc.length_linear_std is not None:
         out["length_errors_std_um"] = {"mc": (mc.length_std * 1e6).tolist(),

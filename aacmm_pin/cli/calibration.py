@@ -318,8 +318,10 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
             print(f"  placement {k}: {cells}")
     disagree = mc.disagreements()
     if disagree:
-        print(f"differ by more than 20%: {', '.join(disagree[:12])}"
+        print(f"differ by more than {mc.agree_limit:.0%}: {', '.join(disagree[:12])}"
               f"{' ...' if len(disagree) > 12 else ''}")
+    if note := mc.resolution_note():
+        print(f"note: {note}")
     return 0
 
 
