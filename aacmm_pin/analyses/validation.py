@@ -330,9 +330,12 @@ def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) ->
         one warning naming the first such error and how many more there are, or none.
 
     Raises:
-        CampaignFormatError: if every pair of bar.csv is off by more than :data:`LENGTH_ERROR_MAX`
-            on average over its placements: no arm errs so much, the lengths (or the calibration)
-            are wrong; the error names a unit of :data:`LENGTH_UNITS` the lengths agree with.
+        CampaignFormatError: if one factor, other than 1, explains every length of bar.csv within
+            :data:`LENGTH_ERROR_MAX` (measured / stated, averaged over the placements): no arm errs
+            so much and so alike, the lengths are in other units (named if one of
+            :data:`LENGTH_UNITS`) or of another bar. With a single pair, only for a unit of
+            :data:`LENGTH_UNITS` (a readout column in radians, say, changes one length by a
+            factor too; it is flagged by the socket scatter).
     """
     bad = [k for k, e in enumerate(errors) if abs(e) > LENGTH_ERROR_MAX * pairs.length[k]]
     if not bad:
@@ -340,28 +343,23 @@ def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) ->
     columns = np.array([j for _, j in pairs.index])
     ratio = np.array([1.0 + float(np.mean(errors[columns == j] / pairs.length[columns == j]))
                       for j in range(len(pairs.pairs))])
-    if np.all(np.abs(ratio - 1.0) > LENGTH_ERROR_MAX):
-        _refuse_lengths(campaign, pairs, ratio)
+    common = float(np.median(ratio))
+    same = bool(np.all(np.abs(ratio / common - 1.0) <= LENGTH_ERROR_MAX))
+    unit = next((u for u, f in LENGTH_UNITS.items() if abs(common / f - 1.0) <= LENGTH_ERROR_MAX),
+                None)
+    if abs(common - 1.0) > LENGTH_ERROR_MAX and same and (unit or len(ratio) > 1):
+        path = "bar.csv" if campaign.source is None else campaign.source / "bar.csv"
+        (a, b), stated = pairs.pairs[0], campaign.bar[pairs.pairs[0]]
+        hint = (f"the lengths look like {unit} (measured / stated = {common:.4g}); length_mm "
+                "wants mm" if unit else f"every length is off by the same factor {common:.4g}: "
+                "other units, or another bar's lengths")
+        raise CampaignFormatError([Problem(
+            path, None, "length_mm", f"every length is off by more than {LENGTH_ERROR_MAX:.0%} "
+            f"({a}-{b}: {stated * 1e3:.6g} mm in the file, {ratio[0] * stated * 1e3:.6g} mm "
+            f"measured): {hint}")])
     i, j = pairs.index[bad[0]]
     (a, b), e, length = pairs.pairs[j], errors[bad[0]], pairs.length[bad[0]]
     more = f" (and {len(bad) - 1} more like it)" if len(bad) > 1 else ""
     return [f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error {e * 1e3:.4g} mm "
             f"is over {LENGTH_ERROR_MAX:.0%} of the calibrated {length * 1e3:.6g} mm{more}: a "
             "wrong length (units?) or calibration"]
-
-
-def _refuse_lengths(campaign: Campaign, pairs: BarPairs, ratio: np.ndarray) -> None:
-    """Raise the error of a bar.csv whose every length is off by ``ratio`` (measured / stated)."""
-    path = "bar.csv" if campaign.source is None else campaign.source / "bar.csv"
-    common = float(np.median(ratio))
-    (a, b), stated = pairs.pairs[0], campaign.bar[pairs.pairs[0]]
-    first = f"{a}-{b}: {stated * 1e3:.6g} mm in the file, {ratio[0] * stated * 1e3:.6g} mm measured"
-    same = bool(np.all(np.abs(ratio / common - 1.0) <= LENGTH_ERROR_MAX))
-    unit = next((u for u, f in LENGTH_UNITS.items() if abs(common / f - 1.0) <= LENGTH_ERROR_MAX),
-                None)
-    hint = (f"the lengths look like {unit} (measured / stated = {common:.4g}); length_mm wants mm"
-            if same and unit else
-            f"every length is off by the same factor {common:.4g}: other units, or a wrong "
-            "calibration" if same else "no arm errs so much: a wrong bar file or a wrong calibration")
-    raise CampaignFormatError([Problem(path, None, "length_mm", f"every length is off by more "
-                                       f"than {LENGTH_ERROR_MAX:.0%} ({first}): {hint}")])

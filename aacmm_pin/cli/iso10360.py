@@ -47,9 +47,11 @@ def _points(args: argparse.Namespace) -> tuple[Any, Any]:
 
     points, groups, readouts = read_points(args.points)
     if readouts is not None:
+        from aacmm_pin.data.campaign import read_readouts
         from aacmm_pin.effects.calibrated import predict
 
         arm, params = _load(args)
+        readouts = read_readouts(args.points, arm)  # against the arm: its number of axes
         points = predict(arm, params, readouts)
     return points, groups
 
@@ -84,7 +86,7 @@ def _spat(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
-    centres = spat_centres(arm, params, read_campaign(args.campaign), use_rtest=not args.no_rtest)
+    centres = spat_centres(arm, params, read_campaign(args.campaign, arm=arm), use_rtest=not args.no_rtest)
     rows, data = [], {}
     head = (f"{'location':>8} {'n':>6} {'max dev (um)':>13} {'2 sigma (um)':>13} "
             f"{'range x (um)':>13} {'range y (um)':>13} {'range z (um)':>13}")
@@ -129,7 +131,7 @@ def _euni(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
-    r = length_errors(arm, params, read_campaign(args.campaign))
+    r = length_errors(arm, params, read_campaign(args.campaign, arm=arm))
     rows = [f"  placement {k}: " + ", ".join(f"{a}-{b} {e * 1e6:+.2f} um"
                                               for (a, b), e in zip(r.pairs, errs))
             for k, errs in zip(r.placements, r.errors)]

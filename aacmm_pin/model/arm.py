@@ -155,14 +155,32 @@ def _next_axis(joints: list[Joint]) -> np.ndarray | None:
     return None
 
 
+def one_entry_per_axis(urdf: UrdfTree) -> UrdfTree:
+    """Return the tree with every ``continuous`` joint a ``revolute`` one with wide limits.
+
+    A continuous joint is a revolute joint without limits; Pinocchio's own takes two configuration
+    entries (cos, sin), this one entry, its angle, as every other axis. The readout limits stay the
+    arm's (:attr:`Arm.joint_limits`: one turn). A tree without continuous joints is returned as is.
+    """
+    continuous = [j for j in urdf.joints() if j.type == "continuous"]
+    if not continuous:
+        return urdf
+    urdf = urdf.copy()
+    for joint in continuous:
+        urdf.make_one_dof(joint.name, "revolute", joint.axis, zero_origin=False)
+    return urdf
+
+
 def build_model(urdf: UrdfTree) -> pin.Model:
-    """Return Pinocchio's model of a URDF tree.
+    """Return Pinocchio's model of a URDF tree, one configuration entry per axis.
+
+    (A ``continuous`` joint as a revolute one: :func:`one_entry_per_axis`.)
 
     Raises:
         ArmModelError: naming the file and what Pinocchio's URDF parser said.
     """
     try:
-        return pin.buildModelFromXML(urdf.xml())
+        return pin.buildModelFromXML(one_entry_per_axis(urdf).xml())
     except (RuntimeError, ValueError) as exc:
         raise ArmModelError(urdf.path, f"Pinocchio cannot build a model from it: {exc}") from None
 
