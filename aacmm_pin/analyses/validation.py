@@ -323,6 +323,12 @@ LENGTH_UNITS = {"inches": 25.4, "cm": 10.0, "m": 1000.0, "um": 1e-3}
 (the file's ``length_mm`` column wants mm)."""
 
 
+SAME_FACTOR = 0.1
+"""Lengths share one factor when each one's measured / stated departs from their median by at most
+this share of the median's departure from 1 (lengths in inches: 25.4 each, to the arm's 1e-4; a
+socket's readouts off: every pair through it changes by its own factor)."""
+
+
 def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) -> list[str]:
     """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length: one line.
 
@@ -330,12 +336,12 @@ def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) ->
         one warning naming the first such error and how many more there are, or none.
 
     Raises:
-        CampaignFormatError: if one factor, other than 1, explains every length of bar.csv within
-            :data:`LENGTH_ERROR_MAX` (measured / stated, averaged over the placements): no arm errs
-            so much and so alike, the lengths are in other units (named if one of
-            :data:`LENGTH_UNITS`) or of another bar. With a single pair, only for a unit of
-            :data:`LENGTH_UNITS` (a readout column in radians, say, changes one length by a
-            factor too; it is flagged by the socket scatter).
+        CampaignFormatError: if one factor, off 1 by more than :data:`LENGTH_ERROR_MAX`, explains
+            every length of bar.csv (measured / stated, averaged over the placements; within
+            :data:`SAME_FACTOR` of its departure from 1): no arm errs so much and so alike, the
+            lengths are in other units (named if one of :data:`LENGTH_UNITS`) or of another bar.
+            With a single pair, only for a unit of :data:`LENGTH_UNITS` (a readout column in
+            radians, say, changes one length by a factor too; the socket scatter flags it).
     """
     bad = [k for k, e in enumerate(errors) if abs(e) > LENGTH_ERROR_MAX * pairs.length[k]]
     if not bad:
@@ -344,7 +350,7 @@ def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) ->
     ratio = np.array([1.0 + float(np.mean(errors[columns == j] / pairs.length[columns == j]))
                       for j in range(len(pairs.pairs))])
     common = float(np.median(ratio))
-    same = bool(np.all(np.abs(ratio / common - 1.0) <= LENGTH_ERROR_MAX))
+    same = bool(np.all(np.abs(ratio - common) <= SAME_FACTOR * abs(common - 1.0)))
     unit = next((u for u, f in LENGTH_UNITS.items() if abs(common / f - 1.0) <= LENGTH_ERROR_MAX),
                 None)
     if abs(common - 1.0) > LENGTH_ERROR_MAX and same and (unit or len(ratio) > 1):
