@@ -37,6 +37,8 @@ WRONG_PATHS = [
     ["iso10360", "spat", MISSING], ["iso10360", "euni", MISSING],
     ["iso10360", "sphere", MISSING, "--diameter-mm", "25"], ["iso10360", "ldia", MISSING],
     ["identify", "--effects-file", MISSING, "."], ["iso10360", "euni", "--params", MISSING, "."],
+    ["identify", ".", "--arm", f"{MISSING}.urdf"], ["axes", f"{MISSING}.urdf"],
+    ["simulate", "out", "--arm", MISSING],
 ]
 
 

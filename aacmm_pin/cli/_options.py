@@ -33,16 +33,28 @@ def input_path(text: str) -> Path:
     return Path(text)
 
 
+def arm_source(text: str) -> str:
+    """``type=`` of an arm argument (URDF path or embedded arm's name), checked as an input."""
+    return text
+
+
 def check_input_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Raise if an argument of ``parser`` of type :func:`input_path` names no file or folder.
 
+    An argument of type :func:`arm_source` must be a URDF file or an embedded arm's name.
+
     Raises:
         FileNotFoundError: naming the path and the argument (one line), for the first missing one.
+        ArmModelError: for an arm that is neither a file nor an embedded arm's name.
     """
     import errno
     import os
 
+    from aacmm_pin.model.arm_files import resolve_arm_path
+
     for action in parser._actions:
+        if action.type is arm_source and getattr(args, action.dest, None) is not None:
+            resolve_arm_path(getattr(args, action.dest))
         if action.type is not input_path:
             continue
         given = getattr(args, action.dest, None)
@@ -92,7 +104,7 @@ def _parent() -> argparse.ArgumentParser:
 def arm_option(default: str | None = "aacmm7", text: str = ARM_HELP) -> argparse.ArgumentParser:
     """``--arm URDF``: the arm's URDF path or embedded name."""
     p = _parent()
-    p.add_argument("--arm", default=default, metavar="URDF", help=text)
+    p.add_argument("--arm", type=arm_source, default=default, metavar="URDF", help=text)
     return p
 
 

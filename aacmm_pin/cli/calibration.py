@@ -15,6 +15,7 @@ from aacmm_pin.cli._options import (
     FORCE_FILE,
     add_command,
     arm_option,
+    arm_source,
     claim_file,
     effects_file_option,
     force_option,
@@ -406,7 +407,7 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add axes, simulate and predict (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
                     "over its tree), their limits, its tools and its error frames")
-    p.add_argument("arm", nargs="?", default="aacmm7", metavar="URDF",
+    p.add_argument("arm", nargs="?", type=arm_source, default="aacmm7", metavar="URDF",
                    help="URDF path or embedded arm name (aacmm7, ur5, wam7)")
     p.set_defaults(handler=_axes)
 

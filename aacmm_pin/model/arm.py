@@ -43,7 +43,6 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,6 +51,8 @@ import pinocchio as pin
 
 from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
+from aacmm_pin.model.arm_files import EMBEDDED as EMBEDDED  # re-exported: the embedded arms
+from aacmm_pin.model.arm_files import resolve_arm_path as resolve_arm_path
 from aacmm_pin.model.sizes import Sizes, sizes_of_urdf, sizes_path
 from aacmm_pin.model.urdf_tree import Joint, UrdfTree, read_urdf
 
@@ -94,30 +95,6 @@ class ErrorFrame:
         else:
             out[:3, 3] = self.axis * value
         return out
-
-
-EMBEDDED = ("aacmm7", "ur5", "wam7")
-"""Arms shipped with the package, loadable by name: the default AACMM and the two robots of the
-public laser-tracker data (``urdf/make_serial_dh.py`` writes them from the makers' DH tables)."""
-
-
-def resolve_arm_path(arm: str | Path) -> Path:
-    """Return the URDF path of an arm given by path or by the name of an embedded arm.
-
-    Raises:
-        ArmModelError: if it is neither an existing file nor an embedded arm's name.
-    """
-    path = Path(arm)
-    if path.is_file():
-        return path
-    name = str(arm)
-    candidates = [resources.files("aacmm_pin") / "urdf" / f"{name}.urdf",
-                  Path(__file__).resolve().parents[2] / "urdf" / f"{name}.urdf"]
-    for candidate in candidates:
-        if candidate.is_file():
-            return Path(str(candidate))
-    raise ArmModelError(arm, f"no such URDF file, and no embedded arm named '{name}' "
-                             f"(embedded: {', '.join(EMBEDDED)})")
 
 
 def _chains(joints: list[Joint], path: Path | str) -> dict[str, list[Joint]]:
