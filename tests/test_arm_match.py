@@ -17,6 +17,7 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin.data.campaign import read_readouts
+from aacmm_pin.errors import CampaignWarning
 from tests.helpers import ROOT, run_cli
 
 
@@ -113,3 +114,47 @@ def test_a_continuous_joint_works_in_every_command(argv: list[str], continuous: 
     monkeypatch.chdir(tmp_path)
     status, err = run_cli(argv)
     assert status == 0, err
+
+
+def _swap_columns(src: Path, dst: Path, a: str, b: str, shift_deg: float = 0.0) -> None:
+    rows = list(csv.reader(src.open(newline="")))
+    i, j = rows[0].index(a), rows[0].index(b)
+    for row in rows[1:]:
+        row[i], row[j] = row[j], f"{float(row[i]) + shift_deg:.9f}"
+    with dst.open("w", newline="") as f:
+        csv.writer(f, lineterminator="\n").writerows(rows)
+
+
+def test_readouts_beyond_the_arms_limits_are_one_warning(continuous: Path, tmp_path: Path) -> None:
+    """q2_deg and q3_deg swapped in lengthbar.csv: A2 (limits -100..100 deg) reads up to 150 deg.
+
+    One warning for the file, naming its first line beyond and the count; the campaign as written
+    and the same readouts on an axis without stated limits (A7 continuous, +360 deg) give none.
+    """
+    import warnings
+
+    from aacmm_pin.data.campaign import read_campaign
+
+    files = continuous
+    camp = tmp_path / "camp"
+    camp.mkdir()
+    for name in ("spat.csv", "locations.csv", "bar.csv", "lengthbar.csv"):
+        (camp / name).write_bytes((files / "campaign" / name).read_bytes())
+    arm = ap.load_arm()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # as written: within the limits, no warning
+        read_campaign(camp, arm=arm)
+    _swap_columns(files / "campaign" / "lengthbar.csv", camp / "lengthbar.csv", "q2_deg", "q3_deg")
+    with pytest.warns(CampaignWarning) as caught:
+        read_campaign(camp, arm=arm)
+    text = [str(w.message) for w in caught if "limits" in str(w.message)]
+    assert len(text) == 1 and "column 'q2_deg'" in text[0] and "A2's limits (-100..100 deg)" in text[0]
+    assert "more readouts beyond" in text[0]
+    # A7 one turn on, on the continuous A7 of cont.urdf: no stated limit, no warning
+    _swap_columns(files / "campaign" / "lengthbar.csv", camp / "lengthbar.csv", "q7_deg", "q7_deg",
+                  360.0)
+    with pytest.warns(CampaignWarning, match="A7's limits"):
+        read_campaign(camp, arm=arm)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_campaign(camp, arm=ap.load_arm(files / "cont.urdf"))

@@ -186,3 +186,19 @@ def test_cli_validate_says_when_the_bar_was_an_input_of_the_fit(small_sim: ap.Si
                      "--json", str(out)]) == 0
         noted = "not an independent test" in capsys.readouterr().out
         assert noted == use_bar and ("note" in json.loads(out.read_text())) == use_bar
+
+
+def test_far_readouts_are_a_few_lines_and_a_count(arm: ap.Arm, small_sim: ap.Simulation,
+                                                  small_cal: ap.Calibration) -> None:
+    """Every bar readout far from its socket (A2 and A3 swapped): a few lines and one count, not
+    one line per readout (303 lines for the sample campaign against another arm's calibration)."""
+    from aacmm_pin.data.problem_log import MAX_LIKE
+
+    log = small_sim.campaign.lengthbar
+    assert log is not None
+    q = log.q.copy()
+    q[:, [1, 2]] = q[:, [2, 1]]
+    result = ap.validate(arm, small_cal.parameters,
+                         replace(small_sim.campaign, lengthbar=replace(log, q=q)))
+    far = [w for w in result.warnings if w.startswith("lengthbar.csv line")]
+    assert len(far) == MAX_LIKE + 1 and "more readouts like it" in far[-1], far

@@ -9,6 +9,7 @@ import numpy as np
 
 from aacmm_pin.analyses.bar_scatter import SocketScatter, socket_scatter
 from aacmm_pin.data.campaign import Campaign
+from aacmm_pin.data.problem_log import MAX_LIKE
 from aacmm_pin.effects.calibrated import predict, stylus_positions
 from aacmm_pin.errors import AacmmError, CampaignFormatError, Problem
 from aacmm_pin.model.arm import Arm
@@ -311,11 +312,16 @@ def _socket_warnings(campaign: Campaign, points: np.ndarray) -> list[str]:
     limit = min(SOCKET_SCATTER_MAX,
                 max(SOCKET_SCATTER_K * 1.4826 * float(np.median(dist)), SOCKET_SCATTER_MIN))
     where = log.lines if log.lines is not None else np.arange(len(points)) + 2
-    return [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
-            f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
-            "a wrong readout, socket or placement, or a posture in an angular range the "
-            "calibration's SPATs did not cover (aacmm-pin plan names those ranges)"
-            for i in np.flatnonzero(dist > limit)]
+    far = np.flatnonzero(dist > limit)
+    shown = [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
+             f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
+             "a wrong readout, socket or placement, or a posture in an angular range the "
+             "calibration's SPATs did not cover (aacmm-pin plan names those ranges)"
+             for i in far[:MAX_LIKE]]
+    if far.size > MAX_LIKE:  # one kind of problem: a few shown, the others counted
+        shown.append(f"lengthbar.csv line {int(where[far[MAX_LIKE]])}: ... and {far.size - MAX_LIKE:,}"
+                     f" more readouts like it (to line {int(where[far[-1]])})")
+    return shown
 
 
 LENGTH_UNITS = {"inches": 25.4, "cm": 10.0, "m": 1000.0, "um": 1e-3}

@@ -350,6 +350,20 @@ class Arm:
                           for v, d in zip((joint.lower, joint.upper), out[i])]
         return out
 
+    @cached_property
+    def stated_limits(self) -> np.ndarray:
+        """The limits the URDF states, shape (n_axes, 2), rad (NaN: a continuous joint, no bound).
+
+        Readouts of an axis without a stated bound may lie anywhere (e.g. 0..360 deg). The
+        readers warn of readouts beyond them (:func:`aacmm_pin.data.campaign.read_campaign`).
+        """
+        out = np.full((self.n_axes, 2), np.nan)
+        for i, name in enumerate(self.axis_names):
+            joint = self._joints[name]
+            if joint.type == "revolute":
+                out[i] = [np.nan if v is None else v for v in (joint.lower, joint.upper)]
+        return out
+
     # ------------------------------------------------------------------ URDF views
     def urdf_tree(self, dh: dict[str, float] | None = None, tool: np.ndarray | None = None,
                   tools: dict[str, np.ndarray] | None = None) -> UrdfTree:
