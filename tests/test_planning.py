@@ -67,3 +67,20 @@ def test_plan_cli_lists_ranked_candidates(tmp_path, capsys):
     data = json.loads((tmp_path / "plan.json").read_text())
     after = [c["worst_axis_std_after_arcsec"] for c in data["candidates"]]
     assert after == sorted(after) and data["length_std_um"] is not None
+
+
+def test_a_single_worst_node_prints_as_one_angle() -> None:
+    """One map node above half the axis max was printed "-150..-150 deg" (issue 26, item 9)."""
+    from aacmm_pin.analyses.planning import Plan, _worst_ranges
+    from aacmm_pin.units import ARCSEC
+
+    nodes = np.arange(-180.0, 180.0, 30.0)
+    std = np.full(nodes.size, 1.0) * ARCSEC
+    std[nodes == -150] = 5.0 * ARCSEC  # one node alone
+    std[(nodes >= 30) & (nodes <= 90)] = 4.0 * ARCSEC  # a run of three
+    ranges = _worst_ranges(std, nodes)
+    assert sorted((lo, hi) for lo, hi, _ in ranges) == [(-150.0, -150.0), (30.0, 90.0)]
+    text = Plan(worst_axis=2, map_std={2: float(std.mean())}, worst_ranges={2: ranges},
+                length_std=None).table()
+    assert "-150 deg (5.0 arcsec)" in text and "30..90 deg (4.0 arcsec)" in text, text
+    assert "..-150" not in text

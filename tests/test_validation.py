@@ -41,13 +41,37 @@ def test_a_wrong_bar_readout_is_flagged_with_its_line(arm: ap.Arm, small_sim: ap
     assert "WARNING: lengthbar.csv line 5" in result.table()
 
 
-def test_a_bar_length_in_other_units_is_flagged(arm: ap.Arm, small_sim: ap.Simulation,
-                                                small_cal: ap.Calibration) -> None:
-    """A bar.csv length given in the wrong unit (x pi/180, still a plausible 1 mm..10 m)."""
-    bar = {k: v * np.pi / 180 for k, v in small_sim.campaign.bar.items()}
+@pytest.mark.parametrize(("factor", "words"), [
+    (1 / 25.4, "look like inches (measured / stated = 25.4)"),
+    (0.1, "look like cm"),
+    (np.pi / 180, "off by the same factor 57.3"),  # x pi/180: still a plausible 1 mm..10 m
+])
+def test_bar_lengths_in_other_units_are_refused(arm: ap.Arm, small_sim: ap.Simulation,
+                                                small_cal: ap.Calibration, factor: float,
+                                                words: str) -> None:
+    """Every bar.csv length off by one factor: an error naming the file, column and unit (issue 26).
+
+    (It was one warning per placement and pair, 14 for the paper's bar, and exit status 0.)
+    """
+    bar = {k: v * factor for k, v in small_sim.campaign.bar.items()}
+    with pytest.raises(ap.AacmmError) as info:
+        ap.validate(arm, small_cal.parameters, replace(small_sim.campaign, bar=bar))
+    text = str(info.value)
+    assert "bar.csv: column 'length_mm'" in text and words in text, text
+
+
+def test_one_wrong_bar_length_is_one_warning(arm: ap.Arm, small_sim: ap.Simulation,
+                                             small_cal: ap.Calibration) -> None:
+    """One pair's length 5 % off (beyond the 1 % no arm errs by): one line for all its placements."""
+    bar = dict(small_sim.campaign.bar)
+    first = next(iter(bar))
+    bar[first] *= 1.05
     result = ap.validate(arm, small_cal.parameters, replace(small_sim.campaign, bar=bar))
-    assert result.warnings and all("bar.csv" in w and "units?" in w for w in result.warnings)
-    assert len(result.warnings) == np.isfinite(result.errors).sum()
+    placements = np.isfinite(result.errors[:, result.pairs.index(first)]).sum()
+    assert placements > 1
+    assert len(result.warnings) == 1, result.warnings
+    assert f"{first[0]}-{first[1]}" in result.warnings[0] and "units?" in result.warnings[0]
+    assert f"and {placements - 1} more like it" in result.warnings[0]
 
 
 def scatter_ratios(arm: ap.Arm, campaign: ap.Campaign
@@ -162,3 +186,19 @@ def test_cli_validate_says_when_the_bar_was_an_input_of_the_fit(small_sim: ap.Si
                      "--json", str(out)]) == 0
         noted = "not an independent test" in capsys.readouterr().out
         assert noted == use_bar and ("note" in json.loads(out.read_text())) == use_bar
+
+
+def test_far_readouts_are_a_few_lines_and_a_count(arm: ap.Arm, small_sim: ap.Simulation,
+                                                  small_cal: ap.Calibration) -> None:
+    """Every bar readout far from its socket (A2 and A3 swapped): a few lines and one count, not
+    one line per readout (303 lines for the sample campaign against another arm's calibration)."""
+    from aacmm_pin.data.problem_log import MAX_LIKE
+
+    log = small_sim.campaign.lengthbar
+    assert log is not None
+    q = log.q.copy()
+    q[:, [1, 2]] = q[:, [2, 1]]
+    result = ap.validate(arm, small_cal.parameters,
+                         replace(small_sim.campaign, lengthbar=replace(log, q=q)))
+    far = [w for w in result.warnings if w.startswith("lengthbar.csv line")]
+    assert len(far) == MAX_LIKE + 1 and "more readouts like it" in far[-1], far

@@ -85,10 +85,12 @@ def test_identify_refuses_to_replace_the_campaign_it_reads(tmp_path, small_sim):
 
 def test_json_and_html_outputs_are_claimed_before_the_work(tmp_path, small_sim):
     """validate/plan --json, view --html, iso10360 --json on an existing file: refused first, so
-    before reading a campaign (here a missing one) and before minutes of fitting."""
+    before reading a campaign (here an empty folder: a path that does not exist is reported even
+    before, at once) and before minutes of fitting."""
     taken = tmp_path / "taken.json"
     taken.write_text("{}")
-    missing = str(tmp_path / "no-such-campaign")
+    (tmp_path / "empty").mkdir()
+    missing = str(tmp_path / "empty")
     for argv in (["validate", missing, missing, "--json", str(taken)],
                  ["plan", missing, "--json", str(taken)],
                  ["view", missing, missing, "--html", str(taken)],

@@ -93,7 +93,7 @@ class Plan:
         lines = [f"worst axis: A{self.worst_axis}, map uncertainty (RMS node std, k=1) "
                  + ", ".join(f"A{a} {v / ARCSEC:.1f}" for a, v in self.map_std.items()) + " arcsec"]
         for axis, ranges in self.worst_ranges.items():
-            text = "; ".join(f"{lo:g}..{hi:g} deg ({s / ARCSEC:.1f} arcsec)" for lo, hi, s in ranges)
+            text = "; ".join(f"{_span(lo, hi)} deg ({s / ARCSEC:.1f} arcsec)" for lo, hi, s in ranges)
             lines.append(f"  A{axis} worst ranges: {text or 'none'}")
         if self.length_std is not None:
             lines.append(f"length-error uncertainty now: {self.length_std * 1e6:.2f} um RMS")
@@ -185,6 +185,11 @@ def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = 
     for m in np.unique(campaign.spat.location):
         info = model.add(info, campaign.spat.q[campaign.spat.location == m])
     return model, info
+
+
+def _span(lo_deg: float, hi_deg: float) -> str:
+    """Return a range of map nodes as text: ``lo..hi``, or one value for a single node."""
+    return f"{lo_deg:g}" if lo_deg == hi_deg else f"{lo_deg:g}..{hi_deg:g}"
 
 
 def _worst_ranges(std: np.ndarray, nodes_deg: np.ndarray, top: int = 2

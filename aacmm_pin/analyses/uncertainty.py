@@ -14,6 +14,7 @@ Linearised: the covariance of :attr:`Calibration.covariance` propagated to the l
 from __future__ import annotations
 
 import os
+import signal
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -30,7 +31,21 @@ from aacmm_pin.fit.unknowns import NodeKey, UnknownKey
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
 
 AGREE = 0.2
-"""Relative difference of Monte Carlo and linearised standard uncertainty still called agreement."""
+"""Relative difference of Monte Carlo and linearised standard uncertainty still called agreement
+(when the trials resolve it: :meth:`MonteCarloResult.agree_limit`)."""
+
+
+def std_resolution(trials: int) -> float:
+    """Relative standard uncertainty of a standard deviation estimated from ``trials`` samples.
+
+    ``1 / sqrt(2 (n - 1))`` for normal samples: 20 trials give a std to +-16 %, 100 to +-7 %.
+    """
+    return 1.0 / float(np.sqrt(2.0 * (trials - 1)))
+
+
+def trials_to_resolve(relative: float) -> int:
+    """Fewest trials whose std estimate is within ``relative`` at two sigmas (``2 x std_resolution``)."""
+    return int(np.ceil(1.0 + 2.0 / relative ** 2))
 
 
 @dataclass(frozen=True)
@@ -73,10 +88,28 @@ class MonteCarloResult:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(self.identifiable, self.std / self.linear_std, np.nan)
 
+    @property
+    def agree_limit(self) -> float:
+        """Relative difference beyond which the two stds disagree.
+
+        :data:`AGREE`, or two :func:`std_resolution` of the trials where that is larger
+        (20 trials: 32 %; a smaller difference is the chance of so few trials).
+        """
+        return max(AGREE, 2.0 * std_resolution(self.trials))
+
     def disagreements(self) -> list[str]:
-        """Names of identifiable entries whose two uncertainties differ by more than 20%."""
+        """Names of identifiable entries whose two uncertainties differ by more than :attr:`agree_limit`."""
         ratio = self.ratio()
-        return [n for n, r in zip(self.names, ratio) if np.isfinite(r) and abs(r - 1) > AGREE]
+        return [n for n, r in zip(self.names, ratio)
+                if np.isfinite(r) and abs(r - 1) > self.agree_limit]
+
+    def resolution_note(self) -> str | None:
+        """One line when the trials cannot resolve :data:`AGREE` (else None): what they resolve."""
+        if self.agree_limit <= AGREE:
+            return None
+        return (f"{self.trials} trials resolve a std to +-{std_resolution(self.trials):.0%} "
+                f"(1/sqrt(2(n-1))): differences up to {self.agree_limit:.0%} are chance; "
+                f"--trials {trials_to_resolve(AGREE)} or more resolve {AGREE:.0%}")
 
     def node_std(self, axis: int, nodes_deg: np.ndarray, linear: bool = False) -> np.ndarray:
         """Return the std of each node of a map, rad (NaN where not estimated)."""
@@ -202,6 +235,19 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
     return std
 
 
+def _ignore_interrupt() -> None:
+    """A worker's start: Ctrl-C (SIGINT to the whole process group) is the main process's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End a pool's workers at once (Ctrl-C): queued batches cancelled, running ones terminated."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
 def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                 sigma_rtest: float = SIGMA_RTEST, sigma_location: float = SIGMA_LOCATION, seed: int = 0,
                 executor: Executor | None = None, workers: int | None = None,
@@ -237,7 +283,7 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                         bar=campaign.bar) if has_bar else None
     results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
-    pool = ProcessPoolExecutor(workers) if own else executor
+    pool = ProcessPoolExecutor(workers, initializer=_ignore_interrupt) if own else executor
     with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
             from aacmm_pin._blas import single_threaded_blas
@@ -254,6 +300,11 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                 for future, batch in zip(futures, batches):
                     results.append(future.result())
                     bar.update(len(batch))
+            except KeyboardInterrupt:  # Ctrl-C: stop the workers now, not after their batches
+                if own:
+                    assert isinstance(pool, ProcessPoolExecutor)
+                    _stop_workers(pool)
+                raise
             finally:
                 if own:
                     pool.shutdown()
@@ -296,8 +347,10 @@ def uncertainty_report(cal: Calibration, mc: MonteCarloResult) -> dict[str, Any]
         "sigma_location_um": mc.sigma_location * 1e6, "units": "SI (m, rad) unless named",
         "parameters": params, "maps": maps,
         "disagreements": mc.disagreements(),
-        "agreement_note": f"Monte Carlo and linearised std differ by more than {AGREE:.0%} for the "
-                          "entries listed in 'disagreements' (empty: they agree everywhere)",
+        "agreement_note": f"Monte Carlo and linearised std differ by more than "
+                          f"{mc.agree_limit:.0%} for the entries listed in 'disagreements' (empty: "
+                          "they agree everywhere)" + (f"; {note}" if (note := mc.resolution_note())
+                                                     else ""),
     }
     if mc.length_std is not None and mc.length_linear_std is not None:
         out["length_errors_std_um"] = {"mc": (mc.length_std * 1e6).tolist(),

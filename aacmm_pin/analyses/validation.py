@@ -9,8 +9,9 @@ import numpy as np
 
 from aacmm_pin.analyses.bar_scatter import SocketScatter, socket_scatter
 from aacmm_pin.data.campaign import Campaign
+from aacmm_pin.data.problem_log import MAX_LIKE
 from aacmm_pin.effects.calibrated import predict, stylus_positions
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AacmmError, CampaignFormatError, Problem
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
@@ -311,20 +312,66 @@ def _socket_warnings(campaign: Campaign, points: np.ndarray) -> list[str]:
     limit = min(SOCKET_SCATTER_MAX,
                 max(SOCKET_SCATTER_K * 1.4826 * float(np.median(dist)), SOCKET_SCATTER_MIN))
     where = log.lines if log.lines is not None else np.arange(len(points)) + 2
-    return [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
-            f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
-            "a wrong readout, socket or placement, or a posture in an angular range the "
-            "calibration's SPATs did not cover (aacmm-pin plan names those ranges)"
-            for i in np.flatnonzero(dist > limit)]
+    far = np.flatnonzero(dist > limit)
+    shown = [f"lengthbar.csv line {int(where[i])}: stylus centre {dist[i] * 1e6:.4g} um from its "
+             f"socket's ({log.placement[i]}, {log.socket[i]}) median (limit {limit * 1e6:.3g} um): "
+             "a wrong readout, socket or placement, or a posture in an angular range the "
+             "calibration's SPATs did not cover (aacmm-pin plan names those ranges)"
+             for i in far[:MAX_LIKE]]
+    if far.size > MAX_LIKE:  # one kind of problem: a few shown, the others counted
+        shown.append(f"lengthbar.csv line {int(where[far[MAX_LIKE]])}: ... and {far.size - MAX_LIKE:,}"
+                     f" more readouts like it (to line {int(where[far[-1]])})")
+    return shown
+
+
+LENGTH_UNITS = {"inches": 25.4, "cm": 10.0, "m": 1000.0, "um": 1e-3}
+"""Unit of bar.csv lengths a user may have written by mistake -> measured / stated length it gives
+(the file's ``length_mm`` column wants mm)."""
+
+
+SAME_FACTOR = 0.1
+"""Lengths share one factor when each one's measured / stated departs from their median by at most
+this share of the median's departure from 1 (lengths in inches: 25.4 each, to the arm's 1e-4; a
+socket's readouts off: every pair through it changes by its own factor)."""
 
 
 def _length_warnings(campaign: Campaign, pairs: BarPairs, errors: np.ndarray) -> list[str]:
-    """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length."""
-    out = []
-    for (i, j), e, length in zip(pairs.index, errors, pairs.length):
-        if abs(e) > LENGTH_ERROR_MAX * length:
-            a, b = pairs.pairs[j]
-            out.append(f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error "
-                       f"{e * 1e3:.4g} mm is over {LENGTH_ERROR_MAX:.0%} of the calibrated "
-                       f"{length * 1e3:.6g} mm: a wrong length (units?) or calibration")
-    return out
+    """Flag length errors beyond :data:`LENGTH_ERROR_MAX` of their calibrated length: one line.
+
+    Returns:
+        one warning naming the first such error and how many more there are, or none.
+
+    Raises:
+        CampaignFormatError: if one factor, off 1 by more than :data:`LENGTH_ERROR_MAX`, explains
+            every length of bar.csv (measured / stated, averaged over the placements; within
+            :data:`SAME_FACTOR` of its departure from 1): no arm errs so much and so alike, the
+            lengths are in other units (named if one of :data:`LENGTH_UNITS`) or of another bar.
+            With a single pair, only for a unit of :data:`LENGTH_UNITS` (a readout column in
+            radians, say, changes one length by a factor too; the socket scatter flags it).
+    """
+    bad = [k for k, e in enumerate(errors) if abs(e) > LENGTH_ERROR_MAX * pairs.length[k]]
+    if not bad:
+        return []
+    columns = np.array([j for _, j in pairs.index])
+    ratio = np.array([1.0 + float(np.mean(errors[columns == j] / pairs.length[columns == j]))
+                      for j in range(len(pairs.pairs))])
+    common = float(np.median(ratio))
+    same = bool(np.all(np.abs(ratio - common) <= SAME_FACTOR * abs(common - 1.0)))
+    unit = next((u for u, f in LENGTH_UNITS.items() if abs(common / f - 1.0) <= LENGTH_ERROR_MAX),
+                None)
+    if abs(common - 1.0) > LENGTH_ERROR_MAX and same and (unit or len(ratio) > 1):
+        path = "bar.csv" if campaign.source is None else campaign.source / "bar.csv"
+        (a, b), stated = pairs.pairs[0], campaign.bar[pairs.pairs[0]]
+        hint = (f"the lengths look like {unit} (measured / stated = {common:.4g}); length_mm "
+                "wants mm" if unit else f"every length is off by the same factor {common:.4g}: "
+                "other units, or another bar's lengths")
+        raise CampaignFormatError([Problem(
+            path, None, "length_mm", f"every length is off by more than {LENGTH_ERROR_MAX:.0%} "
+            f"({a}-{b}: {stated * 1e3:.6g} mm in the file, {ratio[0] * stated * 1e3:.6g} mm "
+            f"measured): {hint}")])
+    i, j = pairs.index[bad[0]]
+    (a, b), e, length = pairs.pairs[j], errors[bad[0]], pairs.length[bad[0]]
+    more = f" (and {len(bad) - 1} more like it)" if len(bad) > 1 else ""
+    return [f"bar.csv {a}-{b} at placement {pairs.placements[i]}: length error {e * 1e3:.4g} mm "
+            f"is over {LENGTH_ERROR_MAX:.0%} of the calibrated {length * 1e3:.6g} mm{more}: a "
+            "wrong length (units?) or calibration"]

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
-from aacmm_pin.cli._options import Handler, HelpFormatter, load_effect_files
+from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
 from aacmm_pin.errors import AacmmError, CampaignWarning
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
@@ -94,33 +94,62 @@ def one_blas_thread_at_start() -> bool:
     return True
 
 
+INTERRUPTED = 128 + 2
+"""Exit status after Ctrl-C (SIGINT): 128 + the signal's number, as the shells report it."""
+
 QUIET_COMMANDS = ("acquire", "fake-devices")
 """Commands without a heartbeat: they run until stopped and print their own status."""
+
+
+def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Parse ``aacmm-pin``'s arguments; stray ones are reported by the subcommand they were given to.
+
+    (argparse reports them with the top-level usage: ``aacmm-pin iso10360 euni CALDIR CAMPAIGN``
+    would print the list of commands instead of ``euni``'s usage.)
+
+    Raises:
+        SystemExit: 2 after the usage and the error, as ``ArgumentParser.error``.
+    """
+    parser = build_parser()
+    args, stray = parser.parse_known_args(argv)
+    if stray:
+        command: argparse.ArgumentParser = getattr(args, "command_parser", parser)
+        command.error(f"unrecognized arguments: {' '.join(stray)}")
+    return args
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
     from aacmm_pin.progress import Heartbeat
 
-    args = build_parser().parse_args(argv)
+    try:
+        args = parse_arguments(argv)
+    except KeyboardInterrupt:  # Ctrl-C while the parser loads (a slow disk)
+        print("aacmm-pin: interrupted", file=sys.stderr)
+        return INTERRUPTED
     one_blas_thread_at_start()
     # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
     beat = args.command not in QUIET_COMMANDS
+    name = args.command_parser.prog  # "aacmm-pin iso10360 euni": the whole command
     try:
         handler: Handler = args.handler
-        with Heartbeat(f"aacmm-pin {args.command}", enabled=beat), warnings.catch_warnings():
-            warnings.showwarning = _one_line_warning(args.command)
+        check_input_paths(args.command_parser, args)  # a wrong path: before the heavy imports
+        with Heartbeat(name, enabled=beat), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(name)
             load_effect_files(args)  # --effects-file: before anything reads parameters
             return handler(args)
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
-        print(f"aacmm-pin {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: one line; the claims and atomic writers left nothing partial
+        print(f"{name}: interrupted", file=sys.stderr)
+        return INTERRUPTED
     except BrokenPipeError:  # `aacmm-pin ... | head`: the reader left; so do we, quietly
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
         return 1  # as the Python documentation recommends for a broken pipe
     except OSError as exc:  # read-only or full disk, a folder where a file should be, permissions
-        print(f"aacmm-pin {args.command}: error: {os_error_message(exc)}", file=sys.stderr)
+        print(f"{name}: error: {os_error_message(exc)}", file=sys.stderr)
         return 2
 
 
@@ -130,7 +159,7 @@ def _one_line_warning(command: str) -> Callable[..., None]:
 
     def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
         if issubclass(category, CampaignWarning):
-            print(f"aacmm-pin {command}: warning: {message}", file=sys.stderr)
+            print(f"{command}: warning: {message}", file=sys.stderr)
         else:
             default(message, category, *args, **kwargs)
     return show

@@ -24,6 +24,47 @@ Handler = Callable[[argparse.Namespace], int]
 ARM_HELP = "URDF path or embedded arm name"
 
 
+def input_path(text: str) -> Path:
+    """``type=`` of an argument the command reads: a :class:`~pathlib.Path`, marked as an input.
+
+    :func:`check_input_paths` (``main``, before the handler) checks that every such path exists:
+    a wrong path is reported before the command imports Pinocchio and SciPy or starts its work.
+    """
+    return Path(text)
+
+
+def arm_source(text: str) -> str:
+    """``type=`` of an arm argument (URDF path or embedded arm's name), checked as an input."""
+    return text
+
+
+def check_input_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Raise if an argument of ``parser`` of type :func:`input_path` names no file or folder.
+
+    An argument of type :func:`arm_source` must be a URDF file or an embedded arm's name.
+
+    Raises:
+        FileNotFoundError: naming the path and the argument (one line), for the first missing one.
+        ArmModelError: for an arm that is neither a file nor an embedded arm's name.
+    """
+    import errno
+    import os
+
+    from aacmm_pin.model.arm_files import resolve_arm_path
+
+    for action in parser._actions:
+        if action.type is arm_source and getattr(args, action.dest, None) is not None:
+            resolve_arm_path(getattr(args, action.dest))
+        if action.type is not input_path:
+            continue
+        given = getattr(args, action.dest, None)
+        for path in given if isinstance(given, list) else [given]:
+            if path is not None and not Path(path).exists():
+                name = action.option_strings[-1] if action.option_strings else action.dest
+                raise FileNotFoundError(errno.ENOENT, f"{os.strerror(errno.ENOENT)} "
+                                                      f"(the {name} argument)", str(path))
+
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """``ArgumentDefaultsHelpFormatter`` that shows no ``(default: None)``, ``False`` or ``[]``.
 
@@ -52,6 +93,7 @@ def add_command(subparsers: Any, name: str, help: str, *,
     parser: argparse.ArgumentParser = subparsers.add_parser(
         name, help=help, description=description or help, parents=list(parents),
         formatter_class=HelpFormatter)
+    parser.set_defaults(command_parser=parser)  # the innermost command's: it reports stray arguments
     return parser
 
 
@@ -62,7 +104,7 @@ def _parent() -> argparse.ArgumentParser:
 def arm_option(default: str | None = "aacmm7", text: str = ARM_HELP) -> argparse.ArgumentParser:
     """``--arm URDF``: the arm's URDF path or embedded name."""
     p = _parent()
-    p.add_argument("--arm", default=default, metavar="URDF", help=text)
+    p.add_argument("--arm", type=arm_source, default=default, metavar="URDF", help=text)
     return p
 
 
@@ -164,14 +206,14 @@ def max_nfev_option() -> argparse.ArgumentParser:
 def nest_option(text: str) -> argparse.ArgumentParser:
     """``--nest FILE``: the R-Test nest's sensor directions."""
     p = _parent()
-    p.add_argument("--nest", type=Path, default=None, metavar="FILE", help=text)
+    p.add_argument("--nest", type=input_path, default=None, metavar="FILE", help=text)
     return p
 
 
 def params_option() -> argparse.ArgumentParser:
     """``--params PARAMS_OR_CALDIR``: a calibration instead of the nominal arm."""
     p = _parent()
-    p.add_argument("--params", type=Path, default=None, metavar="PARAMS_OR_CALDIR",
+    p.add_argument("--params", type=input_path, default=None, metavar="PARAMS_OR_CALDIR",
                    help="parameters.json or calibration folder (default: the nominal arm)")
     return p
 
@@ -183,7 +225,7 @@ def effects_file_option() -> argparse.ArgumentParser:
     the command's reading of parameters and its ``--effects`` know their effects.
     """
     p = _parent()
-    p.add_argument("--effects-file", type=Path, action="append", default=[], metavar="FILE",
+    p.add_argument("--effects-file", type=input_path, action="append", default=[], metavar="FILE",
                    help="a Python file that registers effects (aacmm_pin.register_effect), run "
                         "before anything else; repeatable. Effects of installed packages (entry "
                         "point group aacmm_pin.effects) load without it")

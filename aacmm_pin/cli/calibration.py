@@ -17,9 +17,11 @@ from aacmm_pin.cli._options import (
     FORCE_FILE,
     add_command,
     arm_option,
+    arm_source,
     claim_file,
     effects_file_option,
     force_option,
+    input_path,
     json_option,
     max_nfev_option,
     model_option,
@@ -331,8 +333,10 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
             print(f"  placement {k}: {cells}")
     disagree = mc.disagreements()
     if disagree:
-        print(f"differ by more than 20%: {', '.join(disagree[:12])}"
+        print(f"differ by more than {mc.agree_limit:.0%}: {', '.join(disagree[:12])}"
               f"{' ...' if len(disagree) > 12 else ''}")
+    if note := mc.resolution_note():
+        print(f"note: {note}")
     return 0
 
 
@@ -417,7 +421,7 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add axes, simulate and predict (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
                     "over its tree), their limits, its tools and its error frames")
-    p.add_argument("arm", nargs="?", default="aacmm7", metavar="URDF",
+    p.add_argument("arm", nargs="?", type=arm_source, default="aacmm7", metavar="URDF",
                    help="URDF path or embedded arm name (aacmm7, ur5, wam7)")
     p.set_defaults(handler=_axes)
 
@@ -441,8 +445,8 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                     parents=[out_option(Path("points.csv"), "output CSV"),
                              arm_option(None, "override the URDF named in the parameters"),
                              effects_file_option(), force_option(FORCE_FILE)])
-    p.add_argument("params", type=Path, help="parameters.json or a calibration folder")
-    p.add_argument("readouts", type=Path,
+    p.add_argument("params", type=input_path, help="parameters.json or a calibration folder")
+    p.add_argument("readouts", type=input_path,
                    help="CSV with columns q1_deg..qn_deg (or one <joint>_deg per axis)")
     p.add_argument("--tool", default=None,
                    help="the tool whose point to predict, for an arm with several (see axes); "
@@ -459,7 +463,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                                              "displacement for every sample"),
                              arm, out_option(Path("calibration"), "calibration folder"),
                              max_nfev_option(), force_option(), effects_file_option()])
-    p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("campaign", type=input_path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--loss", default="linear",
                    help="scipy loss of every solve: linear, soft_l1, huber, cauchy, arctan (for "
                         "outliers use --robust)")
@@ -490,7 +494,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
                                                                 "figures, final CALDIR"),
                              max_nfev_option(), force_option(), effects_file_option()])
-    p.add_argument("campaign", type=Path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("campaign", type=input_path, help="campaign folder (spat.csv, locations.csv, ...)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
@@ -513,8 +517,8 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
     p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
                     parents=[json_option("the errors"), effects_file_option(),
                              force_option(FORCE_FILE)])
-    p.add_argument("caldir", type=Path, help="calibration folder or parameters.json")
-    p.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
+    p.add_argument("caldir", type=input_path, help="calibration folder or parameters.json")
+    p.add_argument("campaign", type=input_path, help="campaign folder with lengthbar.csv and bar.csv")
     p.set_defaults(handler=_validate)
 
     p = add_command(subparsers, "uncertainty", "Monte Carlo uncertainty of every identified value",
@@ -523,7 +527,7 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
                              seed_option("seed of the first trial (trial i uses seed + i)"),
                              out_option(Path("uncertainty"), "output folder"), max_nfev_option(),
                              force_option()])
-    p.add_argument("campaign", type=Path, help="campaign folder")
+    p.add_argument("campaign", type=input_path, help="campaign folder")
     p.add_argument("--trials", type=positive(int), default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=positive(int), default=None,
                    help="local processes (default: all cores)")
@@ -539,7 +543,7 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
                              arm, seed_option("seed of the candidate postures' IK starts"),
                              json_option("the plan"), max_nfev_option(),
                              force_option(FORCE_FILE)])
-    p.add_argument("campaign", type=Path, help="campaign folder")
+    p.add_argument("campaign", type=input_path, help="campaign folder")
     p.add_argument("--grid", type=positive(int), default=3, help="candidate nests per side")
     p.add_argument("--spacing-mm", type=positive(zero=True), default=260.0,
                    help="half width of the candidate grid around the nests' centre, mm")

@@ -17,6 +17,7 @@ from aacmm_pin.cli._options import (
     claim_file,
     effects_file_option,
     force_option,
+    input_path,
     json_option,
     no_rtest_option,
     params_option,
@@ -46,9 +47,11 @@ def _points(args: argparse.Namespace) -> tuple[Any, Any]:
 
     points, groups, readouts = read_points(args.points)
     if readouts is not None:
+        from aacmm_pin.data.campaign import read_readouts
         from aacmm_pin.effects.calibrated import predict
 
         arm, params = _load(args)
+        readouts = read_readouts(args.points, arm)  # against the arm: its number of axes
         points = predict(arm, params, readouts)
     return points, groups
 
@@ -83,7 +86,7 @@ def _spat(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
-    centres = spat_centres(arm, params, read_campaign(args.campaign), use_rtest=not args.no_rtest)
+    centres = spat_centres(arm, params, read_campaign(args.campaign, arm=arm), use_rtest=not args.no_rtest)
     rows, data = [], {}
     head = (f"{'location':>8} {'n':>6} {'max dev (um)':>13} {'2 sigma (um)':>13} "
             f"{'range x (um)':>13} {'range y (um)':>13} {'range z (um)':>13}")
@@ -128,7 +131,7 @@ def _euni(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
 
     arm, params = _load(args)
-    r = length_errors(arm, params, read_campaign(args.campaign))
+    r = length_errors(arm, params, read_campaign(args.campaign, arm=arm))
     rows = [f"  placement {k}: " + ", ".join(f"{a}-{b} {e * 1e6:+.2f} um"
                                               for (a, b), e in zip(r.pairs, errs))
             for k, errs in zip(r.placements, r.errors)]
@@ -157,24 +160,24 @@ def add_parsers(subparsers: Any) -> None:
     q = add_command(sub, "spat", "point articulation figures of a SPAT log, per location",
                     parents=[*common, no_rtest_option("do not remove the R-Test displacement "
                                                       "(conventional SPAT)")])
-    q.add_argument("campaign", type=Path, help="campaign folder with spat.csv")
+    q.add_argument("campaign", type=input_path, help="campaign folder with spat.csv")
     q.set_defaults(handler=_claiming(_spat))
 
     points_help = ("CSV with x_mm,y_mm,z_mm (points) or q1_deg..qn_deg (readouts, with --params); "
                    "optional column group")
     q = add_command(sub, "sphere", "P_Size and P_Form from 25 points on a calibrated sphere",
                     parents=common)
-    q.add_argument("points", type=Path, help=points_help)
+    q.add_argument("points", type=input_path, help=points_help)
     q.add_argument("--diameter-mm", type=float, required=True,
                    help="calibrated sphere diameter, mm")
     q.set_defaults(handler=_claiming(_sphere))
 
     q = add_command(sub, "ldia", "L_Dia from 5 x 5 articulated points on a sphere",
                     parents=common)
-    q.add_argument("points", type=Path, help=points_help + " (else consecutive groups)")
+    q.add_argument("points", type=input_path, help=points_help + " (else consecutive groups)")
     q.add_argument("--group-size", type=int, default=5, help="points per articulation")
     q.set_defaults(handler=_claiming(_ldia))
 
     q = add_command(sub, "euni", "E_UNI from the length bar", parents=common)
-    q.add_argument("campaign", type=Path, help="campaign folder with lengthbar.csv and bar.csv")
+    q.add_argument("campaign", type=input_path, help="campaign folder with lengthbar.csv and bar.csv")
     q.set_defaults(handler=_claiming(_euni))

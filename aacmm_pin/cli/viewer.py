@@ -7,7 +7,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from aacmm_pin.cli._options import FORCE_FILE, add_command, effects_file_option, force_option
+from aacmm_pin.cli._options import (
+    FORCE_FILE,
+    add_command,
+    effects_file_option,
+    force_option,
+    input_path,
+)
 
 
 def _view(args: argparse.Namespace) -> int:
@@ -45,12 +51,12 @@ def add_parsers(subparsers: Any) -> None:
     p = add_command(subparsers, "view", "MeshCat view of the arm, the campaign and the residuals "
                                         "(live on localhost, or --html FILE)",
                     parents=[effects_file_option(), force_option(FORCE_FILE)])
-    p.add_argument("caldir", type=Path, help="calibration folder or parameters.json (shown first)")
-    p.add_argument("campaign", type=Path, help="campaign folder")
+    p.add_argument("caldir", type=input_path, help="calibration folder or parameters.json (shown first)")
+    p.add_argument("campaign", type=input_path, help="campaign folder")
     p.add_argument("--html", type=Path, default=None, metavar="FILE",
                    help="write one self-contained HTML file (opens offline) instead of serving")
     p.add_argument("--open", action="store_true", help="open the page in the default browser")
-    p.add_argument("--compare", type=Path, nargs="+", action="extend", default=[], metavar="CALDIR",
+    p.add_argument("--compare", type=input_path, nargs="+", action="extend", default=[], metavar="CALDIR",
                    help="more calibrations to switch to (e.g. the dh model's folder)")
     p.add_argument("--location", type=int, default=None,
                    help="R-Test location whose SPAT postures the animation steps through "

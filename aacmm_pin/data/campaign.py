@@ -289,8 +289,44 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
                   and (note := _copies(table)) is not None)
     for note in notes:
         warnings.warn(note, CampaignWarning, stacklevel=2)
+    for table in (spat, log, points):
+        if usable(table) and (beyond := _limits_note(table, arm)) is not None:
+            warnings.warn(beyond, CampaignWarning, stacklevel=2)
     return Campaign(**_logs({k: v for k, v in tables.items() if v is not None}), source=folder,
                     noise=noise, notes=notes)
+
+
+LIMIT_MARGIN_DEG = 1.0
+"""Readouts beyond an axis' stated limit by more than this, deg, are warned of: a readout is the
+true angle plus the encoder's error (tens of arcsec on an arm worth calibrating; 1 deg is 3600)."""
+
+
+def _limits_note(table: Table, arm: ArmNames | None) -> str | None:
+    """Return one line if readouts of ``table`` lie beyond the arm's stated limits, else None.
+
+    The arm's ``stated_limits`` (shape (n_axes, 2), rad, NaN where none; an
+    :class:`~aacmm_pin.model.arm.Arm` has them) and :data:`LIMIT_MARGIN_DEG`; an arm without them,
+    or a file with another number of axes (refused already), is not checked.
+    """
+    limits = getattr(arm, "stated_limits", None)
+    if limits is None or not table.q_columns or len(table.q_columns) != len(limits):
+        return None
+    low, high = (np.degrees(limits[:, k]) for k in (0, 1))
+    beyond = []
+    for a, name in enumerate(table.q_columns):
+        q = np.array([np.nan if v is None else v for v in table.cols[name]], dtype=float)
+        with np.errstate(invalid="ignore"):
+            out = (q < low[a] - LIMIT_MARGIN_DEG) | (q > high[a] + LIMIT_MARGIN_DEG)
+        beyond += [(int(r), a, name, float(q[r])) for r in np.flatnonzero(out)]
+    if not beyond:
+        return None
+    r, a, name, value = min(beyond)
+    more = f" (and {len(beyond) - 1} more readouts beyond their axis' limits)" if len(beyond) > 1 \
+        else ""
+    assert arm is not None
+    return (f"{table.path.name} line {table.lines[r]}: column '{name}': {value:g} deg is beyond "
+            f"{arm.axis_names[a]}'s limits ({low[a]:g}..{high[a]:g} deg){more}: readouts of "
+            "another arm, or columns in another order (aacmm-pin axes ARM lists them)")
 
 
 def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | None,
@@ -310,6 +346,8 @@ def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | 
         checks.close()
     if problems or table is None:
         raise CampaignFormatError(problems)
+    if (beyond := _limits_note(table, arm)) is not None:
+        warnings.warn(beyond, CampaignWarning, stacklevel=3)
     return table
 
 

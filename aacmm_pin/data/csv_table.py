@@ -15,7 +15,7 @@ import csv
 import io
 import math
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeGuard
@@ -299,6 +299,24 @@ def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tup
         log.close()
 
 
+def _wrong_axis_count(q_columns: list[str], named: list[str], line: int,
+                      add: Callable[..., None]) -> None:
+    """Report readout columns of another number of axes than the arm's (the arm-match check).
+
+    Args:
+        q_columns: the file's readout columns, in axis order.
+        named: ``<joint name>_deg`` of each of the arm's axes.
+        line: the header's line.
+        add: the file's problem log's ``add(line, column, reason)``.
+    """
+    extra = q_columns[len(named)] if len(q_columns) > len(named) else None
+    n = len(named)
+    add(line, extra, f"{len(q_columns)} readout columns in degrees ({q_columns[0]}.."
+                     f"{q_columns[-1]}), but the arm has {n} axes (q1_deg..q{n}_deg, or "
+                     f"{named[0]}..{named[-1]}): readouts of another arm, or the wrong --arm "
+                     "(aacmm-pin axes ARM lists an arm's readout columns)")
+
+
 def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
                 log: ProblemLog, extras: Extras, axis_names: Iterable[str] | None) -> Table | None:
     """:func:`read_table` with its problems going to ``log``."""
@@ -322,6 +340,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         return None
     named = [f"{n}_deg" for n in axis_names or []] if has_q else []
     head = _header(header, top, required, has_q, optional, named, add)
+    if named and head.q_columns and len(head.q_columns) != len(named):
+        _wrong_axis_count(head.q_columns, named, top, add)
     taken: list[str] = []
     if extras != "refuse" and not head.missing:
         quiet = ProblemLog([], path)  # a syntax error is reported by the reading pass below

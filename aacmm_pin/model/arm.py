@@ -43,7 +43,6 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,6 +51,8 @@ import pinocchio as pin
 
 from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
+from aacmm_pin.model.arm_files import EMBEDDED as EMBEDDED  # re-exported: the embedded arms
+from aacmm_pin.model.arm_files import resolve_arm_path as resolve_arm_path
 from aacmm_pin.model.sizes import Sizes, sizes_of_urdf, sizes_path
 from aacmm_pin.model.urdf_tree import Joint, UrdfTree, read_urdf
 
@@ -96,30 +97,6 @@ class ErrorFrame:
         return out
 
 
-EMBEDDED = ("aacmm7", "ur5", "wam7")
-"""Arms shipped with the package, loadable by name: the default AACMM and the two robots of the
-public laser-tracker data (``urdf/make_serial_dh.py`` writes them from the makers' DH tables)."""
-
-
-def resolve_arm_path(arm: str | Path) -> Path:
-    """Return the URDF path of an arm given by path or by the name of an embedded arm.
-
-    Raises:
-        ArmModelError: if it is neither an existing file nor an embedded arm's name.
-    """
-    path = Path(arm)
-    if path.is_file():
-        return path
-    name = str(arm)
-    candidates = [resources.files("aacmm_pin") / "urdf" / f"{name}.urdf",
-                  Path(__file__).resolve().parents[2] / "urdf" / f"{name}.urdf"]
-    for candidate in candidates:
-        if candidate.is_file():
-            return Path(str(candidate))
-    raise ArmModelError(arm, f"no such URDF file, and no embedded arm named '{name}' "
-                             f"(embedded: {', '.join(EMBEDDED)})")
-
-
 def _chains(joints: list[Joint], path: Path | str) -> dict[str, list[Joint]]:
     """Return tool joint name -> the joints from the root link to that tool joint, root first."""
     by_child = {j.child: j for j in joints}
@@ -155,14 +132,32 @@ def _next_axis(joints: list[Joint]) -> np.ndarray | None:
     return None
 
 
+def one_entry_per_axis(urdf: UrdfTree) -> UrdfTree:
+    """Return the tree with every ``continuous`` joint a ``revolute`` one with wide limits.
+
+    A continuous joint is a revolute joint without limits; Pinocchio's own takes two configuration
+    entries (cos, sin), this one entry, its angle, as every other axis. The readout limits stay the
+    arm's (:attr:`Arm.joint_limits`: one turn). A tree without continuous joints is returned as is.
+    """
+    continuous = [j for j in urdf.joints() if j.type == "continuous"]
+    if not continuous:
+        return urdf
+    urdf = urdf.copy()
+    for joint in continuous:
+        urdf.make_one_dof(joint.name, "revolute", joint.axis, zero_origin=False)
+    return urdf
+
+
 def build_model(urdf: UrdfTree) -> pin.Model:
-    """Return Pinocchio's model of a URDF tree.
+    """Return Pinocchio's model of a URDF tree, one configuration entry per axis.
+
+    (A ``continuous`` joint as a revolute one: :func:`one_entry_per_axis`.)
 
     Raises:
         ArmModelError: naming the file and what Pinocchio's URDF parser said.
     """
     try:
-        return pin.buildModelFromXML(urdf.xml())
+        return pin.buildModelFromXML(one_entry_per_axis(urdf).xml())
     except (RuntimeError, ValueError) as exc:
         raise ArmModelError(urdf.path, f"Pinocchio cannot build a model from it: {exc}") from None
 
@@ -353,6 +348,20 @@ class Arm:
             if joint.type == "revolute":
                 out[i] = [v if v is not None else d
                           for v, d in zip((joint.lower, joint.upper), out[i])]
+        return out
+
+    @cached_property
+    def stated_limits(self) -> np.ndarray:
+        """The limits the URDF states, shape (n_axes, 2), rad (NaN: a continuous joint, no bound).
+
+        Readouts of an axis without a stated bound may lie anywhere (e.g. 0..360 deg). The
+        readers warn of readouts beyond them (:func:`aacmm_pin.data.campaign.read_campaign`).
+        """
+        out = np.full((self.n_axes, 2), np.nan)
+        for i, name in enumerate(self.axis_names):
+            joint = self._joints[name]
+            if joint.type == "revolute":
+                out[i] = [np.nan if v is None else v for v in (joint.lower, joint.upper)]
         return out
 
     # ------------------------------------------------------------------ URDF views

@@ -24,7 +24,7 @@ from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import predict
 from aacmm_pin.effects.registry import check_extensions
 from aacmm_pin.fit.measurements import measured_positions
-from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.model.arm import Arm, load_arm, one_entry_per_axis
 from aacmm_pin.model.encoder_map import correct_readouts
 from aacmm_pin.model.parameters import Parameters, check_against_arm
 from aacmm_pin.model.samples import Samples
@@ -150,7 +150,7 @@ class ArmPoser:
     """Placements of the arm's URDF visuals for encoder readouts (maps applied)."""
 
     def __init__(self, arm: Arm, params: Parameters):
-        xml = arm.urdf_string(params.dh, tools=params.tool_vectors(arm))
+        xml = one_entry_per_axis(arm.urdf_tree(params.dh, tools=params.tool_vectors(arm))).xml()
         self.model = pin.buildModelFromXML(xml)
         self.visual = pin.buildGeomFromUrdfString(self.model, xml, pin.GeometryType.VISUAL,
                                                   package_dirs=[str(Path(arm.source).parent)])

@@ -148,10 +148,14 @@ def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str
 def _scene(caldir_or_params: Source, campaign: Campaign | str | Path, compare: Sequence[Source],
            location: int | None, scale: float | None, max_postures: int) -> Scene:
     """Return the scene of :func:`view` (its arguments)."""
+    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs._viewer_scene import build_scene, model_residuals
+    from aacmm_pin.outputs.calibration_folder import read_calibration
 
-    if not isinstance(campaign, Campaign):
-        campaign = read_campaign(campaign)
+    if not isinstance(campaign, Campaign):  # read against the arm: its columns, names and tools
+        first = (caldir_or_params if isinstance(caldir_or_params, Parameters)
+                 else read_calibration(caldir_or_params).parameters)
+        campaign = read_campaign(campaign, arm=load_arm(first.arm))
     models = [model_residuals(s, campaign) for s in (caldir_or_params, *compare)]
     seen: dict[str, int] = {}
     for i, m in enumerate(models):

@@ -1,0 +1,56 @@
+"""Ctrl-C (SIGINT) in a working command: one line on stderr, exit 130, nothing partial (issue 26, 8).
+
+``aacmm-pin identify`` and ``aacmm-pin discover`` run as subprocesses on a small campaign; SIGINT
+is sent once the command has claimed its output folder (its ``.<name>.lock`` beside it exists: the
+work has started). The command must end with ``aacmm-pin <command>: interrupted`` as the one line
+on stderr that is not a heartbeat, exit status 130 (128 + SIGINT), no output folder and no lock
+file left.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import aacmm_pin as ap
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small simulated campaign folder."""
+    root = tmp_path_factory.mktemp("interrupt")
+    arm = ap.load_arm()
+    sim = ap.simulate_campaign(arm, ap.SimulationConfig(
+        seed=0, samples_per_location=40, samples_per_socket=5, bar_placements=2))
+    ap.write_campaign(sim.campaign, root / "campaign")
+    return root / "campaign"
+
+
+@pytest.mark.parametrize("command", ["identify", "discover"])
+def test_ctrl_c_ends_with_one_line_and_130(command: str, campaign: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    lock = tmp_path / ".out.lock"
+    proc = subprocess.Popen([sys.executable, "-m", "aacmm_pin", command, str(campaign),
+                             "--out", str(out)], cwd=tmp_path, env=ENV,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not lock.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert lock.exists(), f"{command} never claimed its output (exit {proc.poll()})"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    lines = [line for line in err.splitlines() if "still working" not in line]
+    assert lines == [f"aacmm-pin {command}: interrupted"], err
+    assert proc.returncode == 130
+    assert not out.exists()
+    assert not lock.exists()
+    assert [p.name for p in tmp_path.iterdir()] == []  # no temporary folder beside it either
