@@ -218,6 +218,7 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
                         axes: list[int] | None = None,
                         reached: dict[int, np.ndarray] | None = None) -> Figure:
     """Build the figure of :func:`plot_encoder_maps` (same arguments but ``path``)."""
+    from matplotlib.artist import Artist
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -279,7 +280,7 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
         ax.set_xlabel("nominal readout (deg)")
 
     median = float(np.median(np.concatenate(errs))) if errs else None
-    handles = [Line2D([], [], ls="none", marker="o", ms=2.5, color="#0072b2",
+    handles: list[Artist] = [Line2D([], [], ls="none", marker="o", ms=2.5, color="#0072b2",
                       label="identified" + ("" if median is None else
                                             f" (error bar: k = 1 uncertainty, median "
                                             f"{median:.2g} arcsec)"))]
