@@ -195,8 +195,10 @@ def table(results: dict[str, list[Row]]) -> str:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DATA, help="the jacobi2025 data folder")
-    parser.add_argument("--out", type=Path, default=Path("laser-tracker-example"),
-                        help="folder for the campaigns and calibrations")
+    parser.add_argument("--out", type=Path,
+                        default=ROOT / "examples" / "out" / "laser-tracker-example",
+                        help="folder for the campaigns and calibrations "
+                        "(default: examples/out/laser-tracker-example)")
     args = parser.parse_args()
     results = run(args.data, args.out)
     print("\nmean position error (mm)   uncalibrated   DH model   discovered | thesis: uncalibrated"
