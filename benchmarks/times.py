@@ -36,7 +36,7 @@ Stated = tuple[float, float] | None
 
 def example(name: str, args: list[str]) -> tuple[str, list[str], str, Stated]:
     """Return the case of an example, with the time its docstring states ("(about N s)")."""
-    said = re.search(r"\(about (\d+(?:\.\d+)?) s\)", (EXAMPLES / name).read_text())
+    said = re.search(r"\(about (\d+(?:\.\d+)?) s[;)]", (EXAMPLES / name).read_text())
     seconds = None if said is None else float(said.group(1))
     return (f"`python examples/{name}`", [sys.executable, str(EXAMPLES / name), *args],
             "-" if seconds is None else f"its docstring: \"about {seconds:g} s\"",

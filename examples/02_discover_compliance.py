@@ -11,7 +11,8 @@ their predicted covariance), the true compliances next to the identified ones, a
 the figures and the final calibration with :func:`aacmm_pin.write_discovery`. Exits with status 1
 if compliance is not named first.
 
-Run: ``python examples/02_discover_compliance.py [--out discovery-example]`` (about 7 s).
+Run: ``python examples/02_discover_compliance.py [--out DIR]`` (about 7 s;
+default DIR: ``examples/out/discovery-example``).
 ``--samples N`` (SPAT samples per location, default 200) and ``--placements N`` (length-bar
 placements, default 7) simulate a smaller campaign: ``--samples 60 --placements 3`` still names
 compliance first, in half the time (the test suite runs it so; the paper-sized run is its slow test).
@@ -21,13 +22,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from aacmm_pin import SimulationConfig, discover, load_arm, simulate_campaign, write_discovery
 from aacmm_pin.analyses.bar_linear import covered_readouts
 from aacmm_pin.analyses.discovery_results import Step
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--out", default="discovery-example", help="output folder")
+parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "out" / "discovery-example"),
+                    help="output folder (default: examples/out/discovery-example)")
 parser.add_argument("--samples", type=int, default=200, help="SPAT samples per R-Test location")
 parser.add_argument("--placements", type=int, default=7, help="length-bar placements")
 args = parser.parse_args()

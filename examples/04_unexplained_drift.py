@@ -13,7 +13,8 @@ and after. Writes both runs' ``discovery.json`` and figures (``discovery_unexpla
 residual against time) in ``--out``. Exits with status 1 if the creep is not reported first, not
 named on the rerun, or something is still unexplained.
 
-Run: ``python examples/04_unexplained_drift.py [--out unexplained-example]`` (about 5 s).
+Run: ``python examples/04_unexplained_drift.py [--out DIR]`` (about 5 s;
+default DIR: ``examples/out/unexplained-example``).
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.samples import Samples
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--out", default="unexplained-example", help="output folder")
+parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "out" / "unexplained-example"),
+                    help="output folder (default: examples/out/unexplained-example)")
 parser.add_argument("--creep-um", type=float, default=4.0,
                     help="creep of the fixture over one location, um")
 args = parser.parse_args()

@@ -19,7 +19,7 @@ the campaign column ``temp_base_c``, of which aacmm_pin knows nothing. The scrip
    which apply the term (and ``predict`` without the plugin, which says which plugin is missing).
 
 Exits with status 1 if discovery does not name the effect, the gap does not shrink, or a command
-fails. Run: ``python examples/05_plugin.py [--out plugin-example]`` (about 6 s).
+fails. Run: ``python examples/05_plugin.py [--out examples/out/plugin-example]`` (about 6 s).
 """
 
 from __future__ import annotations
@@ -41,7 +41,8 @@ PLUGIN = Path(__file__).resolve().parent / "05_plugin"
 COLUMN = "temp_base_c"
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--out", default="plugin-example", help="output folder")
+parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "out" / "plugin-example"),
+                    help="output folder (default: examples/out/plugin-example)")
 parser.add_argument("--arcsec-per-k", type=float, default=3.0,
                     help="the hidden A1 error per kelvin of base temperature, arcsec/K")
 parser.add_argument("--seed", type=int, default=0, help="seed of the simulated campaign")

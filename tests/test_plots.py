@@ -268,3 +268,58 @@ def test_discovery_step_figure_draws_every_named_term():
                            heldout_rms_before=3e-6, heldout_rms_after=2e-6)
     fig = _step_figure(step, 1)
     assert sorted(ax.get_title() for ax in fig.axes) == [f"compliance[A{a}]" for a in range(1, 7)]
+
+
+def _panel_lines(fig, panel: int) -> tuple[np.ndarray, list]:
+    """The truth line's y at the nodes (closing point dropped) and the marker lines of a panel."""
+    ax = fig.axes[panel]
+    (truth,) = [ln for ln in ax.lines if ln.get_marker() in ("None", "", None)
+                and len(ln.get_xdata()) == N_NODES + 1]
+    marks = [ln for ln in ax.lines if ln.get_marker() == "o" and len(ln.get_xdata())]
+    return np.asarray(truth.get_ydata())[:-1], marks
+
+
+def test_encoder_map_truth_is_honest_where_no_posture_reached(small_sim, small_cal):
+    """Issue 26 item 6. Fig. 6 of a fit whose postures leave part of a map unreached: there the
+    truth line is the truth itself (moved only by the map's gauge constant), not the fit's
+    held zero; no identified value is drawn there; the range is shaded; the line is labelled."""
+    from aacmm_pin.units import ARCSEC
+
+    cal, truth = small_cal, small_sim.truth
+    reached = cal.node_reached
+    axes = sorted(cal.node_identifiable)
+    fig = _encoder_map_figure({a: cal.parameters.map(a).values for a in axes},
+                              identifiable=cal.node_identifiable,
+                              truth=cal.maps_in_gauge(truth), reached=reached)
+    x_deg = np.arange(-180.0, 180.0, 5.0)
+    checked = 0
+    for panel, a in enumerate(axes):
+        line, marks = _panel_lines(fig, panel)
+        away = ~reached[a]
+        for ln in marks:  # no identified (or "not identifiable") value where nothing reached
+            assert not np.isin(np.asarray(ln.get_xdata()), x_deg[away]).any(), a
+        if not away.any():
+            continue
+        own = truth.map(a).values[away] / ARCSEC
+        if np.ptp(own) < 1.0:  # a truth too flat there to tell a held zero from it
+            continue
+        gap = line[away] - own  # one constant: the gauge
+        assert np.ptp(gap) < 1e-6 * np.ptp(own), a
+        assert np.max(np.abs(line[away])) > 1.0, a  # arcsec: not the held zero
+        shaded = [p for p in fig.axes[panel].patches]
+        centres = [x for x in x_deg[away]
+                   if not any(p.get_x() <= x <= p.get_x() + p.get_width() for p in shaded)]
+        assert not centres, (a, centres)
+        checked += 1
+    assert checked >= 2  # the small campaign leaves parts of several maps unreached
+    labels = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
+    assert "truth (in the fit's gauge)" in labels and any("no posture" in t for t in labels)
+
+
+def test_encoder_map_truth_in_gauge_is_the_equivalent_where_reached(small_sim, small_cal):
+    """On reached nodes the truth in the fit's gauge is what the fit can return at best (the
+    equivalent), unchanged: the figure's comparison there is the one it always was."""
+    moved, _ = small_cal.equivalent(small_sim.truth)
+    shown = small_cal.maps_in_gauge(small_sim.truth)
+    for a, hit in small_cal.node_reached.items():
+        assert hit.any() and np.array_equal(shown[a][hit], moved.map(a).values[hit])

@@ -310,3 +310,38 @@ def test_auto_scale_shows_a_good_model_and_a_poor_one():
     for rms_um in (0.7, 1.9, 3.3, 26.0, 140.0):
         assert 0.01 <= auto_scale(model(rms_um)) * rms_um * 1e-6 <= 0.02
     assert auto_scale(model(1e-6)) == 1e5 and auto_scale(model(1e6)) == 100.0
+
+
+def test_each_model_spans_its_own_colour_scale(static):
+    """Issue 26 item 9: a good model's arrows are not one colour because a poor model is shown
+    beside it: each model's colour top is its own 99th-percentile |residual| (1-2-5 rounded up),
+    so its arrows use at least half of the colour map, and the legend states each model's top."""
+    from aacmm_pin.outputs._viewer_scene import _colormap
+
+    scene = static.scene
+    ramp = np.asarray(_colormap()(np.linspace(0.0, 1.0, 256)))[:, :3]
+    for m, top in zip(scene.models, scene.colour_tops):
+        err = np.linalg.norm(m.residual, axis=1)
+        assert np.percentile(err, 99) <= top <= 5 * np.percentile(err, 99) / 2  # 1-2-5 rounding
+        colours = _buffer(scene, f"/meshcat/models/{m.label}/residuals", "color")[0::2]
+        where = np.argmin(((colours[:, None, :] - ramp[None]) ** 2).sum(-1), axis=1) / 255
+        assert where.max() - where.min() >= 0.5, (m.label, where.min(), where.max())
+        info = next(i for i in scene.info["models"] if i["label"] == m.label)
+        assert info["colour_top_um"] == pytest.approx(top * 1e6)
+
+
+def test_legend_lines_fit_inside_the_panel(static):
+    """Issue 26 item 9: no legend text runs past the panel's right edge (it used to be clipped)."""
+    from aacmm_pin.outputs._viewer_scene import _legend_figure
+
+    fig = _legend_figure(static.scene)
+    renderer = fig.canvas.get_renderer()
+    width = fig.bbox.width
+    texts = [t for t in fig.texts] + [fig.axes[0].title]
+    assert len(texts) >= 5
+    for t in texts:
+        box = t.get_window_extent(renderer)
+        assert 0 <= box.x0 and box.x1 <= width, (t.get_text(), box.x1, width)
+    shown = "\n".join(t.get_text() for t in fig.texts)
+    for top in static.scene.colour_tops:
+        assert f"colours 0-{top * 1e6:g} µm" in shown.replace("\n   ", " ")

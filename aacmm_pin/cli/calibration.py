@@ -311,7 +311,7 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
         if axes:
             plot_encoder_maps({a: cal.parameters.map(a).values for a in axes},
                               tmp / "fig6_encoder_maps.png", identifiable=cal.node_identifiable,
-                              std=std)
+                              std=std, reached=cal.node_reached)
     ratio = mc.ratio()
     ratio = ratio[np.isfinite(ratio)]
     shaken = "" if campaign.spat is None else (f", sigma R-Test {args.sigma_rtest_um} um, sigma "

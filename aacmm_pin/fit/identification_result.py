@@ -107,6 +107,36 @@ class Calibration:
         return full.parameters(vec), rms
 
     @property
+    def node_reached(self) -> dict[int, np.ndarray]:
+        """Axis -> mask of the map nodes some posture's readout reached, shape (n_nodes,).
+
+        The other nodes were held at their start values (zero): the data says nothing of them.
+        """
+        u = self.unknowns
+        return {a: u.free[u.map_slice(a)].copy() for a in u.map_axes}
+
+    def maps_in_gauge(self, other: Parameters) -> dict[int, np.ndarray]:
+        """Return ``other``'s encoder maps (e.g. the truth) in this calibration's gauge, rad.
+
+        Axis -> values at the nodes, shape (n_nodes,). A map is identified only up to what the
+        other parameters absorb (a constant: the axis offset, gamma0, the tool, DH errors). On the
+        reached nodes (:attr:`node_reached`) the values are :meth:`equivalent`'s: the best this
+        fit can return if ``other`` is the truth. On the others, which the fit holds at zero,
+        they are ``other``'s own values moved by the same constant: the mean of equivalent minus
+        ``other`` over the reached, identifiable nodes (0 if there are none), so a true error
+        where no posture went is shown, not zero.
+        """
+        moved, _ = self.equivalent(other)
+        reached, ok = self.node_reached, self.node_identifiable
+        out = {}
+        for a in self.unknowns.map_axes:
+            own, eq = other.map(a).values, moved.map(a).values
+            seen = reached[a] & ok[a]
+            shift = float(np.mean(eq[seen] - own[seen])) if seen.any() else 0.0
+            out[a] = np.where(reached[a], eq, own + shift)
+        return out
+
+    @property
     def keys(self) -> list[UnknownKey]:
         """What each entry of ``x`` is (typed; ``names`` are their strings), in order."""
         return [*self.unknowns.keys, *self.nuisance_keys]

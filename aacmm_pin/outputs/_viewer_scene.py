@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import re
+import textwrap
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -186,7 +187,8 @@ class Scene:
     scale: float
     """Magnification of deviations about each R-Test nest."""
     vmax: float
-    """Top of the colour scale of |residual|, m."""
+    """Top of the first model's colour scale of |residual|, m (each model has its own:
+    :attr:`colour_tops`)."""
     location: int | None
     """R-Test location whose postures the animation steps through."""
     postures: np.ndarray
@@ -195,6 +197,8 @@ class Scene:
     """Axis -> SPAT samples per map bin (bins of ``step_deg`` from -180 deg), shape (n_bins,)."""
     info: dict[str, Any] = field(default_factory=dict)
     """JSON summary embedded in the static HTML (labels, RMS, scale, paths)."""
+    colour_tops: list[float] = field(default_factory=list)
+    """Top of each model's colour scale of |residual|, m (:func:`colour_top`), in model order."""
 
 
 def _nice_ceil(value: float) -> float:
@@ -213,6 +217,16 @@ def _colormap() -> Any:
     from matplotlib.colors import ListedColormap
 
     return ListedColormap(colormaps["plasma"](np.linspace(0.0, 0.85, 256)), name="plasma_dark")
+
+
+def colour_top(errors: np.ndarray) -> float:
+    """Return the top of a model's colour scale: its 99th-percentile |residual| rounded up, m.
+
+    ``errors``: the model's |residual| per sample, shape (N,), m. Rounded up to 1, 2 or 5 x 10^k;
+    each model has its own, so a good model's arrows span the colours as a poor model's do
+    (one scale set by the worst model painted a good one's arrows all one colour).
+    """
+    return _nice_ceil(float(np.percentile(errors, 99)) if len(errors) else 1e-6)
 
 
 def _colours(values: np.ndarray, vmax: float) -> np.ndarray:
@@ -324,32 +338,46 @@ def _png(fig: Any) -> tuple[bytes, float]:
 
 def legend_png(scene: Scene) -> tuple[bytes, float]:
     """Return the legend panel: colour scale, magnification and each model's residuals, PNG."""
+    return _png(_legend_figure(scene))
+
+
+LEGEND_CHARS = 66
+"""Longest legend line, characters: 5.6 pt text of at most this many fits the 3.3 in panel."""
+
+
+def _legend_figure(scene: Scene) -> Any:
+    """Build the figure of :func:`legend_png`; rows wrapped to :data:`LEGEND_CHARS`."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
     rows = [f"deviations from each R-Test nest magnified {scene.scale:g}x (grey ring: {RING_UM:g} µm)",
             "arrow: predicted (dot) -> measured (dark dot); bar: its largest length error"]
-    for m in scene.models:
+    tops = scene.colour_tops or [scene.vmax] * len(scene.models)
+    for m, top in zip(scene.models, tops):
         err = np.linalg.norm(m.residual, axis=1)
         text = (f"models/{m.label}: RMS {m.rms * _UM:.2f} µm/coord (nests as identified), "
                 f"max {err.max() * _UM if len(err) else 0:.1f} µm")
         if m.validation is not None:
             text += f", bar RMS {m.validation.rms * _UM:.1f} µm"
-        rows.append(text)
+        rows.append(text + f"; colours 0-{top * _UM:g} µm")
     if scene.location is not None:
         rows.append(f"Controls > Animations: time t s = posture t ({len(scene.postures)} SPAT "
                     f"postures, location {scene.location})")
     rows.append(f"{scene.models[0].label} shown; tick others in Controls > Scene > meshcat > models")
-    height = 0.62 + 0.15 * len(rows)
+    lines = [line for row in rows for line in textwrap.wrap(row, LEGEND_CHARS,
+                                                            subsequent_indent="   ")]
+    height = 0.62 + 0.15 * len(lines)
     fig = _figure(3.3, height)
     cax = fig.add_axes((0.04, 1 - 0.34 / height, 0.92, 0.1 / height))
-    bar = fig.colorbar(ScalarMappable(Normalize(0, scene.vmax * _UM), _colormap()), cax=cax,
+    bar = fig.colorbar(ScalarMappable(Normalize(0, 1), _colormap()), cax=cax,
                        orientation="horizontal")
+    bar.set_ticks([0.0, 0.5, 1.0], labels=["0", "half", "top"])
     bar.ax.tick_params(labelsize=6, length=2, pad=1)
-    cax.set_title("|residual|, predicted -> measured sphere centre (µm)", fontsize=7, pad=3)
-    for i, text in enumerate(rows):
+    cax.set_title("|residual|, predicted -> measured sphere centre (each model's own scale: "
+                  "its row)", fontsize=5.6, pad=3)
+    for i, text in enumerate(lines):
         fig.text(0.03, 1 - (0.56 + 0.15 * i) / height, text, fontsize=5.6, va="top")
-    return _png(fig)
+    return fig
 
 
 def coverage_png(scene: Scene, lengthbar_q: np.ndarray | None, limits: np.ndarray
@@ -530,16 +558,16 @@ def build_scene(models: list[ModelResiduals], campaign: Campaign, *, scale: floa
     viz.loadViewerModel(rootNodeName=ARM)
 
     errors = [np.linalg.norm(m.residual, axis=1) for m in models]
-    vmax = _nice_ceil(max((float(np.percentile(e, 99)) for e in errors if len(e)), default=1e-6))
+    tops = [colour_top(e) for e in errors]
     location, postures = _animated_postures(campaign, location, max_postures)
     q = campaign.spat.q if campaign.spat is not None else np.zeros((0, first.arm.n_axes))
-    scene = Scene(recorder.commands, models, poser, scale, vmax, location, postures,
-                  coverage_counts(q, first.params.step_deg))
+    scene = Scene(recorder.commands, models, poser, scale, tops[0], location, postures,
+                  coverage_counts(q, first.params.step_deg), colour_tops=tops)
 
     _draw_campaign(vis, campaign, first, scale)
     paths = []
-    for i, model in enumerate(models):
-        paths += _draw_model(vis, model, scale, vmax)
+    for i, (model, top) in enumerate(zip(models, tops)):
+        paths += _draw_model(vis, model, scale, top)
         if i > 0:
             vis[f"models/{model.label}"].set_property("visible", False)
     for name, (radius, colour) in {"predicted": (0.0035, 0xd55e00),
@@ -568,9 +596,10 @@ def build_scene(models: list[ModelResiduals], campaign: Campaign, *, scale: floa
     scene.info = {
         "models": [{"label": m.label, "rms_um": m.rms * _UM, "n_samples": int(len(e)),
                     "max_um": float(e.max() * _UM) if len(e) else 0.0,
+                    "colour_top_um": top * _UM,
                     "bar_rms_um": None if m.validation is None else m.validation.rms * _UM}
-                   for m, e in zip(models, errors)],
-        "scale": scale, "vmax_um": vmax * _UM, "location": location,
+                   for m, e, top in zip(models, errors, tops)],
+        "scale": scale, "vmax_um": tops[0] * _UM, "location": location,
         "postures": postures.tolist(), "substeps": SUBSTEPS, "view_centre": centre.tolist(),
         "arm_paths": [f"/meshcat/{p}" for p in poser.paths], "residual_paths": paths,
     }

@@ -78,12 +78,10 @@ def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
     phase("writing figures")
     plot_rtest_displacement(campaign, tmp / "fig5_rtest_displacement.png")
     best = calibrations["proposed_rtest"]
-    truth = sim.truth
     plot_encoder_maps({a: best.parameters.map(a).values for a in best.node_identifiable},
                       tmp / "fig6_encoder_maps.png", identifiable=best.node_identifiable,
                       std={a: best.node_std(a) for a in best.node_identifiable},
-                      truth={a: best.equivalent(truth)[0].map(a).values
-                             for a in best.node_identifiable})
+                      truth=best.maps_in_gauge(sim.truth), reached=best.node_reached)
     plot_length_errors({labels[k]: v for k, v in results.items()},
                        tmp / "fig9_length_errors.png")
     return results

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from aacmm_pin.analyses.discovery_results import Discovery, Step
+from aacmm_pin.analyses.linear_scorer import FOLDS
 from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.model.arm import Arm
@@ -71,15 +72,41 @@ def _step_figure(step: Step, k: int) -> Figure:
     return fig
 
 
+def held_out_text(inputs: tuple[str, ...]) -> str:
+    """How the held-out RMS leaves data out, for a calibration's ``inputs`` (its data kinds).
+
+    R-Test locations (SPATs) are left out one at a time; absolute points in
+    :data:`~aacmm_pin.analyses.linear_scorer.FOLDS` folds of the samples (each instrument group
+    kept in every fold).
+    """
+    spat, points = "spat" in inputs, "points" in inputs
+    if points and not spat:
+        return f"{FOLDS} folds of the points"
+    return "leave one location out" + (f"; points in {FOLDS} folds" if points else "")
+
+
+def group_text(inputs: tuple[str, ...]) -> str:
+    """What the residual scan takes each sample's mean over, for a calibration's ``inputs``."""
+    spat, points = "spat" in inputs, "points" in inputs
+    if points and not spat:
+        return "its instrument group's mean"
+    return "its location's or group's mean" if points else "its location's mean"
+
+
 def gap_figure(result: Discovery, path: str | Path) -> None:
     """Write the held-out RMS, fit RMS and length-bar errors of the start model and every step."""
+    _gap_figure(result).savefig(path, dpi=DPI)
+
+
+def _gap_figure(result: Discovery) -> Figure:
+    """Build the figure of :func:`gap_figure`."""
     fig = _new_figure(6.4, 3.6)
     ax = fig.subplots()
     labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
                                             for s in result.steps]
     x = np.arange(len(labels))
     ax.plot(x, np.array(result.heldout_rms) * 1e6, "-o", color=MODEL_COLOURS[2],
-            label="held-out RMS (leave one location out)")
+            label=f"held-out RMS ({held_out_text(result.calibration.inputs)})")
     ax.plot(x, np.array(result.fit_rms) * 1e6, "-s", color=MODEL_COLOURS[3], label="fit RMS")
     handles: list[Any] = []
     if all(v is not None for v in result.bar_rms):
@@ -103,15 +130,22 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
                  + ")", fontsize=7)
     lines, labels_ = ax.get_legend_handles_labels()
     ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7)
-    fig.savefig(path, dpi=DPI)
+    return fig
 
 
-def unexplained_figure(scan: Scan, path: str | Path) -> None:
+def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = ("spat",)) -> None:
     """Write the final residual (less each location's mean) against the variable it follows most.
 
     One panel per coordinate: the residual of every sample and its binned means, with the stated
     noise as a band; the variable is the scan's top structure (else its best-ranked variable).
+    ``inputs``: the calibration's data kinds (its ``inputs``), which name what the mean is over
+    (:func:`group_text`: an R-Test location, an instrument group of points).
     """
+    _unexplained_figure(scan, inputs).savefig(path, dpi=DPI)
+
+
+def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
+    """Build the figure of :func:`unexplained_figure`."""
     top = (scan.structure or scan.variables)[0]
     fig = _new_figure(11.0, 3.4)
     x = np.asarray(top.values, dtype=float)
@@ -126,10 +160,10 @@ def unexplained_figure(scan: Scan, path: str | Path) -> None:
         ax.set_xlabel(top.label or top.variable)
         ax.set_title(f"{'xyz'[c]} residual", fontsize=9)
         if c == 0:
-            ax.set_ylabel("residual less its location's mean (um)")
+            ax.set_ylabel(f"residual less {group_text(inputs)} (um)")
             ax.legend(fontsize=7)
     fig.suptitle("\n".join(textwrap.wrap(scan.hint(), 130)), fontsize=8)
-    fig.savefig(path, dpi=DPI)
+    return fig
 
 
 def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False) -> Path:
@@ -151,5 +185,6 @@ def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool
         for k, step in enumerate(result.steps, start=1):
             step_figure(step, k, tmp / f"discovery_step{k}.png")
         if result.scan is not None and result.scan.unexplained and result.scan.variables:
-            unexplained_figure(result.scan, tmp / "discovery_unexplained.png")
+            unexplained_figure(result.scan, tmp / "discovery_unexplained.png",
+                               result.calibration.inputs)
     return Path(folder)

@@ -152,16 +152,40 @@ def _per_axis(name: str, table: Mapping[int, Any] | None, n: int, step_deg: floa
     return out
 
 
+def _unreached_spans(reached: np.ndarray, step_deg: float) -> list[tuple[float, float]]:
+    """Return the readout ranges (deg) of the runs of unreached nodes, each node +- step/2.
+
+    ``reached``: per node from -180 deg, shape (n,), bool. A run across +-180 deg gives two spans.
+    """
+    x_deg = -180.0 + step_deg * np.arange(len(reached))
+    spans: list[tuple[float, float]] = []
+    for k in np.flatnonzero(~reached):
+        low = -185.0 if k == 0 else x_deg[k] - step_deg / 2
+        high = x_deg[k] + step_deg / 2
+        if spans and abs(spans[-1][1] - low) < 1e-9:
+            spans[-1] = (spans[-1][0], high)
+        else:
+            spans.append((low, high))
+    if not reached[0]:  # node 0 (-180 deg) is also +180 deg: shade up to the edge there
+        spans.append((180.0 - step_deg / 2 if reached[-1] else spans[-1][1], 185.0))
+    return spans
+
+
 def plot_encoder_maps(maps: dict[int, np.ndarray], path: str | Path, *, step_deg: float = 5.0,
                       identifiable: dict[int, np.ndarray] | None = None,
                       std: dict[int, np.ndarray] | None = None,
                       truth: dict[int, np.ndarray] | None = None,
-                      axes: list[int] | None = None) -> Path:
+                      axes: list[int] | None = None,
+                      reached: dict[int, np.ndarray] | None = None) -> Path:
     """Plot identified angular position measurement errors vs nominal readout, one panel per axis.
 
     Paper Fig. 6: identified nodes as blue dots with k = 1 error bars; nodes not identifiable as
     hollow grey markers without error bar, counted in the panel's top-right note; the truth as a
-    thin black line. The optional tables may cover only some axes.
+    thin black line over every node (give it in the fit's gauge,
+    :meth:`~aacmm_pin.fit.identification_result.Calibration.maps_in_gauge`). Where no posture's
+    readout reached (``reached`` False) the range is shaded and no identified value is drawn:
+    the fit holds those nodes at zero, which is no measurement. The optional tables may cover
+    only some axes.
 
     Args:
         maps: axis number n -> identified error at the nodes, shape (360/step_deg,), in rad; node k
@@ -172,6 +196,8 @@ def plot_encoder_maps(maps: dict[int, np.ndarray], path: str | Path, *, step_deg
         std: axis -> standard uncertainty (k = 1) of each node, shape (360/step_deg,), in rad.
         truth: axis -> true error at the nodes, shape (360/step_deg,), in rad.
         axes: axes to show, one panel each, in this order; default: sorted keys of ``maps``.
+        reached: axis -> per-node flag, shape (360/step_deg,), bool; False = no posture's
+            readout reached the node (default: all reached).
 
     Returns:
         ``path`` as a Path.
@@ -181,7 +207,7 @@ def plot_encoder_maps(maps: dict[int, np.ndarray], path: str | Path, *, step_deg
             missing from ``maps``, ``step_deg`` does not divide 360, or a table has the wrong shape.
     """
     fig = _encoder_map_figure(maps, step_deg=step_deg, identifiable=identifiable, std=std,
-                              truth=truth, axes=axes)
+                              truth=truth, axes=axes, reached=reached)
     return _save(fig, path)
 
 
@@ -189,9 +215,12 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
                         identifiable: dict[int, np.ndarray] | None = None,
                         std: dict[int, np.ndarray] | None = None,
                         truth: dict[int, np.ndarray] | None = None,
-                        axes: list[int] | None = None) -> Figure:
+                        axes: list[int] | None = None,
+                        reached: dict[int, np.ndarray] | None = None) -> Figure:
     """Build the figure of :func:`plot_encoder_maps` (same arguments but ``path``)."""
+    from matplotlib.artist import Artist
     from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
     if not maps:
         raise ValueError("maps: no encoder map given")
@@ -203,6 +232,7 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     flags = _per_axis("identifiable", identifiable, n, step_deg, bool)
     sigma = _per_axis("std", std, n, step_deg)
     true = _per_axis("truth", truth, n, step_deg)
+    seen = _per_axis("reached", reached, n, step_deg, bool)
     shown = sorted(values) if axes is None else [int(a) for a in axes]
     if not shown or any(a not in values for a in shown):
         raise ValueError(f"axes: choose one or more of {sorted(values)}, got {axes}")
@@ -217,9 +247,11 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     errs: list[np.ndarray] = []
     for ax, axis in zip(grid, shown):
         y = values[axis] / ARCSEC
-        ok = flags.get(axis, np.ones(n, dtype=bool))
+        hit = seen.get(axis, np.ones(n, dtype=bool))
+        ok = flags.get(axis, np.ones(n, dtype=bool)) & hit
+        lost = ~flags.get(axis, np.ones(n, dtype=bool)) & hit  # reached, yet not determined
         err = sigma[axis][ok] / ARCSEC if axis in sigma else None
-        top = max(float(np.max(np.abs(y))), MIN_SPAN_ARCSEC)
+        top = max(float(np.max(np.abs(y[hit]), initial=0.0)), MIN_SPAN_ARCSEC)
         if err is not None and err.size:
             errs.append(err)
             top = max(top, float(np.max(np.abs(y[ok]) + err)))
@@ -227,15 +259,18 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
             t = np.where(np.abs(true[axis]) / ARCSEC < 1e-6, 0.0, true[axis] / ARCSEC)  # rounding
             top = max(top, float(np.max(np.abs(t))))
             ax.plot(np.append(x_deg, 180.0), np.append(t, t[0]), color="black", lw=0.8, zorder=2)
+        for low, high in _unreached_spans(hit, step_deg):
+            ax.axvspan(low, high, color="0.88", lw=0, zorder=0)
         ax.errorbar(x_deg[ok], y[ok], yerr=err, fmt="o", ms=2.5, color="#0072b2", ecolor="#0072b2",
                     elinewidth=0.9, capsize=1.5, zorder=3)
         # at least +-MIN_SPAN_ARCSEC: an axis the data cannot see is flat, not magnified noise
         ax.set_ylim(-1.12 * top, 1.12 * top)
-        ax.plot(x_deg[~ok], y[~ok], "o", ms=4.5, mfc="none", mec="0.55", mew=1.0, zorder=3)
+        ax.plot(x_deg[lost], y[lost], "o", ms=4.5, mfc="none", mec="0.55", mew=1.0, zorder=3)
         ax.axhline(0.0, color="0.3", lw=0.5, zorder=1)
         ax.set_title(f"A{axis}-axis", loc="left", fontsize="medium", fontweight="bold")
         if (~ok).any():
-            ax.set_title(f"{int((~ok).sum())} of {n} nodes not identifiable", loc="right",
+            away = "" if hit.all() else f" ({int((~hit).sum())} not reached)"
+            ax.set_title(f"{int((~ok).sum())} of {n} nodes not identifiable{away}", loc="right",
                          fontsize="small", color="0.35")
         ax.set_xlim(-185.0, 185.0)
         ax.set_xticks(np.arange(-180, 181, 90))
@@ -245,15 +280,18 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
         ax.set_xlabel("nominal readout (deg)")
 
     median = float(np.median(np.concatenate(errs))) if errs else None
-    handles = [Line2D([], [], ls="none", marker="o", ms=2.5, color="#0072b2",
+    handles: list[Artist] = [Line2D([], [], ls="none", marker="o", ms=2.5, color="#0072b2",
                       label="identified" + ("" if median is None else
                                             f" (error bar: k = 1 uncertainty, median "
                                             f"{median:.2g} arcsec)"))]
-    if any((~flags.get(a, np.ones(n, dtype=bool))).any() for a in shown):
+    if any((~flags.get(a, np.ones(n, dtype=bool)) & seen.get(a, np.ones(n, dtype=bool))).any()
+           for a in shown):
         handles.append(Line2D([], [], ls="none", marker="o", ms=4.5, mfc="none", mec="0.55",
                               label="not identifiable"))
     if any(a in true for a in shown):
-        handles.append(Line2D([], [], color="black", lw=0.8, label="truth"))
+        handles.append(Line2D([], [], color="black", lw=0.8, label="truth (in the fit's gauge)"))
+    if any(not seen.get(a, np.ones(n, dtype=bool)).all() for a in shown):
+        handles.append(Patch(color="0.88", label="no posture reached (not identified)"))
     if len(handles) > 1 or sigma:  # blue dots alone need no legend
         fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), frameon=False,
                    fontsize="small")

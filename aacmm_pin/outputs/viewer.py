@@ -7,7 +7,8 @@ r"""MeshCat viewer of a calibration on its campaign: the arm, the R-Test nests, 
   showing posture ``t``; :meth:`View.pose` poses it from Python on a live server;
 * the R-Test nests (with a ring of 10 µm, magnified) and the length-bar sockets;
 * for every SPAT sample the predicted stylus centre with an arrow to the measured sphere centre,
-  coloured by the magnitude of the residual (legend panel), the deviations from each nest
+  coloured by the magnitude of the residual on the model's own scale (0 to its 99th percentile,
+  rounded up; each model's top in the legend panel), the deviations from each nest
   magnified ``scale`` times (by default so that the first model's RMS residual is ~20 mm long);
 * the bar of every placement coloured by its largest length error;
 * one group ``models/<label>`` per calibration, the first shown and the others hidden: tick them
