@@ -224,3 +224,28 @@ def test_shared_ur5_data_to_identify_in_two_commands(tmp_path: Path) -> None:
     assert points is not None
     before_mm = np.mean(np.linalg.norm(points.point * 1e3 - commanded_mm, axis=1))
     assert after_mm < 0.1 * before_mm
+
+
+def test_each_file_is_an_instrument_set_up_unless_one_frame(tmp_path: Path) -> None:
+    """Two files: groups 1 and 2 (a frame each), or one group with --one-frame; rows in order."""
+    a, qa, _ = _mocap(tmp_path / "a.csv", n=3, seed=5)
+    b, qb, _ = _mocap(tmp_path / "b.csv", n=4, seed=6)
+    options = ["--joints", "a1..a6", "--point", "X,Y,Z", "--units", "m", "--angles", "rad"]
+    for extra, groups in (([], [1] * 3 + [2] * 4), (["--one-frame"], [1] * 7)):
+        out = tmp_path / f"c{len(extra)}"
+        assert run_cli(["import-points", str(a), str(b), "--out", str(out), *options,
+                        *extra]) == (0, "")
+        points = read_campaign(out).points
+        assert points is not None and points.group.tolist() == groups
+        np.testing.assert_allclose(points.q, np.r_[qa, qb], rtol=0,
+                                   atol=np.radians(ROUNDING_MM))
+
+
+def test_a_preset_named_must_fit_the_header(tmp_path: Path) -> None:
+    source, _, _ = _mocap(tmp_path / "mocap.csv", n=4)
+    status, err = run_cli(["import-points", str(source), "--out", str(tmp_path / "c"),
+                           "--format", "jacobi2025"])
+    assert status == 2 and "not the jacobi2025 format" in err
+    status, err = run_cli(["import-points", str(source), "--out", str(tmp_path / "c"),
+                           "--units", "m"])
+    assert status == 2 and "--joints" in err
