@@ -5,7 +5,8 @@ Compensation Method for Enhancing the Pose Accuracy of Serial Industrial Robots*
 Tsinghua University, 2025; measured with a GTS3800 laser tracker). Each row holds the commanded
 joint angles, the commanded (nominal) tool position and its difference from the measured one,
 ``dif = commanded - measured`` (mm). This script writes them as ``points.csv`` campaigns (absolute
-tool points, one instrument frame) and calibrates the makers' DH models (``urdf/ur5.urdf``,
+tool points, one instrument frame; what ``aacmm-pin import-points FILE --out FOLDER`` does) and
+calibrates the makers' DH models (``urdf/ur5.urdf``,
 ``urdf/wam7.urdf``, written by ``urdf/make_serial_dh.py``):
 
 * UR5: ``aacmm-pin identify`` on the 1000 grid poses (DH model) and ``aacmm-pin discover`` (what
@@ -26,7 +27,6 @@ Run: ``python examples/03_laser_tracker_ur5_wam.py [--data DIR] [--out DIR]`` (a
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import json
 from dataclasses import dataclass
@@ -37,6 +37,7 @@ import numpy as np
 import aacmm_pin as ap
 from aacmm_pin.analyses.validation import validate_points
 from aacmm_pin.cli import main
+from aacmm_pin.data.point_import import import_points
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"
@@ -47,19 +48,13 @@ FOLDS = 5
 
 
 def write_points_campaign(source: Path, folder: Path) -> float:
-    """Write ``folder/points.csv`` from a tracker CSV; return its mean uncalibrated error, mm."""
-    with source.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    n = sum(1 for key in rows[0] if key.startswith("joint_"))
-    folder.mkdir(parents=True, exist_ok=True)
-    with (folder / "points.csv").open("w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow([f"q{i}_deg" for i in range(1, n + 1)] + ["x_mm", "y_mm", "z_mm"])
-        for r in rows:  # measured = commanded - dif
-            out.writerow([r[f"joint_{i}"] for i in range(1, n + 1)]
-                         + [float(r[f"{c}_t"]) - float(r[f"{c}_dif"]) for c in "xyz"])
-    dif = np.array([[float(r[f"{c}_dif"]) for c in "xyz"] for r in rows])
-    return float(np.mean(np.linalg.norm(dif, axis=1)))
+    """Write the campaign ``folder`` from a tracker CSV (as ``aacmm-pin import-points``).
+
+    Returns its mean uncalibrated error (commanded vs measured point), mm.
+    """
+    offset = import_points([source], folder).mean_offset
+    assert offset is not None  # the jacobi2025 format states the deviations
+    return offset * 1e3
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from tests.helpers import ENV, ROOT
 HEAVY = ("numpy", "pinocchio", "yourdfpy", "scipy", "matplotlib")
 COMMANDS = {("axes",), ("simulate",), ("predict",), ("identify",), ("discover",), ("validate",),
             ("uncertainty",), ("plan",), ("demo",), ("view",), ("acquire",), ("fake-devices",),
+            ("import-points",),
             ("iso10360", "spat"), ("iso10360", "sphere"), ("iso10360", "ldia"),
             ("iso10360", "euni")}
 

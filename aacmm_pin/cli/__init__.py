@@ -4,7 +4,8 @@
   ``validate``, ``uncertainty``, ``plan``, ``demo``;
 * :mod:`~aacmm_pin.cli.viewer`: ``view``;
 * :mod:`~aacmm_pin.cli.acquisition`: ``acquire``, ``fake-devices``;
-* :mod:`~aacmm_pin.cli.iso10360`: ``iso10360 spat|sphere|ldia|euni``.
+* :mod:`~aacmm_pin.cli.iso10360`: ``iso10360 spat|sphere|ldia|euni``;
+* :mod:`~aacmm_pin.cli.importing`: ``import-points``.
 
 Each module's ``add_parsers(subparsers)`` adds its commands; every leaf parser sets ``handler``,
 a thin function of the parsed arguments that calls the public API, prints and returns the exit
@@ -21,7 +22,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from aacmm_pin.cli import acquisition, calibration, iso10360, viewer
+from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
 from aacmm_pin.errors import AacmmError, CampaignWarning
 
@@ -68,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     viewer.add_parsers(sub)
     acquisition.add_parsers(sub)
     iso10360.add_parsers(sub)
+    importing.add_parsers(sub)
     return parser
 
 

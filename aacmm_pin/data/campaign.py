@@ -56,6 +56,7 @@ from aacmm_pin.data.logs import (
     StatedNoise,
     read_noise,
 )
+from aacmm_pin.data.output_claim import CALIBRATION_FILES
 from aacmm_pin.data.problem_log import ProblemLogs
 from aacmm_pin.data.spreadsheet import neutralise_formulas
 from aacmm_pin.errors import CampaignFormatError, CampaignWarning, Problem
@@ -222,6 +223,19 @@ def _logs(tables: dict[str, Table]) -> dict[str, Any]:
             **_log_fields(points)))
 
 
+def _other_csv_hint(folder: Path) -> str:
+    """Return a hint for a folder holding other CSV files (an instrument's export?), else "".
+
+    Not for a calibration folder (its ``encoder_maps.csv``).
+    """
+    others = sorted(p.name for p in folder.glob("*.csv") if p.is_file())
+    if not others or (folder / CALIBRATION_FILES[0]).exists():
+        return ""
+    shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+    return (f"; it holds {shown}: convert a laser-tracker or motion-capture file with "
+            "`aacmm-pin import-points FILE --out FOLDER`")
+
+
 def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
                   arm: ArmNames | None = None, axis_names: Sequence[str] | None = None,
                   tool_names: Sequence[str] | None = None) -> Campaign:
@@ -249,7 +263,8 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
     present = {name for name, path in paths.items() if path.is_file()}
     if not present & set(_LOGS):
         why = ("does not exist" if not folder.exists() else "is not a folder"
-               if not folder.is_dir() else "holds neither spat.csv, lengthbar.csv nor points.csv")
+               if not folder.is_dir() else "holds neither spat.csv, lengthbar.csv nor points.csv"
+               + _other_csv_hint(folder))
         raise CampaignFormatError([Problem(folder, None, None, f"the campaign folder {why}")])
     problems: list[Problem] = []
     for pair in (["spat.csv", "locations.csv"], ["lengthbar.csv", "bar.csv"]):

@@ -1,0 +1,119 @@
+"""The ``import-points`` subcommand: tracker or motion-capture CSV files to a points campaign.
+
+:func:`aacmm_pin.data.point_import.import_points` on the command line: the column mapping by
+options (``--joints``, ``--point``, ``--units``, ``--angles``) or a preset recognised from the
+header (``--format jacobi2025``, the shipped laser-tracker data); the folder it writes is read by
+``identify``, ``discover`` and ``validate`` as it is.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from aacmm_pin.cli._options import add_command, force_option, input_path, noise_um
+
+AUTO = "auto"
+"""``--format`` value: the preset the header is, unless ``--joints`` and ``--point`` are given."""
+
+
+def _format(args: argparse.Namespace) -> Any:
+    """Return the PointFormat the options give, or None (a preset from each file's header)."""
+    from aacmm_pin.data.point_import import (
+        PRESETS,
+        PointFormat,
+        parse_columns,
+        parse_point,
+        read_header,
+    )
+
+    by_columns = args.joints is not None or args.point is not None
+    if by_columns and args.format != AUTO:
+        raise ValueError("--format: give either a preset or --joints and --point, not both")
+    if by_columns:
+        if args.joints is None or args.point is None:
+            raise ValueError("--joints, --point: give both (e.g. --joints q1..q6 --point x,y,z)")
+        header = read_header(Path(args.sources[0])) or []
+        return PointFormat(parse_columns(args.joints), parse_point(args.point, header),
+                           args.units or "mm", args.angles or "deg")
+    if args.units is not None or args.angles is not None:
+        raise ValueError("--units, --angles: they go with --joints and --point (a preset states "
+                         "its units)")
+    if args.format == AUTO:
+        return None
+    for source in args.sources:
+        header = read_header(Path(source)) or []
+        if PRESETS[args.format](header) is None:
+            raise ValueError(f"{source}:1: the header is not the {args.format} format "
+                             f"({', '.join(header[:10])}...); give --joints and --point")
+    return None
+
+
+def _import_points(args: argparse.Namespace) -> int:
+    """Handler of ``aacmm-pin import-points``."""
+    from aacmm_pin.data.output_claim import claim_output
+    from aacmm_pin.data.point_import import import_points
+    from aacmm_pin.units import UM
+
+    sources = [Path(s) for s in args.sources]
+    with claim_output(args.out, args.force, sources):  # the folder held before any reading
+        result = import_points(sources, args.out, _format(args),
+                               sigma=None if args.sigma_um is None else args.sigma_um * UM,
+                               one_frame=args.one_frame, force=args.force)
+    for f in result.files:
+        print(f"read {len(f.log.q)} points of {f.log.q.shape[1]} axes from {f.path}")
+    print(f"format {result.format.describe()}")
+    if (offset := result.mean_offset) is not None:
+        print(f"mean distance between nominal and measured points: {offset * 1e3:.4f} mm "
+              "(the uncalibrated error)")
+    points = result.campaign.points
+    assert points is not None
+    groups = len(set(points.group.tolist()))
+    noise = result.campaign.noise
+    stated = (f"stated point noise {noise.point / UM:g} um per coordinate" if noise is not None
+              else "no stated noise (the package's default applies)")
+    print(f"wrote {args.out}: points.csv ({len(points.q)} points, {groups} instrument "
+          f"set-up{'s' if groups > 1 else ''}), campaign.json ({stated}, provenance)")
+    print(f"next: aacmm-pin identify {args.out} --arm URDF")
+    return 0
+
+
+def add_parsers(subparsers: Any) -> None:
+    """Add the ``import-points`` subcommand to ``aacmm-pin``'s subparsers.
+
+    Args:
+        subparsers: what ``ArgumentParser.add_subparsers()`` returned.
+    """
+    p = add_command(subparsers, "import-points",
+                    "convert laser-tracker or motion-capture CSV files into a points campaign",
+                    parents=[force_option()],
+                    description="Convert laser-tracker or motion-capture CSV files (joint angles "
+                                "and measured tool points, one row per pose) into a points "
+                                "campaign folder that identify, discover and validate read: "
+                                "points.csv (mm, degrees) and campaign.json (stated noise, "
+                                "provenance). The columns come from --joints and --point, or "
+                                "from a preset recognised by the header.")
+    p.add_argument("sources", nargs="+", type=input_path, metavar="SOURCE",
+                   help="CSV file(s); each is one instrument set-up (frame) unless --one-frame")
+    p.add_argument("--out", type=Path, required=True, metavar="FOLDER",
+                   help="campaign folder to write")
+    p.add_argument("--format", choices=(AUTO, "jacobi2025"), default=AUTO,
+                   help="a preset of columns and units; auto: recognised from the header "
+                        "(jacobi2025: step_order,x_t..z_t,x_dif..z_dif,joint_1..joint_n, the "
+                        "shared laser-tracker data)")
+    p.add_argument("--joints", default=None, metavar="COLUMNS",
+                   help="joint-angle columns in axis order, e.g. 'q1..q6' or 'a1,a2,a3,a4,a5,a6'")
+    p.add_argument("--point", default=None, metavar="X,Y,Z",
+                   help="measured point columns, e.g. 'x,y,z'; 'a-b' subtracts column b from a "
+                        "(e.g. nominal minus deviation)")
+    p.add_argument("--units", choices=("mm", "m"), default=None,
+                   help="unit of the point columns (default mm)")
+    p.add_argument("--angles", choices=("deg", "rad"), default=None,
+                   help="unit of the joint columns (default deg)")
+    p.add_argument("--sigma-um", type=noise_um, default=None, metavar="UM",
+                   help="the instrument's standard uncertainty of a point per coordinate, um "
+                        "(default: the preset's; else none stated and identify uses 20 um)")
+    p.add_argument("--one-frame", action="store_true",
+                   help="the files share one instrument frame (one set-up) instead of one each")
+    p.set_defaults(handler=_import_points)

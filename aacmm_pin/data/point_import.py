@@ -1,0 +1,403 @@
+"""Tracker and motion-capture point files to a points campaign: :func:`import_points`.
+
+An instrument's export is a CSV file with one row per pose: the arm's joint angles in some
+columns, the measured tool point in others, in the instrument's units. A :class:`PointFormat`
+says which columns and units: given by the user (:func:`parse_columns`, :func:`parse_point`) or a
+preset recognised from the header (:func:`detect_format`; :data:`PRESETS`: ``jacobi2025``, the
+laser-tracker data of P. Jacobi's thesis shipped in ``shared/real-data``). :func:`read_point_file`
+reads one file into a :class:`~aacmm_pin.data.logs.PointLog` in SI, every cell checked (file,
+line, column, a few of each kind: :mod:`aacmm_pin.data.problem_log`); :func:`import_points` writes
+the campaign folder whole or not at all: ``points.csv`` in the package's format (mm, degrees) and
+``campaign.json`` with the instrument's stated noise, when known, and the provenance (source files,
+their rows, the licence found beside them).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aacmm_pin.data.campaign import write_campaign
+from aacmm_pin.data.columns import MAX_ANGLE_DEG
+from aacmm_pin.data.csv_table import read_table
+from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
+from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.data.problem_log import ProblemLog, close_match
+from aacmm_pin.errors import CampaignFormatError, Problem
+from aacmm_pin.units import MAX_COORDINATE, MM, RADIAN_MIN_ROWS, UM
+
+__all__ = ["JACOBI2025", "PRESETS", "ImportResult", "PointFormat", "detect_format",
+           "import_points", "parse_columns", "parse_point", "read_point_file"]
+
+LENGTH_UNITS = {"mm": MM, "m": 1.0}
+"""Length unit of a file -> metres per unit."""
+ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
+"""Angle unit of a file -> radians per unit."""
+
+
+@dataclass(frozen=True)
+class PointFormat:
+    """Which columns of an instrument's CSV hold what, in which units."""
+
+    joints: tuple[str, ...]
+    """Joint-angle columns in axis order (readout order of the arm: ``aacmm-pin axes``)."""
+    point: tuple[tuple[str, str | None], ...]
+    """For x, y, z: the column holding the coordinate, and a column subtracted from it or None
+    (``x_t - x_dif``: a nominal point and its deviation)."""
+    length_unit: str = "mm"
+    """Unit of the point columns, a key of :data:`LENGTH_UNITS`."""
+    angle_unit: str = "deg"
+    """Unit of the joint columns, a key of :data:`ANGLE_UNITS`."""
+    name: str = ""
+    """Preset name (empty: given column by column)."""
+    noise: float | None = None
+    """Stated standard uncertainty of a point per coordinate, m, or None (not known)."""
+    instrument: str = ""
+    """The instrument and its stated accuracy, as its maker states them."""
+    source: str = ""
+    """Where the data come from (publication, repository, licence)."""
+
+    def __post_init__(self) -> None:
+        if not self.joints:
+            raise ValueError("joints: one column per axis expected, got none")
+        if len(self.point) != 3:
+            raise ValueError(f"point: three columns (x, y, z) expected, got {len(self.point)}")
+        if self.length_unit not in LENGTH_UNITS or self.angle_unit not in ANGLE_UNITS:
+            raise ValueError(f"units: length one of {', '.join(LENGTH_UNITS)} and angle one of "
+                             f"{', '.join(ANGLE_UNITS)} expected, got {self.length_unit!r}, "
+                             f"{self.angle_unit!r}")
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """Every column the format reads, without repeats, joints first."""
+        named = [*self.joints, *(c for pair in self.point for c in pair if c is not None)]
+        return tuple(dict.fromkeys(named))
+
+    def describe(self) -> str:
+        """Return one line: the joint and point columns and their units."""
+        joints = (f"{self.joints[0]}..{self.joints[-1]}" if len(self.joints) > 2
+                  else ",".join(self.joints))
+        point = ",".join(a if b is None else f"{a}-{b}" for a, b in self.point)
+        name = f"{self.name}: " if self.name else ""
+        return f"{name}joints {joints} ({self.angle_unit}), point {point} ({self.length_unit})"
+
+
+_RANGE_END = re.compile(r"(.*?)(\d+)(\D*)")
+
+
+def parse_columns(text: str) -> tuple[str, ...]:
+    """Return the column names of a comma-separated list; ``q1..q6`` stands for q1, q2, ..., q6.
+
+    A range's ends differ only in their last number (``joint_1..joint_7``, ``a1_deg..a6_deg``).
+
+    Raises:
+        ValueError: for an empty list or name, or a range whose ends do not match.
+    """
+    names: list[str] = []
+    for item in (part.strip() for part in text.split(",")):
+        if ".." not in item:
+            names.append(item)
+            continue
+        first, _, last = item.partition("..")
+        a, b = _RANGE_END.fullmatch(first.strip()), _RANGE_END.fullmatch(last.strip())
+        if not (a and b and a[1] == b[1] and a[3] == b[3] and int(a[2]) <= int(b[2])):
+            raise ValueError(f"{item!r}: a range is <name><first number>..<name><last number>, "
+                             "e.g. q1..q6 or joint_1..joint_7")
+        names += [f"{a[1]}{k}{a[3]}" for k in range(int(a[2]), int(b[2]) + 1)]
+    if not names or not all(names):
+        raise ValueError(f"{text!r}: comma-separated column names expected (e.g. q1..q6)")
+    return tuple(names)
+
+
+def parse_point(text: str, header: Sequence[str] = ()) -> tuple[tuple[str, str | None], ...]:
+    """Return the x, y, z point columns of ``x,y,z`` or ``x_t-x_dif,y_t-y_dif,z_t-z_dif``.
+
+    ``A-B`` is column A minus column B, unless the header has a column named ``A-B``.
+
+    Raises:
+        ValueError: unless three columns are given.
+    """
+    items = [part.strip() for part in text.split(",")]
+    if len(items) != 3 or not all(items):
+        raise ValueError(f"{text!r}: three comma-separated columns x,y,z expected (each a "
+                         "column or column-column)")
+    out: list[tuple[str, str | None]] = []
+    for item in items:
+        a, minus, b = item.partition("-")
+        out.append((a.strip(), b.strip()) if minus and a.strip() and b.strip()
+                   and item not in header else (item, None))
+    return tuple(out)
+
+
+def _jacobi2025(header: Sequence[str]) -> PointFormat | None:
+    """Return the jacobi2025 format of a header that is one, else None."""
+    joints = [h for h in header if h.startswith("joint_")]
+    fixed = ["step_order", "x_t", "y_t", "z_t", "x_dif", "y_dif", "z_dif"]
+    if not joints or list(header) != fixed + [f"joint_{k}" for k in range(1, len(joints) + 1)]:
+        return None
+    return PointFormat(
+        tuple(joints), tuple((f"{c}_t", f"{c}_dif") for c in "xyz"), "mm", "deg", "jacobi2025",
+        noise=20 * UM,
+        instrument="GTS3800 laser tracker, stated volumetric accuracy 15 um + 6 um/m; taken as "
+                   "20 um per coordinate (15 um + 6 um/m at about 1 m)",
+        source="P. Jacobi, A Hybrid Error Compensation Method for Enhancing the Pose Accuracy of "
+               "Serial Industrial Robots, Master's thesis, Tsinghua University, 2025; "
+               "github.com/pauljac7700/serial_robots_datasets, MIT licence (keep its LICENSE "
+               "with the data)")
+
+
+PRESETS = {"jacobi2025": _jacobi2025}
+"""Preset name -> function of a file's header returning its format, or None if it is not one.
+
+``jacobi2025``: ``step_order, x_t, y_t, z_t, x_dif, y_dif, z_dif, joint_1..joint_n``; the
+commanded point ``x_t..`` (mm) and ``dif = commanded - measured`` (mm), joint angles in degrees;
+the measured point is ``x_t - x_dif``."""
+JACOBI2025 = "jacobi2025"
+"""Name of the preset of the shipped laser-tracker data."""
+
+
+def detect_format(header: Sequence[str]) -> PointFormat | None:
+    """Return the preset format a header is, or None."""
+    return next((fmt for preset in PRESETS.values() if (fmt := preset(header)) is not None), None)
+
+
+def read_header(path: Path) -> list[str] | None:
+    """Return the stripped cells of a CSV file's first row, or None if it cannot be read."""
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            row = next(csv.reader(f), None)
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return None  # read_table says why
+    return None if row is None else [c.strip() for c in row]
+
+
+def _missing(path: Path, header: list[str], fmt: PointFormat) -> list[Problem]:
+    """Return a problem per column of the format the header lacks, with the name it likely means."""
+    problems = []
+    for name in (n for n in fmt.columns if n not in header):
+        meant = close_match(name, header)
+        hint = f"; did you mean {meant}?" if meant else ""
+        shown = ", ".join(header[:16]) + (f" and {len(header) - 16} more" if len(header) > 16
+                                          else "")
+        problems.append(Problem(path, 1, name, f"missing column{hint} (the header has: {shown})"))
+    return problems
+
+
+def _check_values(path: Path, lines: list[int], fmt: PointFormat, q: np.ndarray,
+                  point: np.ndarray, out: list[Problem]) -> None:
+    """Add a problem for each angle or coordinate beyond what an arm or instrument gives.
+
+    ``q`` (N, n) rad and ``point`` (N, 3) m as read: an angle beyond two turns or a coordinate
+    beyond :data:`~aacmm_pin.units.MAX_COORDINATE` is most likely a wrong unit; so are degree
+    columns that all lie within +-2 pi over many rows while the arm moves.
+    """
+    log = ProblemLog(out, path, "cells")
+    other_angle = "rad" if fmt.angle_unit == "deg" else "deg"
+    other_length = "m" if fmt.length_unit == "mm" else "mm"
+    for k, name in enumerate(fmt.joints):
+        for i in np.flatnonzero(np.abs(np.degrees(q[:, k])) > MAX_ANGLE_DEG):
+            log.add(lines[i], name, f"{q[i, k] / ANGLE_UNITS[fmt.angle_unit]:g} {fmt.angle_unit} "
+                                    f"is beyond +-{MAX_ANGLE_DEG:g} deg: in {other_angle}? "
+                                    "(--angles)", "angle")
+    for k, (name, _) in enumerate(fmt.point):
+        for i in np.flatnonzero(np.abs(point[:, k]) > MAX_COORDINATE):
+            log.add(lines[i], name, f"{point[i, k] / LENGTH_UNITS[fmt.length_unit]:g} "
+                                    f"{fmt.length_unit} is beyond +-{MAX_COORDINATE:g} m: in "
+                                    f"{other_length}? (--units)", "coordinate")
+    read = q / ANGLE_UNITS[fmt.angle_unit]
+    if (fmt.angle_unit == "deg" and len(q) >= RADIAN_MIN_ROWS
+            and np.max(np.abs(read)) <= 2 * math.pi and np.max(np.ptp(read, axis=0)) >= 1.0):
+        k = int(np.argmax(np.ptp(read, axis=0)))
+        log.add(lines[0], fmt.joints[k], f"every joint column lies within +-6.29 over {len(q)} "
+                                         "rows: these look like radians (--angles rad)")
+    log.close()
+
+
+@dataclass(frozen=True)
+class PointFile:
+    """One instrument file read: its points and where they came from."""
+
+    path: Path
+    """The file."""
+    log: PointLog
+    """Its points (group 1), q rad, point m, ``lines`` the source file's lines."""
+    offset: np.ndarray | None
+    """Length of each subtracted vector (``x_dif, y_dif, z_dif``: nominal minus measured), (N,)
+    m, or None when the format subtracts nothing."""
+
+
+def read_point_file(path: str | Path, fmt: PointFormat | None = None) -> tuple[PointFile,
+                                                                              PointFormat]:
+    """Read an instrument's CSV file; return its points and the format used.
+
+    Args:
+        path: the CSV file (comma separated, header row).
+        fmt: its columns and units; None: a preset recognised from the header (:data:`PRESETS`).
+
+    Raises:
+        CampaignFormatError: naming file, line and column of each problem: a missing column
+            (with the name it likely means), a bad cell, an angle or coordinate in the wrong unit,
+            a header no preset recognises when ``fmt`` is None.
+    """
+    path = Path(path)
+    header = read_header(path)
+    problems: list[Problem] = []
+    if header is None or len(header) < 2:  # unreadable, empty, another separator: the reader says
+        read_table(path, (), False, (), problems, extras="readouts")
+        raise CampaignFormatError(problems or [Problem(path, 1, None, "a single column; joint "
+                                                       "and point columns expected")])
+    if fmt is None:
+        fmt = detect_format(header)
+        if fmt is None:
+            presets = ", ".join(PRESETS)
+            raise CampaignFormatError([Problem(path, 1, None, f"no preset format ({presets}) has "
+                                               "this header; give the joint and point columns "
+                                               "(--joints, --point)")])
+    if problems := _missing(path, header, fmt):
+        raise CampaignFormatError(problems)
+    columns = fmt.columns
+    table = read_table(path, columns, False, (), problems, extras="readouts")
+    if problems or table is None:
+        raise CampaignFormatError(problems or [Problem(path, None, None, "cannot be read")])
+    cells = {name: np.array(table.cols[name], dtype=float) for name in columns}
+    q = np.stack([cells[n] for n in fmt.joints], axis=1) * ANGLE_UNITS[fmt.angle_unit]
+    scale = LENGTH_UNITS[fmt.length_unit]
+    point = np.stack([cells[a] - (0.0 if b is None else cells[b]) for a, b in fmt.point],
+                     axis=1) * scale
+    _check_values(path, table.lines, fmt, q, point, problems)
+    if problems:
+        raise CampaignFormatError(problems)
+    subtracted = [b for _, b in fmt.point if b is not None]
+    offset = (np.linalg.norm(np.stack([cells[b] for b in subtracted], axis=1), axis=1) * scale
+              if len(subtracted) == 3 else None)
+    log = PointLog(np.ones(len(q), dtype=np.int64), q, point,
+                   lines=np.array(table.lines, dtype=np.int64))
+    return PointFile(path, log, offset), fmt
+
+
+def licence_note(path: Path) -> str | None:
+    """Return ``<LICENSE file>: <its first line>`` found beside a data file or up to 2 folders up."""
+    for folder in [path.absolute().parent, *path.absolute().parent.parents][:3]:
+        for candidate in sorted(folder.glob("LICEN[CS]E*")):
+            if candidate.is_file():
+                try:
+                    with candidate.open(encoding="utf-8", errors="replace") as f:
+                        first = next((line.strip() for line in f if line.strip()), "")
+                except OSError:
+                    continue
+                return f"{candidate}: {first}"
+    return None
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """What :func:`import_points` read and wrote."""
+
+    campaign: Campaign
+    """The campaign written (points in SI; ``noise`` the stated one, or None)."""
+    files: tuple[PointFile, ...]
+    """Each source file read, in order."""
+    format: PointFormat
+    """The format used (the first file's preset, when recognised)."""
+    provenance: dict[str, Any] = field(default_factory=dict)
+    """The ``provenance`` object written to ``campaign.json``."""
+
+    @property
+    def mean_offset(self) -> float | None:
+        """Mean length of the subtracted vectors over all points (nominal - measured), m, or None."""
+        offsets = [f.offset for f in self.files]
+        if any(o is None for o in offsets):
+            return None
+        return float(np.mean(np.concatenate([o for o in offsets if o is not None])))
+
+
+def import_points(sources: Sequence[str | Path], folder: str | Path,
+                  fmt: PointFormat | None = None, *, sigma: float | None = None,
+                  one_frame: bool = False, force: bool = False) -> ImportResult:
+    """Convert instrument point files into a points campaign folder (written whole or not at all).
+
+    Args:
+        sources: the instrument's CSV files; each is one instrument set-up (``group`` 1, 2, ...)
+            unless ``one_frame``.
+        folder: the campaign folder to write (``points.csv``, ``campaign.json``).
+        fmt: columns and units of the files; None: each file's preset, from its header.
+        sigma: stated standard uncertainty of a point per coordinate, m (overrides the preset's);
+            None: the preset's, else none stated (the package's default applies).
+        one_frame: all files share one instrument frame (one group).
+        force: replace a folder that holds files.
+
+    Returns:
+        What was read and written; ``campaign.points.lines`` are the lines of ``points.csv``.
+
+    Raises:
+        CampaignFormatError: every problem of every file (file, line, column).
+        OutputExistsError: if ``folder`` holds files (without ``force``) or is a source.
+        ValueError: for no sources, files with different numbers of axes, or a bad ``sigma``.
+    """
+    if not sources:
+        raise ValueError("sources: give one or more point files")
+    files: list[PointFile] = []
+    formats: list[PointFormat] = []
+    problems: list[Problem] = []
+    for source in sources:
+        try:
+            read, used = read_point_file(source, fmt)
+        except CampaignFormatError as exc:
+            problems += exc.problems
+            continue
+        files.append(read)
+        formats.append(used)
+    if problems:
+        raise CampaignFormatError(problems)
+    if len(axes := {f.log.q.shape[1] for f in files}) > 1:
+        raise ValueError(f"sources: the files have {sorted(axes)} axes; one arm's files expected")
+    noise = sigma if sigma is not None else formats[0].noise
+    group = np.concatenate([np.full(len(f.log.q), 1 if one_frame else k, dtype=np.int64)
+                            for k, f in enumerate(files, start=1)])
+    points = PointLog(group, np.concatenate([f.log.q for f in files]),
+                      np.concatenate([f.log.point for f in files]),
+                      lines=np.arange(2, 2 + len(group), dtype=np.int64))
+    stated = None if noise is None else StatedNoise(point=noise)
+    campaign = Campaign(None, {}, None, {}, points=points, noise=stated)
+    provenance = _provenance(files, formats, "none stated: the package's default applies"
+                             if noise is None else "as given" if sigma is not None
+                             else "the preset's instrument accuracy")
+    with output_folder(folder, force, [f.path for f in files]) as tmp:
+        write_campaign(campaign, tmp)
+        content: dict[str, Any] = {} if stated is None else {"noise_um": {"point": stated.point / UM}}
+        content["provenance"] = provenance
+        (tmp / NOISE_FILE).write_text(json.dumps(content, indent=2) + "\n", encoding="utf-8")
+    return ImportResult(campaign, tuple(files), formats[0], provenance)
+
+
+def _provenance(files: list[PointFile], formats: list[PointFormat], noise: str) -> dict[str, Any]:
+    """Return campaign.json's ``provenance``: per source file its rows, format and licence.
+
+    ``noise``: where the stated noise comes from, in a few words.
+    """
+    out: list[dict[str, Any]] = []
+    first = 2
+    for f, fmt in zip(files, formats):
+        n = len(f.log.q)
+        lines = f.log.lines if f.log.lines is not None else np.arange(2, 2 + n)
+        entry: dict[str, Any] = {
+            "file": str(f.path.absolute()), "rows": n,
+            "source_lines": f"{int(lines[0])}..{int(lines[-1])}",
+            "points_csv_lines": f"{first}..{first + n - 1}", "format": fmt.describe()}
+        if fmt.instrument:
+            entry["instrument"] = fmt.instrument
+        if fmt.source:
+            entry["source"] = fmt.source
+        if (note := licence_note(f.path)) is not None:
+            entry["licence_file"] = note
+        out.append(entry)
+        first += n
+    return {"imported_by": "aacmm-pin import-points", "files": out, "noise": noise}
