@@ -12,6 +12,9 @@ runs:
 * ``<!-- pending: COMMAND -->``: a subcommand another change adds; skipped while the CLI lacks it and
   a failure once it has it (the marker must then go).
 
+A comment just after a block, ``<!-- prints: TEXT | TEXT ... -->``, states what its output holds (each
+TEXT, runs of spaces counting as one): the numbers the text quotes are checked where they are made.
+
 A block runs after the earlier blocks of its document that it may depend on (the fast ones for a
 fast block, all of them for a slow one), so ``-k`` can pick any one.
 """
@@ -35,6 +38,7 @@ SHARED = ROOT.parent / "shared"
 README_LIMIT = 300  # lines (issue 26: about 250, at most 300)
 FENCE = re.compile(r"^```(\S*)\s*$")
 MARK = re.compile(r"^<!--\s*(.*?)\s*-->\s*$")
+PRINTS = re.compile(r"^<!--\s*prints:\s*(.*?)\s*-->\s*$")
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,7 @@ class Block:
     lang: str
     mark: str
     text: str
+    prints: tuple[str, ...] = ()
 
     @property
     def id(self) -> str:
@@ -72,10 +77,13 @@ def blocks(doc: Path) -> list[Block]:
             continue
         end = next(j for j in range(k + 1, len(lines)) if lines[j].startswith("```"))
         before = next((lines[j] for j in range(k - 1, -1, -1) if lines[j].strip()), "")
-        mark = MARK.match(before)
+        after = next((lines[j] for j in range(end + 1, len(lines)) if lines[j].strip()), "")
+        mark = None if PRINTS.match(before) else MARK.match(before)
+        prints = PRINTS.match(after)
         if fence.group(1) in ("bash", "python"):
             out.append(Block(doc, k + 1, fence.group(1), mark.group(1) if mark else "",
-                             "\n".join(lines[k + 1:end])))
+                             "\n".join(lines[k + 1:end]),
+                             tuple(t.strip() for t in prints.group(1).split("|")) if prints else ()))
         k = end + 1
     return out
 
@@ -130,11 +138,16 @@ def _run(block: Block, work: Path) -> None:
         # the checkout's CLI and interpreter, whatever an installed console script points to
         prelude = f'aacmm-pin() {{ "{exe}" -m aacmm_pin "$@"; }}; python() {{ "{exe}" "$@"; }}; '
         runs = [["bash", "-euo", "pipefail", "-c", prelude + line] for line in shell_lines(block.text)]
+    printed = ""
     for argv in runs:
         proc = subprocess.run(argv, cwd=work, env=env, capture_output=True, text=True, timeout=timeout)
         assert proc.returncode == 0, (
             f"{block.id}: {argv[-1][-300:]!r} exited {proc.returncode}\n"
             f"stdout: {proc.stdout[-2000:]}\nstderr: {proc.stderr[-2000:]}")
+        printed += proc.stdout
+    flat = re.sub(r"[ \t]+", " ", printed)
+    for text in block.prints:
+        assert re.sub(r"\s+", " ", text) in flat, f"{block.id} does not print {text!r}:\n{printed[-3000:]}"
 
 
 def _subcommands() -> set[str]:
