@@ -1,4 +1,4 @@
-"""The package's import graph against the layer table in the README (one-way data flow)."""
+"""The package's import graph against the layer table of docs/architecture.md (one-way data flow)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ OPTIONAL = ("matplotlib", "meshcat", "serial")
 
 
 def _layer_table() -> dict[str, int]:
-    """Return module (or ``pkg/`` prefix) -> layer from the README's architecture table."""
-    text = (ROOT / "README.md").read_text()
-    section = text[text.index("## Architecture"):]
+    """Return module (or ``pkg/`` prefix) -> layer from docs/architecture.md's layer table."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    section = text[text.index("# Architecture"):]
     section = section[:section.index("\n## ", 1)]
     table: dict[str, int] = {}
     for layer, cell in re.findall(r"^\| (\d+) [a-z]+ \| (.+) \|$", section, flags=re.M):
@@ -40,7 +40,7 @@ def _layer(module: str, table: dict[str, int]) -> int:
     package = module.split(".")[0] + "/"
     if package in table:
         return table[package]
-    raise AssertionError(f"aacmm_pin.{module} is in no layer of the README's architecture table")
+    raise AssertionError(f"aacmm_pin.{module} is in no layer of docs/architecture.md's table")
 
 
 def _type_checking_nodes(tree: ast.AST) -> set[int]:
@@ -104,9 +104,9 @@ def _graph() -> dict[str, set[str]]:
 
 
 def test_every_module_is_in_a_layer() -> None:
-    """Every module of the package is named (or its subpackage is) in the README's table."""
+    """Every module of the package is named (or its subpackage is) in docs/architecture.md's table."""
     table = _layer_table()
-    assert table, "README.md has no architecture layer table"
+    assert table, "docs/architecture.md has no layer table"
     for module in _modules():
         _layer(module.removesuffix(".__init__") if module.endswith(".__init__") else module, table)
 

@@ -23,7 +23,7 @@ from aacmm_pin.data.json_file import read_json
 from aacmm_pin.errors import FileFormatError, Problem
 
 MIN_DETERMINANT = 0.1
-"""Smallest |det U| accepted: three unit directions closer to a plane cannot resolve 3D."""
+"""Smallest ``|det U|`` accepted: three unit directions closer to a plane cannot resolve 3D."""
 
 
 @dataclass(frozen=True, eq=False)

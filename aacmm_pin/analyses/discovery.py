@@ -7,6 +7,7 @@ The loop (:func:`discover`):
    (:mod:`aacmm_pin.effects`; one per axis where the effect is per-axis), fit the residuals with
    the model's own directions plus the term's columns (each parameter with a Gaussian prior of its
    plausible size, so terms the data cannot see are shrunk, not overfitted) and measure
+
    * the held-out RMS: leave one R-Test location out, refit on the others, predict the left-out
      SPAT (less its mean: its nest offset is unknown) and pool over the locations;
    * the length-bar error, when the campaign has a bar: the candidate's linearised change of the bar

@@ -162,7 +162,7 @@ class PointArticulation(NamedTuple):
     ranges: np.ndarray
     """Range (max - min) of the deviations along x, y, z, shape (3,), m."""
     two_sigma: float
-    """Twice sqrt(sum |deviation|^2 / (N - 1)), m."""
+    """Twice sqrt(sum ``|deviation|^2`` / (N - 1)), m."""
 
     def to_dict(self) -> dict[str, Any]:
         """Return the figures in um (JSON form)."""

@@ -74,7 +74,7 @@ class LateralCompliance(Effect):
     by_default = False
     """Tried when named only: where a joint's lateral axis is parallel to the next joint's axis
     (an AACMM's vertical A1 before its horizontal A2), the moments about them are the same and the
-    two effects nearly indistinguishable (see the README)."""
+    two effects nearly indistinguishable (see docs/discovery.md)."""
 
     def candidates(self, arm: Arm, samples: Samples) -> list[Term]:
         """One term per axis whose lateral gravity moment varies."""
