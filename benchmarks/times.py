@@ -47,7 +47,7 @@ CASES: list[tuple[str, list[str], str, Stated]] = [
     ("`aacmm-pin simulate c`", [*CLI, "simulate", "c"],
      "\"a few seconds\" (its first line)", (1.0, 5.0)),
     ("`aacmm-pin demo`", [*CLI, "demo", "--out", "demo"],
-     "README: \"the demo about 10 s\", \"about 10-15 s\"", (10.0, 15.0)),
+     "docs/install.md: \"the demo about 7 s of CPU\", \"about 5-8 s of CPU\"", (5.0, 8.0)),
     ("`aacmm-pin identify c --model proposed`",
      [*CLI, "identify", "c", "--model", "proposed", "--out", "cal"], "-", None),
     ("`aacmm-pin validate cal c`", [*CLI, "validate", "cal", "c"], "-", None),
