@@ -2,7 +2,7 @@
 
 Simulates a SPAT + length-bar campaign, identifies the three models of Fig. 9, validates them on
 the length bar and writes the figures. Run: ``python examples/01_reproduce_paper.py [OUT]
-[--figures DIR]`` (about 10 s).
+[--figures DIR]`` (about 7 s).
 
 ``OUT`` is the demo's folder (default ``examples/out/aacmm-pin-demo``, which git ignores; a rerun
 replaces it); ``--figures DIR`` also copies the three figures to DIR
