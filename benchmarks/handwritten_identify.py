@@ -7,7 +7,7 @@ Run: ``python benchmarks/handwritten_identify.py CAMPAIGN OUT.json [--method trf
 the fit RMS and the solver's evaluations); ``--check CAMPAIGN`` prints the analytic Jacobian's largest
 error against central differences.
 
-The model: the chain of the README's table (22 DH errors, tool vector), X0 and a translation to the
+The model: the chain of docs/model.md's table (22 DH errors, tool vector), X0 and a translation to the
 MT-CS, one 5-degree encoder map per axis (linear interpolation, periodic), and every R-Test nest's
 offset estimated with a 3 um prior (as ``aacmm-pin identify`` does when the residual matches the
 noise). Map nodes that no readout touches are left out (held at zero); each map's mean is held at

@@ -18,7 +18,7 @@ calibrates the makers' DH models (``urdf/ur5.urdf``,
 
 Each robot's plausible sizes (the priors of discovery's held-out scores) are its own,
 ``urdf/<robot>.sizes.json``. It prints the mean position error uncalibrated and calibrated, beside
-the thesis' figures, then the README's table: uncalibrated, DH and every discovery step with its
+the thesis' figures, then the table of docs/real-robots.md: uncalibrated, DH and every discovery step with its
 k-fold held-out RMS, fit RMS and test error.
 
 Run: ``python examples/03_laser_tracker_ur5_wam.py [--data DIR] [--out DIR]`` (about 10 s).
@@ -171,7 +171,7 @@ def _mm(value: float | None) -> str:
 
 
 def table(results: dict[str, list[Row]]) -> str:
-    """Return the README's table (Markdown) of every robot's models beside the thesis' figures."""
+    """Return docs/real-robots.md's table (Markdown) of every robot's models beside the thesis' figures."""
     test = {"UR5": "mean error on the 20 random test poses",
             "WAM": f"mean error: uncalibrated on the grid, every model on {FOLDS}-fold refits"}
     lines = ["| robot | model | k-fold held-out RMS (mm) | fit RMS (mm) | test error (mm) | "
