@@ -99,7 +99,7 @@ def test_02_discover_compliance_on_a_small_campaign(tmp_path: Path) -> None:
 def test_02_discover_compliance_paper_sized(tmp_path: Path) -> None:
     """Example 02 as documented (4 x 200 SPAT samples, 7 bar placements): the same output, and the
     length-bar numbers the README quotes (plain RMS 1.28 -> 2.36 um)."""
-    out = _run("02_discover_compliance.py", cwd=tmp_path)
+    out = _run("02_discover_compliance.py", "--out", "discovery-example", cwd=tmp_path)
     _check_02(out, tmp_path / "discovery-example")
     assert "length bar: RMS 1.28 -> 2.36 um" in out
 
