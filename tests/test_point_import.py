@@ -249,3 +249,15 @@ def test_a_preset_named_must_fit_the_header(tmp_path: Path) -> None:
     status, err = run_cli(["import-points", str(source), "--out", str(tmp_path / "c"),
                            "--units", "m"])
     assert status == 2 and "--joints" in err
+
+
+def test_a_zero_padded_range_keeps_its_padding_and_the_header_is_listed_once(tmp_path: Path) -> None:
+    from aacmm_pin.data.point_import import parse_columns
+
+    assert parse_columns("q01..q06") == ("q01", "q02", "q03", "q04", "q05", "q06")
+    assert parse_columns("joint_1..joint_3") == ("joint_1", "joint_2", "joint_3")
+    source, _, _ = _mocap(tmp_path / "mocap.csv", n=4)
+    status, err = run_cli(["import-points", str(source), "--out", str(tmp_path / "c"),
+                           "--joints", "b1..b6", "--point", "X,Y,Z", "--units", "m",
+                           "--angles", "rad"])
+    assert status == 2 and err.count("the header has:") == 1 and err.count("missing column") == 6

@@ -111,7 +111,8 @@ def parse_columns(text: str) -> tuple[str, ...]:
         if not (a and b and a[1] == b[1] and a[3] == b[3] and int(a[2]) <= int(b[2])):
             raise ValueError(f"{item!r}: a range is <name><first number>..<name><last number>, "
                              "e.g. q1..q6 or joint_1..joint_7")
-        names += [f"{a[1]}{k}{a[3]}" for k in range(int(a[2]), int(b[2]) + 1)]
+        width = len(a[2]) if a[2].startswith("0") else 1  # q01..q06 keeps its zero padding
+        names += [f"{a[1]}{k:0{width}d}{a[3]}" for k in range(int(a[2]), int(b[2]) + 1)]
     if not names or not all(names):
         raise ValueError(f"{text!r}: comma-separated column names expected (e.g. q1..q6)")
     return tuple(names)
@@ -182,12 +183,12 @@ def read_header(path: Path) -> list[str] | None:
 def _missing(path: Path, header: list[str], fmt: PointFormat) -> list[Problem]:
     """Return a problem per column of the format the header lacks, with the name it likely means."""
     problems = []
+    shown = ", ".join(header[:16]) + (f" and {len(header) - 16} more" if len(header) > 16 else "")
     for name in (n for n in fmt.columns if n not in header):
         meant = close_match(name, header)
         hint = f"; did you mean {meant}?" if meant else ""
-        shown = ", ".join(header[:16]) + (f" and {len(header) - 16} more" if len(header) > 16
-                                          else "")
-        problems.append(Problem(path, 1, name, f"missing column{hint} (the header has: {shown})"))
+        listing = f" (the header has: {shown})" if not problems else ""  # the header once
+        problems.append(Problem(path, 1, name, f"missing column{hint}{listing}"))
     return problems
 
 
