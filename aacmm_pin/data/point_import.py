@@ -182,7 +182,7 @@ def read_header(path: Path) -> list[str] | None:
 
 def _missing(path: Path, header: list[str], fmt: PointFormat) -> list[Problem]:
     """Return a problem per column of the format the header lacks, with the name it likely means."""
-    problems = []
+    problems: list[Problem] = []
     shown = ", ".join(header[:16]) + (f" and {len(header) - 16} more" if len(header) > 16 else "")
     for name in (n for n in fmt.columns if n not in header):
         meant = close_match(name, header)
