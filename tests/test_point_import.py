@@ -152,7 +152,12 @@ def test_wrong_units_are_named(tmp_path: Path) -> None:
     source, _, _ = _mocap(tmp_path / "mocap.csv", n=25)
     status, err = run_cli(["import-points", str(source), "--out", str(tmp_path / "c"),
                            "--joints", "a1..a6", "--point", "X,Y,Z", "--units", "m"])
-    assert status == 2 and "look like radians (--angles rad)" in err
+    assert status == 2 and "look like radians (--angles rad;" in err
+    # the same small angles with the unit stated: degrees of an arm that moves a few degrees only
+    status, err = run_cli(["import-points", str(source), "--out", str(tmp_path / "small"),
+                           "--joints", "a1..a6", "--point", "X,Y,Z", "--units", "m",
+                           "--angles", "deg"])
+    assert status == 0, err
     q, p = _poses(5, 4)
     rows = [[*np.degrees(qi), *(pi * 1e6)] for qi, pi in zip(q, p)]  # um written, read as mm...
     big = _write(tmp_path / "um.csv", ["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "z"], rows)

@@ -36,7 +36,8 @@ def _format(args: argparse.Namespace) -> Any:
             raise ValueError("--joints, --point: give both (e.g. --joints q1..q6 --point x,y,z)")
         header = read_header(Path(args.sources[0])) or []
         return PointFormat(parse_columns(args.joints), parse_point(args.point, header),
-                           args.units or "mm", args.angles or "deg")
+                           args.units or "mm", args.angles or "deg",
+                           angles_stated=args.angles is not None)
     if args.units is not None or args.angles is not None:
         raise ValueError("--units, --angles: they go with --joints and --point (a preset states "
                          "its units)")

@@ -60,6 +60,9 @@ class PointFormat:
     """Preset name (empty: given column by column)."""
     noise: float | None = None
     """Stated standard uncertainty of a point per coordinate, m, or None (not known)."""
+    angles_stated: bool = False
+    """True when the user stated the angle unit (``--angles deg``): no guess that degree columns
+    are radians (an arm that moves a few degrees only)."""
     instrument: str = ""
     """The instrument and its stated accuracy, as its maker states them."""
     source: str = ""
@@ -214,11 +217,12 @@ def _check_values(path: Path, lines: list[int], fmt: PointFormat, q: np.ndarray,
                                     f"{fmt.length_unit} is beyond +-{MAX_COORDINATE:g} m: in "
                                     f"{other_length}? (--units)", "coordinate")
     read = q / ANGLE_UNITS[fmt.angle_unit]
-    if (fmt.angle_unit == "deg" and len(q) >= RADIAN_MIN_ROWS
+    if (fmt.angle_unit == "deg" and not fmt.angles_stated and len(q) >= RADIAN_MIN_ROWS
             and np.max(np.abs(read)) <= 2 * math.pi and np.max(np.ptp(read, axis=0)) >= 1.0):
         k = int(np.argmax(np.ptp(read, axis=0)))
         log.add(lines[0], fmt.joints[k], f"every joint column lies within +-6.29 over {len(q)} "
-                                         "rows: these look like radians (--angles rad)")
+                                         "rows: these look like radians (--angles rad; "
+                                         "--angles deg if they are degrees)")
     log.close()
 
 
