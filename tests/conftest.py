@@ -63,6 +63,14 @@ def small_sim(arm: ap.Arm) -> ap.Simulation:
 
 
 @pytest.fixture(scope="session")
+def process_sim(arm: ap.Arm) -> ap.Simulation:
+    """A campaign a command works on for about a second (4 x 40 SPAT samples, 2 bar placements):
+    long enough to be stopped mid-run by the kill and Ctrl-C tests."""
+    return ap.simulate_campaign(arm, ap.SimulationConfig(
+        seed=0, samples_per_location=40, samples_per_socket=5, bar_placements=2))
+
+
+@pytest.fixture(scope="session")
 def small_cal(arm: ap.Arm, small_sim: ap.Simulation) -> ap.Calibration:
     """The proposed model identified on the small campaign."""
     return ap.identify(small_sim.campaign, arm, model="proposed")

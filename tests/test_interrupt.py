@@ -25,13 +25,10 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
 
 
 @pytest.fixture(scope="module")
-def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def campaign(tmp_path_factory: pytest.TempPathFactory, process_sim: ap.Simulation) -> Path:
     """A small simulated campaign folder."""
     root = tmp_path_factory.mktemp("interrupt")
-    arm = ap.load_arm()
-    sim = ap.simulate_campaign(arm, ap.SimulationConfig(
-        seed=0, samples_per_location=40, samples_per_socket=5, bar_placements=2))
-    ap.write_campaign(sim.campaign, root / "campaign")
+    ap.write_campaign(process_sim.campaign, root / "campaign")
     return root / "campaign"
 
 

@@ -62,13 +62,11 @@ def _visible(parent: Path) -> set[str]:
 
 
 @pytest.fixture(scope="module")
-def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def campaign(tmp_path_factory: pytest.TempPathFactory, arm: ap.Arm,
+             process_sim: ap.Simulation) -> Path:
     """A small campaign folder and, beside it, a reference calibration (dh model)."""
     root = tmp_path_factory.mktemp("kill")
-    arm = ap.load_arm()
-    sim = ap.simulate_campaign(arm, ap.SimulationConfig(
-        seed=0, samples_per_location=40, samples_per_socket=5, bar_placements=2))
-    ap.write_campaign(sim.campaign, root / "campaign")
+    ap.write_campaign(process_sim.campaign, root / "campaign")
     cal = ap.identify(ap.read_campaign(root / "campaign", arm=arm), arm, "dh")
     ap.write_calibration(cal, arm, root / "old_cal")  # the "old" output: another model
     return root / "campaign"
