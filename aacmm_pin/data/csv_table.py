@@ -425,13 +425,26 @@ def check_radians(table: Table, out: list[Problem]) -> None:
             for name in table.q_columns]
     if any(np.isnan(c).any() for c in cols):
         return  # bad cells, reported already
-    ptp = [float(np.ptp(c)) for c in cols]
-    if max(float(np.max(np.abs(c))) for c in cols) <= 2 * math.pi and max(ptp) >= 1.0:
-        name = table.q_columns[int(np.argmax(ptp))]
+    k = radian_like_column(np.stack(cols, axis=1))
+    if k is not None:
+        name = table.q_columns[k]
         out.append(Problem(table.path, table.lines[0], name,
                            f"every readout column lies within +-6.29 over {len(table.lines)} "
-                           f"rows ({name} spans {max(ptp):.3g}): these look like radians; "
-                           "write degrees"))
+                           f"rows ({name} spans {float(np.ptp(cols[k])):.3g}): these look like "
+                           "radians; write degrees"))
+
+
+def radian_like_column(degrees: np.ndarray) -> int | None:
+    """Return the column that moves most if angle columns in degrees look like radians, else None.
+
+    ``degrees`` (N, n): the angles as written in a file that says degrees. They look like radians
+    when every value lies within +-2 pi and some column moves by 1 or more (see
+    :func:`check_radians`); the caller checks ``N >= units.RADIAN_MIN_ROWS``.
+    """
+    ptp = np.ptp(degrees, axis=0)
+    if np.max(np.abs(degrees)) <= 2 * math.pi and np.max(ptp) >= 1.0:
+        return int(np.argmax(ptp))
+    return None
 
 
 def usable(table: Table | None, *columns: str) -> TypeGuard[Table]:

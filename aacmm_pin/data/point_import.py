@@ -27,7 +27,7 @@ import numpy as np
 
 from aacmm_pin.data.campaign import write_campaign
 from aacmm_pin.data.columns import MAX_ANGLE_DEG
-from aacmm_pin.data.csv_table import read_table
+from aacmm_pin.data.csv_table import radian_like_column, read_table
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.data.problem_log import ProblemLog, close_match
@@ -216,13 +216,13 @@ def _check_values(path: Path, lines: list[int], fmt: PointFormat, q: np.ndarray,
             log.add(lines[i], name, f"{point[i, k] / LENGTH_UNITS[fmt.length_unit]:g} "
                                     f"{fmt.length_unit} is beyond +-{MAX_COORDINATE:g} m: in "
                                     f"{other_length}? (--units)", "coordinate")
-    read = q / ANGLE_UNITS[fmt.angle_unit]
-    if (fmt.angle_unit == "deg" and not fmt.angles_stated and len(q) >= RADIAN_MIN_ROWS
-            and np.max(np.abs(read)) <= 2 * math.pi and np.max(np.ptp(read, axis=0)) >= 1.0):
-        k = int(np.argmax(np.ptp(read, axis=0)))
-        log.add(lines[0], fmt.joints[k], f"every joint column lies within +-6.29 over {len(q)} "
-                                         "rows: these look like radians (--angles rad; "
-                                         "--angles deg if they are degrees)")
+    moving = (radian_like_column(q / ANGLE_UNITS[fmt.angle_unit])
+             if fmt.angle_unit == "deg" and not fmt.angles_stated and len(q) >= RADIAN_MIN_ROWS
+             else None)
+    if moving is not None:
+        log.add(lines[0], fmt.joints[moving],
+                f"every joint column lies within +-6.29 over {len(q)} rows: these look like "
+                "radians (--angles rad; --angles deg if they are degrees)")
     log.close()
 
 
