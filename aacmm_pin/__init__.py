@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     )
     from aacmm_pin.data.columns import Column, register_column
     from aacmm_pin.data.logs import Campaign, LengthBarLog, PointLog, SpatLog, StatedNoise, read_noise
+    from aacmm_pin.data.point_import import ImportResult, PointFormat, import_points
     from aacmm_pin.effects.base import (
         AngleTerm,
         BasisTerm,
@@ -80,7 +81,7 @@ __all__ = [
     "StylusJacobians", "correct_readouts", "load_arm", "node_angles", "predict",
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
-    "Sizes", "read_sizes", "write_sizes",
+    "Sizes", "read_sizes", "write_sizes", "import_points", "ImportResult", "PointFormat",
     # the extension point: an effect, the ways its terms act, registration
     "Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm", "MapTerm", "BasisTerm",
     "Variable", "register_effect", "load_effect_file",
@@ -91,6 +92,7 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "model.arm": ("DEFAULT_ARM", "Arm", "ErrorFrame", "IdentificationModel", "load_arm"),
     "data.campaign": ("ArmNames", "read_campaign", "read_readouts", "write_campaign", "write_points"),
     "data.columns": ("Column", "register_column"),
+    "data.point_import": ("ImportResult", "PointFormat", "import_points"),
     "data.logs": ("Campaign", "LengthBarLog", "PointLog", "SpatLog", "StatedNoise", "read_noise"),
     "analyses.discovery": ("discover",),
     "analyses.discovery_results": ("Discovery",),

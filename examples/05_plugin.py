@@ -48,7 +48,13 @@ parser.add_argument("--arcsec-per-k", type=float, default=3.0,
 parser.add_argument("--seed", type=int, default=0, help="seed of the simulated campaign")
 args = parser.parse_args()
 out = Path(args.out)
+WRITES = {"campaign", "site", "discovery", "points.csv", "x.csv"}
+"""What the script writes in ``--out``: a folder holding only these is its own earlier run."""
 if out.exists():
+    foreign = sorted(p.name for p in out.iterdir() if p.name not in WRITES)
+    if foreign:  # never delete what this script did not write
+        sys.exit(f"{out} holds {', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}, "
+                 "which this example did not write: choose another --out")
     shutil.rmtree(out)
 
 

@@ -136,6 +136,16 @@ def test_05_plugin_is_discovered_and_applied_in_fresh_processes(tmp_path: Path) 
     assert (tmp_path / "ex5" / "points.csv").is_file()
 
 
+def test_05_plugin_keeps_a_folder_it_did_not_write(tmp_path: Path) -> None:
+    """Example 05 clears its own earlier run only: an --out holding a user's file is refused (exit 1,
+    the file named) and nothing in it is deleted."""
+    (tmp_path / "notes.txt").write_text("mine")
+    proc = subprocess.run([sys.executable, str(EXAMPLES / "05_plugin.py"), "--out", str(tmp_path)],
+                          env=ENV, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and "notes.txt" in proc.stderr, proc.stderr
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
 def test_no_package_file_knows_the_plugins_column() -> None:
     """The column of example 05's plugin (temp_base_c) is named nowhere in the package: a new
     column and its effect need no edit of aacmm_pin."""
