@@ -74,8 +74,10 @@ def _import_points(args: argparse.Namespace) -> int:
     noise = result.campaign.noise
     stated = (f"stated point noise {noise.point / UM:g} um per coordinate" if noise is not None
               else "no stated noise (the package's default applies)")
+    poses = (f", {len(set(points.columns['pose'].tolist()))} poses of several points: column "
+             "pose" if "pose" in points.columns else "")
     print(f"wrote {args.out}: points.csv ({len(points.q)} points, {groups} instrument "
-          f"set-up{'s' if groups > 1 else ''}), campaign.json ({stated}, provenance)")
+          f"set-up{'s' if groups > 1 else ''}{poses}), campaign.json ({stated}, provenance)")
     print(f"next: aacmm-pin identify {args.out} --arm URDF")
     return 0
 

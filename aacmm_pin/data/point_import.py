@@ -30,6 +30,7 @@ from aacmm_pin.data.columns import MAX_ANGLE_DEG
 from aacmm_pin.data.csv_table import radian_like_column, read_table
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
 from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
 from aacmm_pin.data.problem_log import ProblemLog, close_match
 from aacmm_pin.errors import CampaignFormatError, Problem
 from aacmm_pin.units import MAX_COORDINATE, MM, RADIAN_MIN_ROWS, UM
@@ -367,9 +368,10 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
     noise = sigma if sigma is not None else formats[0].noise
     group = np.concatenate([np.full(len(f.log.q), 1 if one_frame else k, dtype=np.int64)
                             for k, f in enumerate(files, start=1)])
-    points = PointLog(group, np.concatenate([f.log.q for f in files]),
-                      np.concatenate([f.log.point for f in files]),
-                      lines=np.arange(2, 2 + len(group), dtype=np.int64))
+    q = np.concatenate([f.log.q for f in files])
+    points = PointLog(group, q, np.concatenate([f.log.point for f in files]),
+                      lines=np.arange(2, 2 + len(group), dtype=np.int64),
+                      columns=_pose_column(files))
     stated = None if noise is None else StatedNoise(point=noise)
     campaign = Campaign(None, {}, None, {}, points=points, noise=stated)
     provenance = _provenance(files, formats, "none stated: the package's default applies"
@@ -381,6 +383,21 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
         content["provenance"] = provenance
         (tmp / NOISE_FILE).write_text(json.dumps(content, indent=2) + "\n", encoding="utf-8")
     return ImportResult(campaign, tuple(files), formats[0], provenance)
+
+
+def _pose_column(files: list[PointFile]) -> dict[str, np.ndarray]:
+    """Return the ``pose`` column (1, 2, ... over all files) where a pose has several points.
+
+    Several points of one pose: identical readouts in consecutive rows (several markers). Without
+    any, nothing (``{}``).
+    """
+    ids, first = [], 1
+    for f in files:
+        own = pose_ids(f.log.q)
+        ids.append(own + first)
+        first += int(own.max()) + 1 if own.size else 0
+    pose = np.concatenate(ids)
+    return {POSE_COLUMN: pose.astype(float)} if len(np.unique(pose)) < len(pose) else {}
 
 
 def _provenance(files: list[PointFile], formats: list[PointFormat], noise: str) -> dict[str, Any]:
