@@ -95,6 +95,7 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.model.samples import Samples
     from aacmm_pin.outputs.calibration_folder import read_calibration
+    from aacmm_pin.outputs.instrument_frames import frame_of, to_instrument_frame
 
     folder = read_calibration(args.params)
     params = folder.parameters
@@ -105,11 +106,16 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
         args.readouts, arm)
     samples = Samples(arm, q, columns=columns, files=(Path(args.readouts).name,))
     points = predict(arm, params, q, samples, tool=tool)
+    where = "stylus centres (x_mm, y_mm, z_mm, r-CS)"
+    if args.frame is not None:  # the instrument's frame: r-CS -> MT-CS -> the group's frame
+        rot, trans = frame_of(folder.report, args.frame, str(args.params))
+        points = to_instrument_frame(points @ params.rotation().T + params.translation, rot, trans)
+        where = f"points (x_mm, y_mm, z_mm) in the frame of instrument group {args.frame}"
     keep = read_id_columns(args.readouts, arm)
     with output_file(args.out, args.force, inputs) as tmp:
         write_points(tmp, points, keep)  # id cells made safe for spreadsheets
     kept = f" after the input's {', '.join(keep)} columns" if keep else ""
-    print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS){kept} to {args.out}")
+    print(f"wrote {len(points)} {where}{kept} to {args.out}")
     return 0
 
 
@@ -451,6 +457,10 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p.add_argument("--tool", default=None,
                    help="the tool whose point to predict, for an arm with several (see axes); "
                         "default: the readouts' tool column")
+    p.add_argument("--frame", type=int, default=None, metavar="GROUP",
+                   help="write the points in the frame of this instrument group (the group "
+                        "column of points.csv), with the frame the calibration fitted, to compare "
+                        "with that instrument's data directly; default: the arm's r-CS")
     p.set_defaults(handler=_predict)
 
 
@@ -514,11 +524,24 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
 
 def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
-    p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
+    p = add_command(subparsers, "validate", "length-bar errors (paper Fig. 9) or point errors of "
+                                            "a calibration on a test campaign",
                     parents=[json_option("the errors"), effects_file_option(),
-                             force_option(FORCE_FILE)])
+                             force_option(FORCE_FILE)],
+                    description="Test a calibration on a campaign. With lengthbar.csv and bar.csv: "
+                                "the error of every calibrated socket distance per bar placement "
+                                "(paper Fig. 9) and the readouts' scatter about their sockets. "
+                                "With points.csv: the error of every point (mean, RMS, max). "
+                                "Without SPAT the lowest instrument group is predicted in the "
+                                "calibration's own frame (base_to_mt of parameters.json), so the "
+                                "error is absolute; every other group has a frame of its own, "
+                                "which is fitted to the predicted points first (six unknowns, "
+                                "the groups are named in the output): its error is that of the "
+                                "shape only. predict --frame GROUP writes predicted points in a "
+                                "group's frame as the calibration fitted it.")
     p.add_argument("caldir", type=input_path, help="calibration folder or parameters.json")
-    p.add_argument("campaign", type=input_path, help="campaign folder with lengthbar.csv and bar.csv")
+    p.add_argument("campaign", type=input_path,
+                   help="campaign folder with lengthbar.csv and bar.csv, and/or points.csv")
     p.set_defaults(handler=_validate)
 
     p = add_command(subparsers, "uncertainty", "Monte Carlo uncertainty of every identified value",

@@ -28,6 +28,7 @@ from aacmm_pin.outputs.calibration_folder import (
     CalibrationFolder,
     read_calibration,
 )
+from aacmm_pin.outputs.instrument_frames import FRAMES_KEY, instrument_frames
 from aacmm_pin.outputs.urdf_resources import rebase_resources
 from aacmm_pin.units import ARCSEC
 
@@ -88,4 +89,6 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
     write_maps_csv(cal, folder / MAPS_FILE)
     report = cal.report()
     report["arm"] = arm.name
+    if frames := instrument_frames(cal):  # predict --frame GROUP
+        report[FRAMES_KEY] = frames
     (folder / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n")
