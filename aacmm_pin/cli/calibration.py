@@ -125,7 +125,9 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _identify_into(args: argparse.Namespace) -> int:
+    from aacmm_pin.analyses.model_choice import AUTO, choose_model, heldout_check, points_only
     from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.effects.registry import term_from_key
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
@@ -137,15 +139,36 @@ def _identify_into(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)
-    phase(f"identifying the {args.model} model")
-    cal = identify(campaign, arm, model=args.model, extensions=terms,
-                   use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
+    print("stated noise per coordinate: " + (f"{args.sigma_um:g} um (--sigma-um)" if args.sigma_um
+                                             is not None else noise_summary(campaign, None,
+                                                                            args.use_bar)))
+    options = dict(extensions=terms, use_rtest=not args.no_rtest, loss=args.loss,
+                   step_deg=args.step_deg,
                    sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
                    max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
                    nests=args.nests, robust=args.robust)
+    choice = None
+    if args.model == AUTO and points_only(campaign):  # points: DH unless the maps pay
+        phase("identifying the dh and proposed models, compared on held-out poses")
+        choice = choose_model(campaign, arm, **options)
+        cal = choice.calibration
+    else:
+        model = "proposed" if args.model == AUTO else args.model  # SPATs: the paper's model
+        phase(f"identifying the {model} model")
+        cal = identify(campaign, arm, model=model, **options)
+        if model == "proposed" and points_only(campaign) and (cal.success or cal.judged):
+            phase("checking the proposed model against dh on held-out poses")
+            choice = heldout_check(cal, campaign, arm, **options)
     phase(f"writing {args.out}")
-    write_calibration(cal, arm, args.out, force=args.force)
+    write_calibration(cal, arm, args.out, force=args.force,
+                      report=None if choice is None else {"model_choice": choice.to_dict()})
     _print_calibration(cal, args.out)
+    if choice is not None and args.model == AUTO:
+        print(f"  model {choice.chosen} chosen: {choice.text()} (--model auto: dh unless the "
+              "encoder maps predict left-out poses better)")
+    elif choice is not None and choice.loses:
+        print(f"  WARNING: the {cal.model} model loses on poses it was not fitted to: "
+              f"{choice.text()}; its encoder maps fit the noise: use --model {choice.chosen}")
     return 0 if cal.success else 1
 
 
@@ -190,6 +213,7 @@ def _discover(args: argparse.Namespace) -> int:
 def _discover_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.discovery import discover
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
+    from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
@@ -204,6 +228,7 @@ def _discover_into(args: argparse.Namespace) -> int:
         noise = dataclasses.replace(campaign.noise or StatedNoise(), **given)
     except ValueError as exc:
         raise SystemExit(f"discover: --sigma-*-um: {exc}") from exc
+    print("stated noise per coordinate: " + noise_summary(campaign, noise if given else None))
     result = discover(campaign, arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
                       max_nfev=args.max_nfev, progress=True, noise=noise,
@@ -467,13 +492,21 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
 
 def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add identify and discover (``arm``: the shared ``--arm`` parent)."""
-    p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
-                    parents=[model_option(),
+    p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs, "
+                                            "absolute points (points.csv) or both",
+                    parents=[model_option(("auto", "dh", "proposed"),
+                                          "dh: DH errors only; proposed: DH errors and encoder "
+                                          "maps; auto: proposed on SPATs, and on points alone "
+                                          "the one that predicts left-out poses better (dh "
+                                          "unless the maps pay; both held-out RMS printed)",
+                                          "auto"),
                              no_rtest_option("conventional SPAT: each location's mean "
-                                             "displacement for every sample"),
+                                             "displacement for every sample (SPAT only)"),
                              arm, out_option(Path("calibration"), "calibration folder"),
                              max_nfev_option(), force_option(), effects_file_option()])
-    p.add_argument("campaign", type=input_path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("campaign", type=input_path,
+                   help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
+                        "lengthbar.csv and bar.csv)")
     p.add_argument("--loss", default="linear",
                    help="scipy loss of every solve: linear, soft_l1, huber, cauchy, arctan (for "
                         "outliers use --robust)")
@@ -481,7 +514,10 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                    help="reject outlier samples (Huber then hard rejection beyond 5 robust sigma "
                         "of the whitened residual norm; listed in report.json 'outliers')")
     p.add_argument("--sigma-um", type=noise_um, default=None,
-                   help="R-Test noise per coordinate in um (default: from the residuals)")
+                   help="stated noise per coordinate, um, of the R-Test readings or, on points "
+                        "alone, of points without a sigma_um column: the residual is judged "
+                        "against it (default: campaign.json's noise_um, else its instrument's, "
+                        "else 2 um R-Test, 20 um points; printed)")
     p.add_argument("--step-deg", type=positive(), default=5.0, help="map node step, deg")
     p.add_argument("--terms", default=None, metavar="KEYS",
                    help="comma-separated effect terms to estimate beside the model, as "
@@ -504,7 +540,9 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
                                                                 "figures, final CALDIR"),
                              max_nfev_option(), force_option(), effects_file_option()])
-    p.add_argument("campaign", type=input_path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("campaign", type=input_path,
+                   help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
+                        "lengthbar.csv and bar.csv)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
@@ -518,7 +556,8 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                                 ("point", "tool point of an instrument", "20")):
         p.add_argument(f"--sigma-{kind}-um", type=noise_um, default=None,
                        help=f"stated noise of a {what} per coordinate, um, which the final "
-                            f"residual is judged against (default: campaign.json, else {default})")
+                            f"residual is judged against (default: campaign.json's noise_um, "
+                            f"else its instrument's, else {default})")
     p.set_defaults(handler=_discover)
 
 
