@@ -98,3 +98,25 @@ def test_help_speaks_of_points(capsys):
 
 def test_spat_reports_keep_use_rtest(small_cal):
     assert small_cal.report()["use_rtest"] is True
+
+
+def test_import_points_names_the_instrument(tmp_path):
+    """import-points --instrument motion-capture: campaign.json names it; its 100 um is the stated
+    point noise; --sigma-um still overrides it."""
+    from tests.helpers import run_cli
+
+    source = tmp_path / "mocap.csv"
+    rng = np.random.default_rng(0)
+    rows = [",".join(f"{v:.6f}" for v in [*rng.uniform(-90, 90, 6), *rng.uniform(-500, 500, 3)])
+            for _ in range(25)]
+    source.write_text("a1,a2,a3,a4,a5,a6,x,y,z\n" + "\n".join(rows) + "\n")
+    args = ["import-points", str(source), "--joints", "a1..a6", "--point", "x,y,z",
+            "--instrument", "motion-capture"]
+    assert run_cli([*args, "--out", str(tmp_path / "a")])[0] == 0
+    content = json.loads((tmp_path / "a" / "campaign.json").read_text())
+    assert content["instrument"] == "motion capture"
+    assert read_campaign(tmp_path / "a").noise == ap.StatedNoise.of_instrument("motion capture")
+    assert run_cli([*args, "--sigma-um", "250", "--out", str(tmp_path / "b")])[0] == 0
+    noise = read_campaign(tmp_path / "b").noise
+    assert noise is not None and noise.point == pytest.approx(250e-6)
+    assert noise.instrument == "motion capture"
