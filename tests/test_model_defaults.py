@@ -16,7 +16,7 @@ from aacmm_pin.cli import main
 from aacmm_pin.data.campaign import read_campaign, write_campaign
 from aacmm_pin.units import ARCSEC, SIGMA_MOTION_CAPTURE
 
-FRESH = 300  # poses never fitted, for the truth's verdict
+FRESH = 150  # poses never fitted, for the truth's verdict
 
 
 def _points(effects: tuple[str, ...], n: int, encoder_arcsec: float = 20.0,
@@ -37,8 +37,8 @@ def _fresh_rms(cal: ap.Calibration, q: np.ndarray, truth: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize(("effects", "n", "encoder", "better"), [
-    (("dh",), 150, 20.0, "dh"),  # no encoder errors, few poses: the maps fit the noise
-    (("dh", "encoder"), 400, 300.0, "proposed"),  # 300 arcsec encoder errors: the maps pay
+    (("dh",), 100, 20.0, "dh"),  # no encoder errors, few poses: the maps fit the noise
+    (("dh", "encoder"), 200, 300.0, "proposed"),  # 300 arcsec encoder errors: the maps pay
 ])
 def test_auto_chooses_the_model_that_predicts_fresh_poses_better(effects, n, encoder, better):
     """choose_model's held-out choice is the model the truth prefers on poses never fitted."""
@@ -54,7 +54,7 @@ def test_auto_chooses_the_model_that_predicts_fresh_poses_better(effects, n, enc
 def test_identify_default_on_points_is_chosen_and_a_losing_model_is_warned(tmp_path, capsys):
     """identify (no --model) on points alone writes the held-out choice (DH here) with both
     numbers; --model proposed, which loses on held-out poses, says so with the numbers."""
-    campaign, _, _ = _points(("dh",), 150)
+    campaign, _, _ = _points(("dh",), 100)
     write_campaign(campaign, tmp_path / "c")
     assert main(["identify", str(tmp_path / "c"), "--arm", "ur5", "--out", str(tmp_path / "a")]) == 0
     out = capsys.readouterr().out
@@ -74,7 +74,7 @@ def test_identify_default_on_points_is_chosen_and_a_losing_model_is_warned(tmp_p
 def test_the_instruments_noise_is_the_stated_one_and_printed(tmp_path, capsys):
     """campaign.json {"instrument": "motion capture"}: points stated at 100 um, printed; a DH fit
     of motion-capture points (100 um noise) then matches its noise instead of being '5 x' it."""
-    campaign, _, _ = _points(("dh",), 300, sigma=SIGMA_MOTION_CAPTURE)
+    campaign, _, _ = _points(("dh",), 150, sigma=SIGMA_MOTION_CAPTURE)
     write_campaign(campaign, tmp_path / "c")
     (tmp_path / "c" / "campaign.json").write_text('{"instrument": "motion capture"}')
     assert read_campaign(tmp_path / "c").noise == ap.StatedNoise.of_instrument("motion capture")
