@@ -423,10 +423,10 @@ def noise_summary(campaign: Campaign, noise: StatedNoise | None = None, use_bar:
         kinds.append("point")
     if use_bar and campaign.lengthbar is not None:
         kinds.append("socket")
-    parts = [stated.describe(kinds)] if kinds else []
-    if campaign.points is not None and campaign.points.sigma is not None:
-        parts.append("points their sigma_um column")
     source = ("defaults" if noise is None and campaign.noise is None else
               "as given" if noise is not None and noise != campaign.noise else
               f"{NOISE_FILE}, {stated.instrument}" if stated.instrument else NOISE_FILE)
-    return f"{', '.join(parts)} ({source})"
+    parts = [f"{stated.describe(kinds)} ({source})"] if kinds else []
+    if campaign.points is not None and campaign.points.sigma is not None:
+        parts.append("points: their sigma_um column")
+    return ", ".join(parts)
