@@ -21,6 +21,7 @@ from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import measurements
 from aacmm_pin.model.arm import Arm
+from aacmm_pin.progress import phase
 
 AUTO = "auto"
 """``identify --model auto``: the proposed model on SPATs; on points alone the one
@@ -47,6 +48,20 @@ class ModelChoice:
         """Return one line with both held-out RMS and the verdict (um)."""
         cells = ", ".join(f"{m} {v * 1e6:.2f} um" for m, v in self.heldout_rms.items())
         return f"held-out RMS ({FOLDS} folds of poses): {cells}"
+
+    def advice(self, auto: bool) -> str | None:
+        """Return the line ``identify`` prints, or None where there is nothing to say.
+
+        The choice made (``auto``), or a warning where the model given loses on held-out poses.
+        """
+        if auto:
+            return (f"model {self.chosen} chosen: {self.text()} (--model auto: dh unless the "
+                    "encoder maps predict left-out poses better)")
+        if self.loses:
+            return (f"WARNING: the {self.calibration.model} model loses on poses it was not "
+                    f"fitted to: {self.text()}; its encoder maps fit the noise: use --model "
+                    f"{self.chosen}")
+        return None
 
     def to_dict(self) -> dict[str, Any]:
         """Return the ``report.json`` form (``model_choice``)."""
@@ -101,3 +116,29 @@ def choose_model(campaign: Campaign, arm: Arm, **options: Any) -> ModelChoice:
     fits = {m: identify(campaign, arm, **{**options, "model": m}) for m in ("dh", "proposed")}
     held, chosen = _compare(fits, campaign, arm)
     return ModelChoice(fits[chosen], held, chosen)
+
+
+def identify_model(campaign: Campaign, arm: Arm, model: str = AUTO, **options: Any
+                   ) -> tuple[Calibration, ModelChoice | None]:
+    """Identify as ``identify --model`` does; return the calibration and the comparison, if any.
+
+    ``auto``: on points alone :func:`choose_model`, else the proposed model; ``proposed`` on
+    points alone: compared with DH (:func:`heldout_check`); ``dh``: no comparison.
+
+    Args:
+        campaign: the campaign.
+        arm: the arm.
+        model: ``auto``, ``dh`` or ``proposed``.
+        options: keywords of :func:`~aacmm_pin.fit.identification.identify` but ``model``.
+    """
+    if model == AUTO and points_only(campaign):  # points: DH unless the maps pay
+        phase("identifying the dh and proposed models, compared on held-out poses")
+        choice = choose_model(campaign, arm, **options)
+        return choice.calibration, choice
+    model = "proposed" if model == AUTO else model  # SPATs: the paper's model
+    phase(f"identifying the {model} model")
+    cal = identify(campaign, arm, model=model, **options)
+    if model == "proposed" and points_only(campaign) and (cal.success or cal.judged):
+        phase("checking the proposed model against dh on held-out poses")
+        return cal, heldout_check(cal, campaign, arm, **options)
+    return cal, None

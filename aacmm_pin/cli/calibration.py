@@ -125,11 +125,10 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _identify_into(args: argparse.Namespace) -> int:
-    from aacmm_pin.analyses.model_choice import AUTO, choose_model, heldout_check, points_only
+    from aacmm_pin.analyses.model_choice import AUTO, identify_model
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.effects.registry import term_from_key
-    from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
@@ -142,33 +141,18 @@ def _identify_into(args: argparse.Namespace) -> int:
     print("stated noise per coordinate: " + (f"{args.sigma_um:g} um (--sigma-um)" if args.sigma_um
                                              is not None else noise_summary(campaign, None,
                                                                             args.use_bar)))
-    options = dict(extensions=terms, use_rtest=not args.no_rtest, loss=args.loss,
-                   step_deg=args.step_deg,
-                   sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
-                   nests=args.nests, robust=args.robust)
-    choice = None
-    if args.model == AUTO and points_only(campaign):  # points: DH unless the maps pay
-        phase("identifying the dh and proposed models, compared on held-out poses")
-        choice = choose_model(campaign, arm, **options)
-        cal = choice.calibration
-    else:
-        model = "proposed" if args.model == AUTO else args.model  # SPATs: the paper's model
-        phase(f"identifying the {model} model")
-        cal = identify(campaign, arm, model=model, **options)
-        if model == "proposed" and points_only(campaign) and (cal.success or cal.judged):
-            phase("checking the proposed model against dh on held-out poses")
-            choice = heldout_check(cal, campaign, arm, **options)
+    cal, choice = identify_model(campaign, arm, args.model, extensions=terms,
+                                 use_rtest=not args.no_rtest, loss=args.loss,
+                                 step_deg=args.step_deg,
+                                 sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
+                                 max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
+                                 nests=args.nests, robust=args.robust)
     phase(f"writing {args.out}")
     write_calibration(cal, arm, args.out, force=args.force,
                       report=None if choice is None else {"model_choice": choice.to_dict()})
     _print_calibration(cal, args.out)
-    if choice is not None and args.model == AUTO:
-        print(f"  model {choice.chosen} chosen: {choice.text()} (--model auto: dh unless the "
-              "encoder maps predict left-out poses better)")
-    elif choice is not None and choice.loses:
-        print(f"  WARNING: the {cal.model} model loses on poses it was not fitted to: "
-              f"{choice.text()}; its encoder maps fit the noise: use --model {choice.chosen}")
+    if choice is not None and (advice := choice.advice(args.model == AUTO)):
+        print(f"  {advice}")
     return 0 if cal.success else 1
 
 
