@@ -212,11 +212,11 @@ def _discover_into(args: argparse.Namespace) -> int:
         noise = dataclasses.replace(campaign.noise or StatedNoise(), **given)
     except ValueError as exc:
         raise SystemExit(f"discover: --sigma-*-um: {exc}") from exc
-    print("stated noise per coordinate: " + noise_summary(campaign, noise if given else None))
     result = discover(campaign, arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
                       max_nfev=args.max_nfev, progress=True, noise=noise,
-                      on_start=functools.partial(_print_discovery_start, args.start),
+                      on_start=functools.partial(_print_discovery_start, args.start,
+                                                 noise_summary(campaign, noise if given else None)),
                       on_step=_print_discovery_step)  # results as they are found, figures after
     if not result.steps:
         print("nothing is missing")
@@ -230,11 +230,16 @@ def _discover_into(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_discovery_start(start: str, heldout_rms: float, fit_rms: float, bar_rms: float | None,
-                           size_factors: dict[str, float]) -> None:
-    """Print the start model's line as soon as it is fitted (RMS in m; the bar's is not shown)."""
+def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: float,
+                           bar_rms: float | None, size_factors: dict[str, float]) -> None:
+    """Print the start model's line as soon as it is fitted, and the stated noise.
+
+    RMS in m (the bar's is not shown); ``noise``: the stated noise the final residual is judged
+    against (:func:`aacmm_pin.data.logs.noise_summary`).
+    """
     print(f"start {start}: held-out RMS {heldout_rms * 1e6:.2f} um, fit RMS "
           f"{fit_rms * 1e6:.2f} um")
+    print(f"  stated noise per coordinate: {noise}")
     if size_factors:
         print("  the fit rejects the arm's sizes of " + ", ".join(
             f"{g} (x{f:.3g})" for g, f in size_factors.items()) + ": held-out priors widened")
