@@ -23,6 +23,17 @@ SIGMA_LOCATION = 3e-6
 SIGMA_POINT = 20e-6
 """Default standard uncertainty of an absolute tool point per coordinate, m: a laser tracker's
 stated accuracy over a robot's workspace (e.g. 15 um + 6 um/m); a ``sigma_um`` column overrides it."""
+SIGMA_MOTION_CAPTURE = 100e-6
+"""Default standard uncertainty of a motion-capture marker per coordinate, m: optical systems
+state about 0.1 mm over a room-sized volume (ten times a laser tracker's 10-20 um)."""
+INSTRUMENT_NOISE: dict[str, dict[str, float]] = {
+    "laser tracker": {"point": SIGMA_POINT},
+    "motion capture": {"point": SIGMA_MOTION_CAPTURE},
+    "r-test": {"rtest": SIGMA_RTEST, "location": SIGMA_LOCATION},
+}
+"""Stated noise per kind of measurement (m) that a campaign's instrument implies, by the name
+``campaign.json`` gives it (``"instrument": "motion capture"``); the kinds it does not set keep
+their defaults, and ``noise_um`` overrides any."""
 NOISE_MIN = 1e-9
 """Smallest stated noise (standard uncertainty per coordinate) accepted, m: nothing measures a
 position better than about 1 nm (a laser interferometer's resolution); below it the weights of a

@@ -38,6 +38,7 @@ import aacmm_pin as ap
 from aacmm_pin.analyses.validation import validate_points
 from aacmm_pin.cli import main
 from aacmm_pin.data.point_import import import_points
+from aacmm_pin.data.poses import POSE_COLUMN, pose_folds, pose_ids
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"
@@ -130,16 +131,14 @@ def kfold_error(campaign: ap.Campaign, arm: ap.Arm, maps: tuple[int, ...] = (),
     """Mean position error (mm) of a model on grid poses it was not fitted to.
 
     The model (``maps``: encoder-map axes, none for DH; ``terms``: extension terms) is fitted
-    ``FOLDS`` times, each on all poses but one fold, and predicts the fold it left out.
+    ``FOLDS`` times, each on all poses but one fold, and predicts the fold it left out; the points
+    of one pose (a ``pose`` column, else identical readouts in consecutive rows) stay in one fold.
     """
     points = campaign.points
     assert points is not None
-    order = np.random.default_rng(0).permutation(len(points.q))
     errors = []
-    for test in np.array_split(order, FOLDS):
-        train = np.setdiff1d(order, test)
-        part = dataclasses.replace(points, group=points.group[train], q=points.q[train],
-                                   point=points.point[train], lines=None)
+    for test in pose_folds(pose_ids(points.q, points.columns.get(POSE_COLUMN)), FOLDS):
+        part = points.take(np.setdiff1d(np.arange(len(points.q)), test))  # every pose whole
         cal = ap.identify(dataclasses.replace(campaign, points=part), arm,
                           model="proposed" if maps else "dh", map_axes=maps or None,
                           extensions=terms)

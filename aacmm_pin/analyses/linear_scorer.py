@@ -18,6 +18,7 @@ from scipy import stats
 
 from aacmm_pin.analyses.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.analyses.discovery_results import Score
+from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians
 from aacmm_pin.errors import AacmmError
@@ -28,7 +29,7 @@ from aacmm_pin.model.kinematics import StylusJacobians
 from aacmm_pin.model.samples import Samples
 
 FOLDS = 5
-"""Folds of the held-out score for absolute points (k-fold over the samples)."""
+"""Folds of the held-out score for absolute points (k-fold over the poses)."""
 SIZE_ALPHA = 1e-3
 """A group of the arm's plausible sizes is rejected by its fit when the fitted values' sum of
 squares (in sizes) exceeds the chi-square quantile 1 - SIZE_ALPHA of a right size."""
@@ -63,15 +64,22 @@ def size_factors(cal: Calibration) -> dict[str, float]:
     return out
 
 
-def held_out_groups(cal: Calibration) -> tuple[list[np.ndarray], list[bool]]:
+def held_out_groups(cal: Calibration, pose: np.ndarray | None = None
+                    ) -> tuple[list[np.ndarray], list[bool]]:
     """Return the held-out groups of a calibration's samples and whether each is centred.
 
     A group is the data residual rows (3 per sample) left out together. Samples with a nest
     (R-Test locations, bar sockets) are left out per nest id and centred (the left-out nest's
-    offset is unknown); absolute tool points are split into :data:`FOLDS` folds (seeded),
-    stratified by instrument group so that every fold keeps most points of every group and a
-    group's frame stays fixed by the rest (left out whole, its six unknowns would be free). Without
-    nests every sample is a point of the folds.
+    offset is unknown); absolute tool points are split into :data:`FOLDS` folds (seeded) of whole
+    poses (the points of one pose, several markers or tools, are left out together), stratified by
+    instrument group so that every fold keeps most points of every group and a group's frame stays
+    fixed by the rest (left out whole, its six unknowns would be free). Without nests every sample
+    is a point of the folds.
+
+    Args:
+        cal: the calibration.
+        pose: pose of every sample, shape (N,) (:func:`aacmm_pin.data.poses.pose_ids`); None:
+            identical readouts in consecutive rows are one pose.
     """
     problem = cal.problem
     n = len(cal.location)
@@ -83,12 +91,17 @@ def held_out_groups(cal: Calibration) -> tuple[list[np.ndarray], list[bool]]:
     groups = [np.flatnonzero(cal.location == m) for m in np.unique(cal.location[~point])]
     centred = [True] * len(groups)
     if point.any():
+        unit = pose_ids(cal.q) if pose is None else np.asarray(pose, dtype=np.int64)
+        unit = np.where(point, unit, -1)  # a pose is a unit of its points only
         fold = np.full(n, -1, dtype=np.int64)
+        unit_fold: dict[int, int] = {}
         seen: dict[int, int] = {}
-        for i in np.random.default_rng(0).permutation(n):  # as before for one group of points
+        for i in np.random.default_rng(0).permutation(n):  # as before for one point per pose
             if point[i]:
-                k = seen.get(int(cal.location[i]), 0)
-                fold[i], seen[int(cal.location[i])] = k % FOLDS, k + 1
+                if (u := int(unit[i])) not in unit_fold:  # a pose's fold: its first point's group
+                    k = seen.get(int(cal.location[i]), 0)
+                    unit_fold[u], seen[int(cal.location[i])] = k % FOLDS, k + 1
+                fold[i] = unit_fold[u]
         groups += [np.flatnonzero(fold == f) for f in range(FOLDS) if np.any(fold == f)]
         centred += [False] * (len(groups) - len(centred))
     return [(3 * g[:, None] + np.arange(3)).ravel() for g in groups], centred
@@ -138,8 +151,9 @@ class LinearScorer:
             self.ridge = self.sigma ** 2 * (arm_rows.T @ arm_rows)
         self.offset = self.ridge @ (z - problem.z(problem.x_ref))  # prior pull back to the start
         # held-out groups: the R-Test locations and bar sockets (each left out less its mean: its
-        # nest offset is unknown); absolute points: FOLDS folds of the samples, seeded
-        self.groups, self.centred = held_out_groups(cal)
+        # nest offset is unknown); absolute points: FOLDS folds of whole poses, seeded
+        pose = samples.columns.get(POSE_COLUMN) if samples.n == len(cal.location) else None
+        self.groups, self.centred = held_out_groups(cal, pose_ids(cal.q, pose))
         """Rows (data residual indices) of each held-out group; whether each is centred."""
         self.n_held = self.n_data - 3 * int(np.sum(self.centred))
         self.prior_rows = np.arange(self.n_data, len(self.r))

@@ -34,6 +34,7 @@ import numpy as np
 from scipy import stats
 
 from aacmm_pin.data.columns import column
+from aacmm_pin.data.poses import POSE_COLUMN
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Effect, Variable
 from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.fit.identification_result import Calibration
@@ -192,7 +193,8 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None,
     chosen = effects if effects is not None else [library()[n] for n in default_effects()]
     for effect in chosen:
         out += effect.variables(samples.arm, samples)
-    read = {c for effect in library().values() for c in effect.reads} | {"t_s", "sigma_um"}
+    read = {c for effect in library().values() for c in effect.reads} | {"t_s", "sigma_um",
+                                                                          POSE_COLUMN}  # a label
     for name, values in samples.columns.items():  # every other per-sample column, by name
         if name not in read and (col := column(name)).varies(values):
             out.append(Variable(f"the column {name}", "all", f"{name} ({col.unit or 'as written'})",

@@ -179,11 +179,11 @@ def json_option(what: str) -> argparse.ArgumentParser:
 
 
 def model_option(choices: Sequence[str] = ("dh", "proposed"),
-                 text: str = "dh: DH errors only; proposed: DH errors and encoder maps"
-                 ) -> argparse.ArgumentParser:
+                 text: str = "dh: DH errors only; proposed: DH errors and encoder maps",
+                 default: str = "proposed") -> argparse.ArgumentParser:
     """``--model``: the identification model."""
     p = _parent()
-    p.add_argument("--model", choices=tuple(choices), default="proposed", help=text)
+    p.add_argument("--model", choices=tuple(choices), default=default, help=text)
     return p
 
 

@@ -95,6 +95,7 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.model.samples import Samples
     from aacmm_pin.outputs.calibration_folder import read_calibration
+    from aacmm_pin.outputs.instrument_frames import frame_of, to_instrument_frame
 
     folder = read_calibration(args.params)
     params = folder.parameters
@@ -105,11 +106,16 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
         args.readouts, arm)
     samples = Samples(arm, q, columns=columns, files=(Path(args.readouts).name,))
     points = predict(arm, params, q, samples, tool=tool)
+    where = "stylus centres (x_mm, y_mm, z_mm, r-CS)"
+    if args.frame is not None:  # the instrument's frame: r-CS -> MT-CS -> the group's frame
+        rot, trans = frame_of(folder.report, args.frame, str(args.params))
+        points = to_instrument_frame(points @ params.rotation().T + params.translation, rot, trans)
+        where = f"points (x_mm, y_mm, z_mm) in the frame of instrument group {args.frame}"
     keep = read_id_columns(args.readouts, arm)
     with output_file(args.out, args.force, inputs) as tmp:
         write_points(tmp, points, keep)  # id cells made safe for spreadsheets
     kept = f" after the input's {', '.join(keep)} columns" if keep else ""
-    print(f"wrote {len(points)} stylus centres (x_mm, y_mm, z_mm, r-CS){kept} to {args.out}")
+    print(f"wrote {len(points)} {where}{kept} to {args.out}")
     return 0
 
 
@@ -119,9 +125,10 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _identify_into(args: argparse.Namespace) -> int:
+    from aacmm_pin.analyses.model_choice import AUTO, identify_model
     from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.effects.registry import term_from_key
-    from aacmm_pin.fit.identification import identify
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
@@ -131,15 +138,21 @@ def _identify_into(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)
-    phase(f"identifying the {args.model} model")
-    cal = identify(campaign, arm, model=args.model, extensions=terms,
-                   use_rtest=not args.no_rtest, loss=args.loss, step_deg=args.step_deg,
-                   sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
-                   max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
-                   nests=args.nests, robust=args.robust)
+    print("stated noise per coordinate: " + (f"{args.sigma_um:g} um (--sigma-um)" if args.sigma_um
+                                             is not None else noise_summary(campaign, None,
+                                                                            args.use_bar)))
+    cal, choice = identify_model(campaign, arm, args.model, extensions=terms,
+                                 use_rtest=not args.no_rtest, loss=args.loss,
+                                 step_deg=args.step_deg,
+                                 sigma=None if args.sigma_um is None else args.sigma_um * 1e-6,
+                                 max_nfev=args.max_nfev, progress=True, use_bar=args.use_bar,
+                                 nests=args.nests, robust=args.robust)
     phase(f"writing {args.out}")
-    write_calibration(cal, arm, args.out, force=args.force)
+    write_calibration(cal, arm, args.out, force=args.force,
+                      report=None if choice is None else {"model_choice": choice.to_dict()})
     _print_calibration(cal, args.out)
+    if choice is not None and (advice := choice.advice(args.model == AUTO)):
+        print(f"  {advice}")
     return 0 if cal.success else 1
 
 
@@ -184,6 +197,7 @@ def _discover(args: argparse.Namespace) -> int:
 def _discover_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.discovery import discover
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
+    from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
@@ -201,7 +215,8 @@ def _discover_into(args: argparse.Namespace) -> int:
     result = discover(campaign, arm, args.start, effects=effects,
                       use_rtest=not args.no_rtest, max_steps=args.max_steps,
                       max_nfev=args.max_nfev, progress=True, noise=noise,
-                      on_start=functools.partial(_print_discovery_start, args.start),
+                      on_start=functools.partial(_print_discovery_start, args.start,
+                                                 noise_summary(campaign, noise if given else None)),
                       on_step=_print_discovery_step)  # results as they are found, figures after
     if not result.steps:
         print("nothing is missing")
@@ -215,11 +230,16 @@ def _discover_into(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_discovery_start(start: str, heldout_rms: float, fit_rms: float, bar_rms: float | None,
-                           size_factors: dict[str, float]) -> None:
-    """Print the start model's line as soon as it is fitted (RMS in m; the bar's is not shown)."""
+def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: float,
+                           bar_rms: float | None, size_factors: dict[str, float]) -> None:
+    """Print the start model's line as soon as it is fitted, and the stated noise.
+
+    RMS in m (the bar's is not shown); ``noise``: the stated noise the final residual is judged
+    against (:func:`aacmm_pin.data.logs.noise_summary`).
+    """
     print(f"start {start}: held-out RMS {heldout_rms * 1e6:.2f} um, fit RMS "
           f"{fit_rms * 1e6:.2f} um")
+    print(f"  stated noise per coordinate: {noise}")
     if size_factors:
         print("  the fit rejects the arm's sizes of " + ", ".join(
             f"{g} (x{f:.3g})" for g, f in size_factors.items()) + ": held-out priors widened")
@@ -451,19 +471,31 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p.add_argument("--tool", default=None,
                    help="the tool whose point to predict, for an arm with several (see axes); "
                         "default: the readouts' tool column")
+    p.add_argument("--frame", type=int, default=None, metavar="GROUP",
+                   help="write the points in the frame of this instrument group (the group "
+                        "column of points.csv), with the frame the calibration fitted, to compare "
+                        "with that instrument's data directly; default: the arm's r-CS")
     p.set_defaults(handler=_predict)
 
 
 
 def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add identify and discover (``arm``: the shared ``--arm`` parent)."""
-    p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs",
-                    parents=[model_option(),
+    p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs, "
+                                            "absolute points (points.csv) or both",
+                    parents=[model_option(("auto", "dh", "proposed"),
+                                          "dh: DH errors only; proposed: DH errors and encoder "
+                                          "maps; auto: proposed on SPATs, and on points alone "
+                                          "the one that predicts left-out poses better (dh "
+                                          "unless the maps pay; both held-out RMS printed)",
+                                          "auto"),
                              no_rtest_option("conventional SPAT: each location's mean "
-                                             "displacement for every sample"),
+                                             "displacement for every sample (SPAT only)"),
                              arm, out_option(Path("calibration"), "calibration folder"),
                              max_nfev_option(), force_option(), effects_file_option()])
-    p.add_argument("campaign", type=input_path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("campaign", type=input_path,
+                   help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
+                        "lengthbar.csv and bar.csv)")
     p.add_argument("--loss", default="linear",
                    help="scipy loss of every solve: linear, soft_l1, huber, cauchy, arctan (for "
                         "outliers use --robust)")
@@ -471,7 +503,10 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                    help="reject outlier samples (Huber then hard rejection beyond 5 robust sigma "
                         "of the whitened residual norm; listed in report.json 'outliers')")
     p.add_argument("--sigma-um", type=noise_um, default=None,
-                   help="R-Test noise per coordinate in um (default: from the residuals)")
+                   help="stated noise per coordinate, um, of the R-Test readings or, on points "
+                        "alone, of points without a sigma_um column: the residual is judged "
+                        "against it (default: campaign.json's noise_um, else its instrument's, "
+                        "else 2 um R-Test, 20 um points; printed)")
     p.add_argument("--step-deg", type=positive(), default=5.0, help="map node step, deg")
     p.add_argument("--terms", default=None, metavar="KEYS",
                    help="comma-separated effect terms to estimate beside the model, as "
@@ -494,7 +529,9 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
                                                                 "figures, final CALDIR"),
                              max_nfev_option(), force_option(), effects_file_option()])
-    p.add_argument("campaign", type=input_path, help="campaign folder (spat.csv, locations.csv, ...)")
+    p.add_argument("campaign", type=input_path,
+                   help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
+                        "lengthbar.csv and bar.csv)")
     p.add_argument("--start", choices=("dh", "proposed"), default="dh",
                    help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
     p.add_argument("--effects", default=None,
@@ -508,17 +545,31 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                                 ("point", "tool point of an instrument", "20")):
         p.add_argument(f"--sigma-{kind}-um", type=noise_um, default=None,
                        help=f"stated noise of a {what} per coordinate, um, which the final "
-                            f"residual is judged against (default: campaign.json, else {default})")
+                            f"residual is judged against (default: campaign.json's noise_um, "
+                            f"else its instrument's, else {default})")
     p.set_defaults(handler=_discover)
 
 
 def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
-    p = add_command(subparsers, "validate", "length-bar errors of a calibration (paper Fig. 9)",
+    p = add_command(subparsers, "validate", "length-bar errors (paper Fig. 9) or point errors of "
+                                            "a calibration on a test campaign",
                     parents=[json_option("the errors"), effects_file_option(),
-                             force_option(FORCE_FILE)])
+                             force_option(FORCE_FILE)],
+                    description="Test a calibration on a campaign. With lengthbar.csv and bar.csv: "
+                                "the error of every calibrated socket distance per bar placement "
+                                "(paper Fig. 9) and the readouts' scatter about their sockets. "
+                                "With points.csv: the error of every point (mean, RMS, max). "
+                                "Without SPAT the lowest instrument group is predicted in the "
+                                "calibration's own frame (base_to_mt of parameters.json), so the "
+                                "error is absolute; every other group has a frame of its own, "
+                                "which is fitted to the predicted points first (six unknowns, "
+                                "the groups are named in the output): its error is that of the "
+                                "shape only. predict --frame GROUP writes predicted points in a "
+                                "group's frame as the calibration fitted it.")
     p.add_argument("caldir", type=input_path, help="calibration folder or parameters.json")
-    p.add_argument("campaign", type=input_path, help="campaign folder with lengthbar.csv and bar.csv")
+    p.add_argument("campaign", type=input_path,
+                   help="campaign folder with lengthbar.csv and bar.csv, and/or points.csv")
     p.set_defaults(handler=_validate)
 
     p = add_command(subparsers, "uncertainty", "Monte Carlo uncertainty of every identified value",

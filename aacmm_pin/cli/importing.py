@@ -61,7 +61,8 @@ def _import_points(args: argparse.Namespace) -> int:
     with claim_output(args.out, args.force, sources):  # the folder held before any reading
         result = import_points(sources, args.out, _format(args),
                                sigma=None if args.sigma_um is None else args.sigma_um * UM,
-                               one_frame=args.one_frame, force=args.force)
+                               one_frame=args.one_frame, force=args.force,
+                               instrument=args.instrument)
     for f in result.files:
         print(f"read {len(f.log.q)} points of {f.log.q.shape[1]} axes from {f.path}")
     print(f"format {result.format.describe()}")
@@ -72,10 +73,13 @@ def _import_points(args: argparse.Namespace) -> int:
     assert points is not None
     groups = len(set(points.group.tolist()))
     noise = result.campaign.noise
-    stated = (f"stated point noise {noise.point / UM:g} um per coordinate" if noise is not None
+    stated = (f"stated point noise {noise.point / UM:g} um per coordinate"
+              + (f" ({noise.instrument})" if noise.instrument else "") if noise is not None
               else "no stated noise (the package's default applies)")
+    poses = (f", {len(set(points.columns['pose'].tolist()))} poses of several points: column "
+             "pose" if "pose" in points.columns else "")
     print(f"wrote {args.out}: points.csv ({len(points.q)} points, {groups} instrument "
-          f"set-up{'s' if groups > 1 else ''}), campaign.json ({stated}, provenance)")
+          f"set-up{'s' if groups > 1 else ''}{poses}), campaign.json ({stated}, provenance)")
     print(f"next: aacmm-pin identify {args.out} --arm URDF")
     return 0
 
@@ -114,7 +118,12 @@ def add_parsers(subparsers: Any) -> None:
                    help="unit of the joint columns (default deg)")
     p.add_argument("--sigma-um", type=noise_um, default=None, metavar="UM",
                    help="the instrument's standard uncertainty of a point per coordinate, um "
-                        "(default: the preset's; else none stated and identify uses 20 um)")
+                        "(default: the preset's, else --instrument's; else none stated and "
+                        "identify uses 20 um)")
+    p.add_argument("--instrument", choices=("laser-tracker", "motion-capture"), default=None,
+                   help="the kind of instrument, written to campaign.json: its stated point noise "
+                        "(20 um a laser tracker, 100 um motion capture) unless --sigma-um or the "
+                        "preset states one")
     p.add_argument("--one-frame", action="store_true",
                    help="the files share one instrument frame (one set-up) instead of one each")
     p.set_defaults(handler=_import_points)

@@ -524,8 +524,9 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
             first["tool"] = pts.tool.tolist()
         _write_csv(folder / "points.csv", _file_columns(pts, first, _mm(_XYZ["loc"], pts.point)))
     if campaign.noise is not None:
-        (folder / NOISE_FILE).write_text(json.dumps({"noise_um": campaign.noise.to_um()},
-                                                    indent=2) + "\n")
+        instrument = {"instrument": campaign.noise.instrument} if campaign.noise.instrument else {}
+        (folder / NOISE_FILE).write_text(json.dumps({**instrument, "noise_um":
+                                                     campaign.noise.to_um()}, indent=2) + "\n")
 
 
 def write_points(path: str | Path, points: np.ndarray,

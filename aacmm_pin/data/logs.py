@@ -21,6 +21,7 @@ from aacmm_pin.data.columns import BUILT_IN
 from aacmm_pin.data.json_file import read_json
 from aacmm_pin.errors import CampaignFormatError, FileFormatError, Problem
 from aacmm_pin.units import (
+    INSTRUMENT_NOISE,
     SIGMA_LOCATION,
     SIGMA_POINT,
     SIGMA_RTEST,
@@ -52,7 +53,23 @@ MAX_NOISE_BYTES = 2**20
 NOISE_FILE = "campaign.json"
 """Optional file beside the CSVs stating the campaign's noise: ``{"noise_um": {"rtest": 2.0,
 "location": 3.0, "point": 20.0, "socket": 2.0}}`` (any subset of the keys; the others keep the paper's
-values)."""
+values), and/or its instrument, ``{"instrument": "motion capture"}`` (one of
+:data:`aacmm_pin.units.INSTRUMENT_NOISE`: laser tracker, motion capture, R-Test), whose defaults the
+kinds ``noise_um`` does not give take."""
+NOISE_KINDS = ("rtest", "location", "point", "socket")
+"""The kinds of measurement a campaign states a noise for (``campaign.json`` ``noise_um``)."""
+KIND_NAMES = {"rtest": "R-Test", "location": "R-Test nest", "point": "points",
+              "socket": "bar sockets"}
+"""How output names each kind of :data:`NOISE_KINDS`."""
+
+
+def instrument_name(text: str) -> str | None:
+    """Return the :data:`~aacmm_pin.units.INSTRUMENT_NOISE` key ``text`` names, or None.
+
+    Case, ``-`` and ``_`` are ignored: ``Motion-Capture`` is ``motion capture``.
+    """
+    key = " ".join(text.lower().replace("_", " ").replace("-", " ").split())
+    return "r-test" if key == "r test" else key if key in INSTRUMENT_NOISE else None
 
 
 @dataclass(frozen=True)
@@ -70,9 +87,30 @@ class StatedNoise:
     """Absolute tool point of an instrument (laser tracker), m (a ``sigma_um`` column overrides)."""
     socket: float = SIGMA_SOCKET
     """Stylus centre seated in a length-bar socket (its seating repeatability), m."""
+    instrument: str = ""
+    """The instrument ``campaign.json`` names (a key of :data:`~aacmm_pin.units.INSTRUMENT_NOISE`),
+    whose defaults these are where ``noise_um`` gives none; empty: none named."""
+
+    @classmethod
+    def of_instrument(cls, instrument: str, **given: float) -> StatedNoise:
+        """Return the noise an instrument implies, the kinds in ``given`` (m) as given.
+
+        The instrument's defaults: :data:`~aacmm_pin.units.INSTRUMENT_NOISE`.
+
+        Raises:
+            ValueError: for an instrument not in the table.
+        """
+        if (key := instrument_name(instrument)) is None:
+            raise ValueError(f"instrument: choose from {', '.join(INSTRUMENT_NOISE)}, got "
+                             f"{instrument!r}")
+        return cls(**{**INSTRUMENT_NOISE[key], **given}, instrument=key)
+
+    def describe(self, kinds: Iterable[str]) -> str:
+        """Return the noise of these kinds (of :data:`NOISE_KINDS`) for output: ``points 100 um``."""
+        return ", ".join(f"{KIND_NAMES[k]} {getattr(self, k) / UM:.4g} um" for k in kinds)
 
     def __post_init__(self) -> None:
-        for name in ("rtest", "location", "point", "socket"):
+        for name in NOISE_KINDS:
             if (why := noise_problem(getattr(self, name))) is not None:
                 raise ValueError(f"{name}: {why}")
 
@@ -98,8 +136,13 @@ def read_noise(path: str | Path) -> StatedNoise:
     if not isinstance(noise, dict):
         raise CampaignFormatError([Problem(path, None, "noise_um", "an object {\"rtest\": 2.0, "
                                            "\"location\": 3.0, \"point\": 20.0} (um) expected")])
-    kinds = tuple(f.name for f in StatedNoise.__dataclass_fields__.values())
-    problems = [Problem(path, None, f"noise_um.{key}", f"unknown kind; choose from {', '.join(kinds)}")
+    instrument = content.get("instrument")
+    kinds = NOISE_KINDS
+    problems = [] if instrument is None or (isinstance(instrument, str) and instrument_name(
+        instrument) is not None) else [Problem(path, None, "instrument", f"unknown instrument "
+                                               f"{instrument!r}; choose from "
+                                               f"{', '.join(INSTRUMENT_NOISE)}")]
+    problems += [Problem(path, None, f"noise_um.{key}", f"unknown kind; choose from {', '.join(kinds)}")
                 for key in noise if key not in kinds]
     problems += [Problem(path, None, f"noise_um.{key}", f"a positive number (um) expected, got "
                          f"{value!r}") for key, value in noise.items() if key in kinds and not (
@@ -111,7 +154,10 @@ def read_noise(path: str | Path) -> StatedNoise:
                  and (why := noise_problem(float(value) * UM)) is not None]
     if problems:
         raise CampaignFormatError(problems)
-    return StatedNoise(**{key: float(value) * UM for key, value in noise.items()})
+    given: dict[str, Any] = {key: float(value) * UM for key, value in noise.items()}
+    if instrument is None:
+        return StatedNoise(**given)
+    return StatedNoise.of_instrument(instrument, **given)
 
 
 _L = TypeVar("_L", bound="_Log")
@@ -357,3 +403,30 @@ class Campaign:
         spat = replace(self.spat, q=self.spat.q if q is None else q, columns=columns,
                        displacement=self.spat.displacement if displacement is None else displacement)
         return replace(self, spat=spat)
+
+
+def noise_summary(campaign: Campaign, noise: StatedNoise | None = None, use_bar: bool = False
+                  ) -> str:
+    """Return the stated noise per coordinate of the campaign's kinds of data, and where from.
+
+    E.g. ``points 100 um (campaign.json, motion capture)`` or ``R-Test 2 um, R-Test nest 3 um
+    (defaults)``; points with a ``sigma_um`` column say so.
+
+    Args:
+        campaign: the campaign (its parts decide the kinds; its ``noise`` the values).
+        noise: the noise to state instead of the campaign's (the command line's over it), or None.
+        use_bar: the length bar is a calibration input (its sockets' noise counts).
+    """
+    stated = noise or campaign.noise or StatedNoise()
+    kinds = ["rtest", "location"] if campaign.spat is not None else []
+    if campaign.points is not None and campaign.points.sigma is None:
+        kinds.append("point")
+    if use_bar and campaign.lengthbar is not None:
+        kinds.append("socket")
+    source = ("defaults" if noise is None and campaign.noise is None else
+              "as given" if noise is not None and noise != campaign.noise else
+              f"{NOISE_FILE}, {stated.instrument}" if stated.instrument else NOISE_FILE)
+    parts = [f"{stated.describe(kinds)} ({source})"] if kinds else []
+    if campaign.points is not None and campaign.points.sigma is not None:
+        parts.append("points: their sigma_um column")
+    return ", ".join(parts)

@@ -30,6 +30,7 @@ from aacmm_pin.data.columns import MAX_ANGLE_DEG
 from aacmm_pin.data.csv_table import radian_like_column, read_table
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
 from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
 from aacmm_pin.data.problem_log import ProblemLog, close_match
 from aacmm_pin.errors import CampaignFormatError, Problem
 from aacmm_pin.units import MAX_COORDINATE, MM, RADIAN_MIN_ROWS, UM
@@ -326,7 +327,8 @@ class ImportResult:
 
 def import_points(sources: Sequence[str | Path], folder: str | Path,
                   fmt: PointFormat | None = None, *, sigma: float | None = None,
-                  one_frame: bool = False, force: bool = False) -> ImportResult:
+                  one_frame: bool = False, force: bool = False,
+                  instrument: str | None = None) -> ImportResult:
     """Convert instrument point files into a points campaign folder (written whole or not at all).
 
     Args:
@@ -338,6 +340,9 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
             None: the preset's, else none stated (the package's default applies).
         one_frame: all files share one instrument frame (one group).
         force: replace a folder that holds files.
+        instrument: the kind of instrument (``laser tracker``, ``motion capture``: a key of
+            :data:`aacmm_pin.units.INSTRUMENT_NOISE`), written to ``campaign.json``; its noise is
+            the stated one unless ``sigma`` or the preset's is given. None: not named.
 
     Returns:
         What was read and written; ``campaign.points.lines`` are the lines of ``points.csv``.
@@ -345,7 +350,8 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
     Raises:
         CampaignFormatError: every problem of every file (file, line, column).
         OutputExistsError: if ``folder`` holds files (without ``force``) or is a source.
-        ValueError: for no sources, files with different numbers of axes, or a bad ``sigma``.
+        ValueError: for no sources, files with different numbers of axes, a bad ``sigma`` or an
+            unknown ``instrument``.
     """
     if not sources:
         raise ValueError("sources: give one or more point files")
@@ -367,20 +373,41 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
     noise = sigma if sigma is not None else formats[0].noise
     group = np.concatenate([np.full(len(f.log.q), 1 if one_frame else k, dtype=np.int64)
                             for k, f in enumerate(files, start=1)])
-    points = PointLog(group, np.concatenate([f.log.q for f in files]),
-                      np.concatenate([f.log.point for f in files]),
-                      lines=np.arange(2, 2 + len(group), dtype=np.int64))
-    stated = None if noise is None else StatedNoise(point=noise)
+    q = np.concatenate([f.log.q for f in files])
+    points = PointLog(group, q, np.concatenate([f.log.point for f in files]),
+                      lines=np.arange(2, 2 + len(group), dtype=np.int64),
+                      columns=_pose_column(files))
+    given = {} if noise is None else {"point": noise}
+    stated = (StatedNoise.of_instrument(instrument, **given) if instrument is not None
+              else None if noise is None else StatedNoise(point=noise))
     campaign = Campaign(None, {}, None, {}, points=points, noise=stated)
     provenance = _provenance(files, formats, "none stated: the package's default applies"
+                             if stated is None else f"the {stated.instrument}'s default"
                              if noise is None else "as given" if sigma is not None
                              else "the preset's instrument accuracy")
     with output_folder(folder, force, [f.path for f in files]) as tmp:
         write_campaign(campaign, tmp)
         content: dict[str, Any] = {} if stated is None else {"noise_um": {"point": stated.point / UM}}
+        if stated is not None and stated.instrument:
+            content = {"instrument": stated.instrument, **content}
         content["provenance"] = provenance
         (tmp / NOISE_FILE).write_text(json.dumps(content, indent=2) + "\n", encoding="utf-8")
     return ImportResult(campaign, tuple(files), formats[0], provenance)
+
+
+def _pose_column(files: list[PointFile]) -> dict[str, np.ndarray]:
+    """Return the ``pose`` column (1, 2, ... over all files) where a pose has several points.
+
+    Several points of one pose: identical readouts in consecutive rows (several markers). Without
+    any, nothing (``{}``).
+    """
+    ids, first = [], 1
+    for f in files:
+        own = pose_ids(f.log.q)
+        ids.append(own + first)
+        first += int(own.max()) + 1 if own.size else 0
+    pose = np.concatenate(ids)
+    return {POSE_COLUMN: pose.astype(float)} if len(np.unique(pose)) < len(pose) else {}
 
 
 def _provenance(files: list[PointFile], formats: list[PointFormat], noise: str) -> dict[str, Any]:

@@ -205,7 +205,9 @@ class Calibration:
     def report(self) -> dict[str, Any]:
         """Return the ``report.json`` content."""
         return {
-            "model": self.model, "use_rtest": self.use_rtest, "inputs": list(self.inputs),
+            "model": self.model,
+            "use_rtest": self.use_rtest if "spat" in self.inputs else None,  # of SPATs alone
+            "inputs": list(self.inputs),
             "nests": self.nests,
             "n_samples": int(len(self.fun)),
             "n_parameters": self.n_determined, "n_unknowns": int(len(self.x)),

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +29,7 @@ from aacmm_pin.outputs.calibration_folder import (
     CalibrationFolder,
     read_calibration,
 )
+from aacmm_pin.outputs.instrument_frames import FRAMES_KEY, instrument_frames
 from aacmm_pin.outputs.urdf_resources import rebase_resources
 from aacmm_pin.units import ARCSEC
 
@@ -55,22 +57,26 @@ def write_maps_csv(cal: Calibration, path: str | Path, std: dict[int, np.ndarray
     Path(path).write_text("\n".join(rows) + "\n")
 
 
-def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: bool = False) -> Path:
+def write_calibration(cal: Calibration, arm: Arm, folder: str | Path, force: bool = False,
+                      report: dict[str, Any] | None = None) -> Path:
     """Write a calibration folder whole (:func:`~aacmm_pin.data.output_folder.output_folder`); return it.
 
     Files: ``parameters.json``, ``calibrated.urdf``, ``encoder_maps.csv``, ``report.json``, and
     ``calibrated.sizes.json`` when the arm has a sizes file (:mod:`aacmm_pin.model.sizes`), so that the
     folder's arm keeps its plausible sizes.
 
+    ``report``: further keys of ``report.json`` (``identify``'s ``model_choice``).
+
     Raises:
         OutputExistsError: if ``folder`` holds files and not ``force``.
     """
     with output_folder(folder, force) as tmp:
-        write_calibration_files(cal, arm, tmp)
+        write_calibration_files(cal, arm, tmp, report)
     return Path(folder)
 
 
-def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
+def write_calibration_files(cal: Calibration, arm: Arm, folder: Path,
+                            extra: dict[str, Any] | None = None) -> None:
     """Write the files of a calibration folder into an existing ``folder`` (not atomically).
 
     ``parameters.json`` names the plugins of the extensions' effects that are not built in
@@ -88,4 +94,7 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path) -> None:
     write_maps_csv(cal, folder / MAPS_FILE)
     report = cal.report()
     report["arm"] = arm.name
+    if frames := instrument_frames(cal):  # predict --frame GROUP
+        report[FRAMES_KEY] = frames
+    report.update(extra or {})
     (folder / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n")
