@@ -216,10 +216,36 @@ def test_encoder_effects_are_not_offered_on_the_coupled_joint(coupled):
 
 
 def test_proposed_model_has_no_map_on_the_coupled_joint(coupled):
-    """identify's default maps are on the axes with an encoder."""
+    """identify's default maps are on the axes with an encoder; asking one on the coupled joint,
+    or reading parameters with one, is an error naming it."""
+    from aacmm_pin.model.encoder_map import EncoderMap
+    from aacmm_pin.model.parameters import check_against_arm
+
     sim = simulate_points(coupled, SimulationConfig(points=40, effects=("dh",)))
     cal = ap.identify(sim.campaign, coupled, model="proposed", max_nfev=1)
     assert 4 not in cal.unknowns.map_axes and 5 in cal.unknowns.map_axes
+    assert not any(4 in t.axes for t in cal.unknowns.terms)
+    with pytest.raises(ValueError, match=r"A4 \(T4\) is a coupled joint"):
+        ap.identify(sim.campaign, coupled, model="proposed", map_axes=(3, 4), max_nfev=1)
+    params = cal.parameters.replace(encoder_maps={4: EncoderMap.zero(5.0)})
+    with pytest.raises(ap.FileFormatError, match=r"encoder_maps.axes.4.*coupled joint"):
+        check_against_arm(params, coupled)
+
+
+def test_ik_postures_follow_the_coupling(coupled):
+    """Inverse kinematics moves the independent axes only (the coupled readout column has no
+    Jacobian column) and reaches the points; the readouts filled are the coupling's."""
+    params = _params(coupled, 7)
+    q0 = coupled.fill_readouts(_readouts(coupled, 5, 8) * 0.5)
+    targets = kinematics.stylus_positions(coupled, params, q0, tool="left")
+    joints = JointKinematics(coupled, params)
+    q = model_kinematics.solve_ik(lambda qq, rows: joints.position_jacobian(qq, "left"), targets,
+                                  coupled.joint_limits, np.random.default_rng(0),
+                                  starts=np.column_stack([q0.min(axis=0), q0.max(axis=0)]))
+    q = coupled.fill_readouts(q)
+    np.testing.assert_allclose(q[:, 3], -(q[:, 1] + q[:, 2]), atol=1e-12)
+    np.testing.assert_allclose(kinematics.stylus_positions(coupled, params, q, tool="left"),
+                               targets, atol=1e-9)
 
 
 @pytest.mark.parametrize("block, message", [

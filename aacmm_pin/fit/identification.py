@@ -354,6 +354,9 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool)
                                             q[main], meas.measured[main], group[main],
                                             None if samples.tool is None else samples.tool[main])
     axes = tuple(arm.measured_axes) if options.map_axes is None else tuple(options.map_axes)
+    if coupled := [a for a in axes if 1 <= a <= arm.n_axes and arm.coupled[a - 1]]:
+        raise ValueError(f"map_axes: A{coupled[0]} ({arm.axis_names[coupled[0] - 1]}) is a coupled "
+                         "joint: it has no encoder, so no map")
     full_u = Unknowns.full(arm, start, axes if options.model == "proposed" else (),
                            tuple(t for t in options.extensions if t.is_extension), samples)
     has_spat = campaign.spat is not None or campaign.points is None
