@@ -140,7 +140,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     arm = arm or load_arm()
     meas = measurements(campaign, arm, use_rtest)
     samples = meas.samples
-    spec = ModelSpec((), tuple(range(1, arm.n_axes + 1)) if start == "proposed" else (), use_rtest)
+    spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
 
     def fit() -> Calibration:
