@@ -194,6 +194,27 @@ def test_coupled_readout_column_may_be_left_out_or_is_checked(tmp_path, coupled)
     read_campaign(write("near", near), arm=coupled)
 
 
+def test_readout_columns_of_another_count_are_still_refused(tmp_path, coupled):
+    """A last axis coupled may be left out (q1..q17 for 18 axes); one column too many, or one
+    missing that is not coupled, is the arm-match error as before."""
+    text = re.sub(r'(<joint name="R7" type="revolute">)',
+                  r'\1\n    <mimic joint="R6" multiplier="2"/>', COUPLED.read_text())
+    (tmp_path / "last.urdf").write_text(text)
+    last = ap.load_arm(tmp_path / "last.urdf")
+    q = last.fill_readouts(_readouts(last, 3, 9))
+    header = ",".join(f"q{i}_deg" for i in range(1, 18))
+    rows = "\n".join(",".join(f"{v:.6f}" for v in np.degrees(r[:17])) for r in q)
+    (tmp_path / "q.csv").write_text(f"{header}\n{rows}\n")
+    read = ap.read_readouts(tmp_path / "q.csv", last)
+    np.testing.assert_allclose(read[:, 17], 2 * read[:, 16], atol=1e-12)
+    with pytest.raises(ap.CampaignFormatError, match="17 readout columns in degrees"):
+        ap.read_readouts(tmp_path / "q.csv", coupled)
+    extra = "\n".join(",".join(f"{v:.6f}" for v in [*np.degrees(r), 1.0]) for r in q)
+    (tmp_path / "q19.csv").write_text(",".join(f"q{i}_deg" for i in range(1, 20)) + f"\n{extra}\n")
+    with pytest.raises(ap.CampaignFormatError, match="19 readout columns in degrees"):
+        ap.read_readouts(tmp_path / "q19.csv", coupled)
+
+
 def test_axes_lists_the_coupled_joint(capsys):
     """`aacmm-pin axes` names the coupled joint with its formula."""
     assert cli.main(["axes", str(COUPLED)]) == 0

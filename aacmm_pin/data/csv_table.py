@@ -209,7 +209,7 @@ def _header(header: list[str], top: int, required: tuple[str, ...], has_q: bool,
         add(top, first_q, f"mixes q<n>_deg and joint-name readout columns ({by_name[0]}): "
                           "use q1_deg..qn_deg or one <joint name>_deg column per axis")
     n_q = max(q_found, default=0)
-    if named and q_found and set(range(n_q, len(named))) <= set(coupled):
+    if named and q_found and n_q < len(named) and set(range(n_q, len(named))) <= set(coupled):
         n_q = len(named)  # the last axes are coupled: their columns may be left out
     q_columns = by_name and named or q_names(n_q)
     may_miss = {name for k in coupled for name in (f"q{k + 1}_deg", *named[k:k + 1])}

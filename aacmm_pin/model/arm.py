@@ -548,6 +548,8 @@ class Arm:
         Its configuration is the n_axes true joint angles in axis order (readouts already corrected
         by the encoder maps, see :func:`aacmm_pin.model.encoder_map.correct_readouts`); the frames
         ``tool_links`` are the tool points. Movable joints on no tool's chain are fixed at zero.
+        A coupled joint stays free here: its entry is its angle, :meth:`joint_angles` of the
+        corrected readouts.
         """
         tree = self.urdf_tree(dh, tool, tools)
         for name in self.off_chain:
