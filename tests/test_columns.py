@@ -250,7 +250,7 @@ def test_readers_are_told_names_not_given_an_arm(tmp_path: Path) -> None:
 def test_the_readers_import_no_arm() -> None:
     """The data modules import neither the arm nor anything above them, not even for types."""
     data = ("columns", "csv_table", "logs", "campaign", "problem_log", "json_file", "bounded_read",
-            "spreadsheet", "output_claim")
+            "spreadsheet", "output_claim", "couplings")
     allowed = {f"aacmm_pin.data.{m}" for m in data} | {"aacmm_pin.errors", "aacmm_pin.units"}
     for name in data:
         tree = ast.parse((PACKAGE / "data" / f"{name}.py").read_text())

@@ -46,12 +46,12 @@ def _f(v: float) -> str:
 
 
 def _joint(name: str, kind: str, parent: str, child: str, xyz=(0, 0, 0), rpy=(0, 0, 0),
-           axis: str | None = None) -> str:
+           axis: str | None = None, limit_deg: float | None = None) -> str:
     out = [f'  <joint name="{name}" type="{kind}">\n',
            f'    <parent link="{parent}"/>\n    <child link="{child}"/>\n',
            f'    <origin xyz="{" ".join(map(_f, xyz))}" rpy="{" ".join(map(_f, rpy))}"/>\n']
     if axis is not None:
-        lim = math.radians(LIMITS_DEG[axis])
+        lim = math.radians(LIMITS_DEG[axis] if limit_deg is None else limit_deg)
         vec = {"z": "0 0 1", "y": "0 1 0"}[axis]
         out.append(f'    <axis xyz="{vec}"/>\n'
                    f'    <limit lower="{_f(-lim)}" upper="{_f(lim)}" effort="100" velocity="2"/>\n')
@@ -81,20 +81,13 @@ def _errors_after(k: int, axis: str, parent: str) -> tuple[list[str], str]:
     return parts, parent
 
 
-def make_urdf() -> str:
-    """Return the URDF text of the torso with two arms."""
-    parts = ['<?xml version="1.0"?>\n',
-             "<!-- torso: a made-up torso with two 7-axis arms, written by urdf/make_torso.py "
-             "(15 axes, 54 error frames at 0, tools left and right). -->\n",
-             '<robot name="torso">\n', _link("base_link", 20.0, 0.1, 0.2),
-             _joint("dth1", "fixed", "base_link", "dth1_frame"), _link("dth1_frame"),
-             _joint("T1", "revolute", "dth1_frame", "torso", (0, 0, 0.1), axis="z"),
-             _link("torso", 15.0, 0.6, 0.15)]
-    errors, torso_end = _errors_after(1, "z", "torso")
-    parts += errors
-    for tool, prefix, sign, first in SIDES:
+def _arms(torso_end: str, sides: tuple[tuple[str, str, float, int], ...] = SIDES,
+          height: float = 0.6) -> list[str]:
+    """Return the two arms' joints and links, mounted on link ``torso_end`` at ``height`` m."""
+    parts = []
+    for tool, prefix, sign, first in sides:
         mount = f"{tool}_shoulder"
-        parts += [_joint(mount, "fixed", torso_end, f"{mount}_frame", (0, sign * 0.25, 0.6),
+        parts += [_joint(mount, "fixed", torso_end, f"{mount}_frame", (0, sign * 0.25, height),
                          (-sign * math.pi / 2, 0, 0)), _link(f"{mount}_frame")]
         parent = f"{mount}_frame"
         for i, (length, mass, axis) in enumerate(zip(LENGTHS, MASSES, AXES)):
@@ -111,6 +104,20 @@ def make_urdf() -> str:
                 parts += errors
         parts += [_joint(f"tool_{tool}", "fixed", parent, f"marker_{tool}", TOOL),
                   _link(f"marker_{tool}")]
+    return parts
+
+
+def make_urdf() -> str:
+    """Return the URDF text of the torso with two arms."""
+    parts = ['<?xml version="1.0"?>\n',
+             "<!-- torso: a made-up torso with two 7-axis arms, written by urdf/make_torso.py "
+             "(15 axes, 54 error frames at 0, tools left and right). -->\n",
+             '<robot name="torso">\n', _link("base_link", 20.0, 0.1, 0.2),
+             _joint("dth1", "fixed", "base_link", "dth1_frame"), _link("dth1_frame"),
+             _joint("T1", "revolute", "dth1_frame", "torso", (0, 0, 0.1), axis="z"),
+             _link("torso", 15.0, 0.6, 0.15)]
+    errors, torso_end = _errors_after(1, "z", "torso")
+    parts += errors + _arms(torso_end)
     parts.append("</robot>\n")
     return "".join(parts)
 

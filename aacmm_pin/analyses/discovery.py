@@ -140,7 +140,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     arm = arm or load_arm()
     meas = measurements(campaign, arm, use_rtest)
     samples = meas.samples
-    spec = ModelSpec((), tuple(range(1, arm.n_axes + 1)) if start == "proposed" else (), use_rtest)
+    spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
 
     def fit() -> Calibration:
@@ -167,7 +167,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     stopped, missing = "", []
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
     def candidates() -> list[Term]:
-        out = [t for e in effects for t in e.candidates(arm, samples) if not t.in_model(spec)]
+        out = [t for e in effects for t in e.offered(arm, samples) if not t.in_model(spec)]
         n_candidates.append(len(out))
         return out
 
@@ -222,7 +222,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         if TIME in followed:  # the scan reports time once: either of its two variables
             followed |= {TIME_WITHIN_LOCATION, TIME_OVERALL}
         scan = dataclasses.replace(scan, suspects=tuple(
-            t.key for e in effects for t in e.candidates(arm, samples)
+            t.key for e in effects for t in e.offered(arm, samples)
             if not t.in_model(spec) and followed.intersection(t.follows)))
     return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
                      calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,

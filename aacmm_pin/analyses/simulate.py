@@ -43,7 +43,7 @@ from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
 from aacmm_pin.model.kinematics import Adjustment, JointKinematics, ToolIndex, solve_ik
 from aacmm_pin.model.parameters import Parameters
-from aacmm_pin.model.samples import Samples, motion_direction
+from aacmm_pin.model.samples import Samples, gravity_torques, motion_direction
 from aacmm_pin.units import (
     ARCSEC,
     DEFAULT_SIMULATOR_EFFECTS,
@@ -142,7 +142,11 @@ class TrueArm:
         consecutive rows of ``q_readout``.
         """
         cfg, out = self.config, np.zeros_like(q_readout)
-        if "compliance" in cfg.effects:
+        if "compliance" in cfg.effects and self.arm.couplings:  # coupled configuration
+            tau = gravity_torques(self.arm, self._model, q_readout)
+            for axis, k in cfg.compliance.items():
+                out[:, axis - 1] += k * tau[:, axis - 1]
+        elif "compliance" in cfg.effects:
             for i, q in enumerate(q_readout):
                 tau = -pin.computeGeneralizedGravity(self._model, self._data, q)  # by gravity
                 for axis, k in cfg.compliance.items():
@@ -174,7 +178,8 @@ class TrueArm:
         """
         offsets = self.angle_offsets(q_readout, np.zeros_like(q_readout) if direction is None
                                      else direction)
-        if self.truth.extensions:  # through the model's kinematics, extensions at the readouts
+        if self.truth.extensions or self.arm.couplings:  # extensions at the readouts; a coupled
+            # joint's angle errors as offsets (its readout is not read)
             pos, jac = self._joints.position_jacobian(q_readout, tool,
                                                       self.adjustment(q_readout, offsets))
         else:
@@ -187,7 +192,7 @@ class TrueArm:
                   tool: ToolIndex = None) -> np.ndarray:
         """Return the true stylus centres, shape (N, 3), m, in the r-CS or the MT-CS."""
         offsets = self.angle_offsets(q_readout)
-        if self.truth.extensions:
+        if self.truth.extensions or self.arm.couplings:
             p_r = kinematics.stylus_positions(self.arm, self.truth, q_readout, frame="r", tool=tool,
                                               adjust=self.adjustment(q_readout, offsets))
         else:
@@ -208,12 +213,14 @@ class TrueArm:
         samples that do not reach the target to 1e-12 m. With backlash, the postures are found
         without it, then refined from there with the directions of motion of that sequence.
         """
-        q = self._solve_ik(targets, rng, temp, iterations, starts, None, None)
+        q = self.arm.fill_readouts(self._solve_ik(targets, rng, temp, iterations, starts, None,
+                                                  None))
         if "backlash" not in self.config.effects:
             return q
         for _ in range(3):  # directions follow the sequence; a few passes until they settle
             direction = motion_direction(q)
-            q = self._solve_ik(targets, rng, temp, iterations, starts, direction, q)
+            q = self.arm.fill_readouts(self._solve_ik(targets, rng, temp, iterations, starts,
+                                                      direction, q))
             if np.array_equal(motion_direction(q), direction):
                 break
         return q
@@ -241,7 +248,7 @@ def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -
     maps: dict[int, EncoderMap] = {}
     if "encoder" in config.effects:
         nodes = node_angles(config.step_deg)
-        for axis in config.encoder_axes or range(1, arm.n_axes + 1):
+        for axis in config.encoder_axes or arm.measured_axes:  # a coupled joint has no encoder
             values = np.zeros_like(nodes)
             for harmonic in (1, 2, 3, 4, 8):
                 amp = rng.uniform(0.2, 1.0) * config.encoder_max / (1 if harmonic == 1 else 2)
@@ -333,7 +340,7 @@ def simulate_points(arm: Arm, config: SimulationConfig) -> Simulation:
     truth = random_truth(arm, config, rng)
     true_arm = TrueArm(arm, truth, config)
     lim = arm.joint_limits
-    q = rng.uniform(lim[:, 0], lim[:, 1], (config.points, arm.n_axes))
+    q = arm.fill_readouts(rng.uniform(lim[:, 0], lim[:, 1], (config.points, arm.n_axes)))
     q = np.radians(np.round(np.degrees(q), 9))  # as written to file: truth follows the file
     tool = np.array(arm.tool_names)[np.arange(config.points) % arm.n_tools]
     p_r = true_arm.positions(q, None, tool=tool)

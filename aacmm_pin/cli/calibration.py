@@ -413,7 +413,9 @@ def _axes(args: argparse.Namespace) -> int:
     print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order "
           "(or <joint>_deg, any order)")
     for n, (name, (lo, hi)) in enumerate(zip(arm.axis_names, np.degrees(arm.joint_limits)), 1):
-        print(f"  {f'q{n}_deg':<7} joint {name:<12} limits {lo:8.1f} .. {hi:7.1f} deg")
+        coupled = arm.couplings.get(name)
+        note = f"  coupled: {coupled.formula()} (no readout needed)" if coupled else ""
+        print(f"  {f'q{n}_deg':<7} joint {name:<12} limits {lo:8.1f} .. {hi:7.1f} deg{note}")
     print(f"tools ({arm.n_tools}; points.csv column 'tool'"
           f"{', optional' if arm.n_tools == 1 else ''}):")
     for name, joint, link in zip(arm.tool_names, arm.tool_joints, arm.tool_links):

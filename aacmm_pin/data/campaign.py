@@ -34,6 +34,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from aacmm_pin.data.columns import BUILT_IN, MAX_ANGLE_DEG, column, file_order
+from aacmm_pin.data.couplings import AxisCoupling
 from aacmm_pin.data.csv_table import (
     MAX_COLUMNS,
     MAX_FILE_BYTES,
@@ -100,6 +101,11 @@ def _names(arm: ArmNames | None, axis_names: Sequence[str] | None,
     axes = axis_names if axis_names is not None else None if arm is None else arm.axis_names
     tools = tool_names if tool_names is not None else None if arm is None else arm.tool_names
     return (None if axes is None else list(axes)), (None if tools is None else list(tools))
+
+
+def couplings_of(arm: ArmNames | None) -> Sequence[AxisCoupling]:
+    """Return the arm's coupled axes (its ``axis_couplings``, if it has any), for the readers."""
+    return tuple(getattr(arm, "axis_couplings", ()))
 
 
 def _check_locations(spat: Table, locs: Table, min_samples: int, out: ProblemLogs) -> None:
@@ -273,7 +279,8 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
                                     f"file not found; {found[0]} needs it (they come in a pair)"))
     axes, tools = _names(arm, axis_names, tool_names)
     tables = {name: read_table(paths[name], *_FILES[name], problems, axis_names=axes,
-                               extras="numbers" if name in _LOGS else "refuse")
+                               extras="numbers" if name in _LOGS else "refuse",
+                               couplings=couplings_of(arm))
               for name in _FILES if name in present}
     spat, locs = tables.get("spat.csv"), tables.get("locations.csv")
     log, bar = tables.get("lengthbar.csv"), tables.get("bar.csv")
@@ -354,7 +361,7 @@ def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | 
     problems: list[Problem] = []
     axes, tools = _names(arm, axis_names, tool_names)
     table = read_table(Path(path), (), True, optional, problems, extras="readouts",
-                       axis_names=axes)
+                       axis_names=axes, couplings=couplings_of(arm))
     if table is not None and tools is not None and "tool" in optional and table.lines:
         checks = ProblemLogs(problems)
         _check_tools(table, tools, checks)

@@ -15,7 +15,7 @@ import csv
 import io
 import math
 import re
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeGuard
@@ -24,6 +24,7 @@ import numpy as np
 
 from aacmm_pin.data.bounded_read import read_bounded
 from aacmm_pin.data.columns import MAX_ANGLE_DEG, Column, column, has_unit
+from aacmm_pin.data.couplings import AxisCoupling, fill_or_check
 from aacmm_pin.data.problem_log import MAX_SHOWN, ProblemLog, close_match
 from aacmm_pin.errors import Problem
 from aacmm_pin.units import (
@@ -178,8 +179,12 @@ class _Header:
 
 
 def _header(header: list[str], top: int, required: tuple[str, ...], has_q: bool,
-            optional: tuple[str, ...], named: list[str], add: Any) -> _Header:
-    """Sort a header's names into known, readout and unknown columns; report what is wrong."""
+            optional: tuple[str, ...], named: list[str], add: Any,
+            coupled: Sequence[int] = ()) -> _Header:
+    """Sort a header's names into known, readout and unknown columns; report what is wrong.
+
+    ``coupled``: 0-based axes whose readout column may be missing (coupled joints).
+    """
     index: dict[str, int] = {}
     unknown: list[tuple[int, str]] = []
     for k, name in enumerate(header):
@@ -203,8 +208,13 @@ def _header(header: list[str], top: int, required: tuple[str, ...], has_q: bool,
         first_q = next(name for name in index if Q_COLUMN.fullmatch(name))
         add(top, first_q, f"mixes q<n>_deg and joint-name readout columns ({by_name[0]}): "
                           "use q1_deg..qn_deg or one <joint name>_deg column per axis")
-    q_columns = by_name and named or q_names(max(q_found, default=0))
+    n_q = max(q_found, default=0)
+    if named and q_found and n_q < len(named) and set(range(n_q, len(named))) <= set(coupled):
+        n_q = len(named)  # the last axes are coupled: their columns may be left out
+    q_columns = by_name and named or q_names(n_q)
+    may_miss = {name for k in coupled for name in (f"q{k + 1}_deg", *named[k:k + 1])}
     wanted = [*required, *(q_columns or ["q1_deg"] if has_q and not q_missing else [])]
+    wanted = [name for name in wanted if name not in may_miss]
     for name in (missing := [name for name in wanted if name not in index]):
         if name in named:
             add(top, name, "missing column: joint-name readout columns need one per axis "
@@ -274,7 +284,8 @@ def _unknown_columns(head: _Header, top: int, expected: list[str], listing: str,
 
 def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
                problems: list[Problem], *, extras: Extras = "refuse",
-               axis_names: Iterable[str] | None = None) -> Table | None:
+               axis_names: Iterable[str] | None = None,
+               couplings: Sequence[AxisCoupling] = ()) -> Table | None:
     """Read and check one CSV file, adding its problems; return None if it has no usable header.
 
     The rows are read one at a time and the problems capped (:class:`ProblemLog`: a few of each
@@ -291,10 +302,12 @@ def read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tup
         extras: what its other columns are (see :data:`Extras`); a file that misses a required
             column reports them as unknown (a misspelt name).
         axis_names: the arm's joint names, when known: allows ``<joint name>_deg`` readouts.
+        couplings: the arm's coupled axes (:mod:`aacmm_pin.data.couplings`): their readout
+            columns may be left out (then filled), a given one is checked.
     """
     log = ProblemLog(problems, path)
     try:
-        return _read_table(path, required, has_q, optional, log, extras, axis_names)
+        return _read_table(path, required, has_q, optional, log, extras, axis_names, couplings)
     finally:
         log.close()
 
@@ -318,7 +331,8 @@ def _wrong_axis_count(q_columns: list[str], named: list[str], line: int,
 
 
 def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
-                log: ProblemLog, extras: Extras, axis_names: Iterable[str] | None) -> Table | None:
+                log: ProblemLog, extras: Extras, axis_names: Iterable[str] | None,
+                couplings: Sequence[AxisCoupling] = ()) -> Table | None:
     """:func:`read_table` with its problems going to ``log``."""
     add = log.add
     if (text := _text(path, log)) is None:
@@ -339,7 +353,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         add(top, None, f"{len(header)} columns in the header; at most {MAX_COLUMNS} are read")
         return None
     named = [f"{n}_deg" for n in axis_names or []] if has_q else []
-    head = _header(header, top, required, has_q, optional, named, add)
+    coupled = [c.axis for c in couplings] if has_q else []
+    head = _header(header, top, required, has_q, optional, named, add, coupled)
     if named and head.q_columns and len(head.q_columns) != len(named):
         _wrong_axis_count(head.q_columns, named, top, add)
     taken: list[str] = []
@@ -385,6 +400,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
                 add(line, name, reason, kind=why, unit="cells")
     if not n_rows:
         add(None, None, "header only: no data rows")
+    if coupled and head.q_columns:
+        fill_or_check(table.cols, table.q_columns, table.lines, couplings, add)
     return table
 
 

@@ -425,10 +425,26 @@ class Effect(ABC):
     by_default: bool = True
     """Whether discovery tries it, and the residual scan tests its variables, when no list of
     effects is given (False: only when named, e.g. ``lateral_compliance``)."""
+    needs_encoder: bool = False
+    """Whether its per-axis terms are errors of an axis' encoder (its readout): True for encoder
+    maps and harmonics, backlash and crosstalk of the readout. Such terms are offered only on axes
+    with an encoder, not on coupled joints (:meth:`offered`); an effect of the joint itself (its
+    compliance: the torque passes through it) is offered on every axis."""
 
     @abstractmethod
     def candidates(self, arm: Arm, samples: Samples) -> list[Term]:
         """Return the terms worth trying on these samples (one per axis for per-axis effects)."""
+
+    def offered(self, arm: Arm, samples: Samples) -> list[Term]:
+        """Return the terms discovery may try: :meth:`candidates`, less coupled axes' if encoder.
+
+        An effect that :attr:`needs_encoder` is not offered on a coupled joint (``term.axis``
+        among ``arm.coupled``): it has no encoder.
+        """
+        terms = self.candidates(arm, samples)
+        if not self.needs_encoder or not arm.couplings:
+            return terms
+        return [t for t in terms if not t.axes or not arm.coupled[t.axis - 1]]
 
     @abstractmethod
     def term(self, key: str) -> Term | None:

@@ -115,4 +115,5 @@ def stylus_ik(arm: Arm, params: Parameters, targets: np.ndarray, rng: np.random.
     def position_jacobian(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return joints.position_jacobian(q, adjust=extension_adjustment(arm, params, q, None))
 
-    return solve_ik(position_jacobian, targets, arm.joint_limits, rng, iterations, starts)
+    return arm.fill_readouts(solve_ik(position_jacobian, targets, arm.joint_limits, rng,
+                                      iterations, starts))  # coupled columns: their couplings

@@ -224,7 +224,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         start: start values (default: the URDF's nominal values; X0 and translation from a fit of
             the location centres).
         step_deg: map node step, deg.
-        map_axes: axes whose maps are estimated (default: all, for ``proposed``).
+        map_axes: axes whose maps are estimated (default: all with an encoder, for ``proposed``).
         loss: scipy loss of every solve, e.g. ``"linear"`` (default). For outliers use ``robust``:
             scipy's ``"soft_l1"`` / ``"huber"`` weigh coordinates, not samples, with a fixed
             scale, and do not reach their tolerance on these problems.
@@ -353,7 +353,10 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool)
     start = options.start or _initial_frame(arm, Parameters.nominal(arm, options.step_deg),
                                             q[main], meas.measured[main], group[main],
                                             None if samples.tool is None else samples.tool[main])
-    axes = tuple(range(1, arm.n_axes + 1)) if options.map_axes is None else tuple(options.map_axes)
+    axes = tuple(arm.measured_axes) if options.map_axes is None else tuple(options.map_axes)
+    if coupled := [a for a in axes if 1 <= a <= arm.n_axes and arm.coupled[a - 1]]:
+        raise ValueError(f"map_axes: A{coupled[0]} ({arm.axis_names[coupled[0] - 1]}) is a coupled "
+                         "joint: it has no encoder, so no map")
     full_u = Unknowns.full(arm, start, axes if options.model == "proposed" else (),
                            tuple(t for t in options.extensions if t.is_extension), samples)
     has_spat = campaign.spat is not None or campaign.points is None

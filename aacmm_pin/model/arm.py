@@ -23,6 +23,13 @@ does too):
   holds one elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
   Error frames are the ones on the tools' chains, in the same depth-first order as the axes.
 * Every other fixed joint is nominal geometry (e.g. ``L2z``).
+* **Coupled joints.** An axis whose angle follows others' (a passive joint, no encoder) is stated
+  by a URDF ``<mimic joint multiplier offset>`` or, for a sum of several joints, by the
+  ``couplings`` block of the arm's sizes file (:mod:`aacmm_pin.data.couplings`): it keeps its axis
+  number and readout column (which may be left out of the files, :attr:`Arm.axis_couplings`), but
+  its angle is :math:`\sum_i a_i q_i + b` of the independent axes' true angles plus its own angle
+  errors (e.g. its compliance), :meth:`Arm.couple`. Pinocchio's models keep the joint free (one
+  configuration entry per axis, as every other); the coupling is applied in this package's layer.
 
 Two Pinocchio views of one arm:
 
@@ -49,6 +56,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from aacmm_pin.data.couplings import AxisCoupling, Coupling, fill_coupled
 from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm_files import EMBEDDED as EMBEDDED  # re-exported: the embedded arms
@@ -72,6 +80,11 @@ TOOL_JOINTS = ("tool_x", "tool_y", "tool_z")
 _UNIT = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
 _ROT_LETTER = {"a": "x", "b": "y", "c": "z"}
 _TOL = 1e-12
+COUPLING_TOLERANCE = 5.0
+r"""A readout column given for a coupled joint may differ from its coupling by this many of the
+arm's plausible angle errors (the largest of ``dh_angle``, ``map_node`` and the encoder effect's
+size, :mod:`aacmm_pin.model.sizes`) times :math:`\sqrt{1 + \sum a_i^2}` (every readout in the sum
+has its error): a wrong coupling or column is off by degrees."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +129,43 @@ def _chains(joints: list[Joint], path: Path | str) -> dict[str, list[Joint]]:
                 raise ArmModelError(path, "the joints form a loop")
         out[tool.name] = chain[::-1]
     return out
+
+
+def _read_couplings(arm: Arm) -> dict[str, Coupling]:
+    """Return the arm's coupled axes by name: URDF ``<mimic>`` and the sizes file's block.
+
+    Raises:
+        ArmModelError: a coupling of a joint that is no axis, one that follows a joint that is no
+            axis or is coupled itself, or a joint coupled twice (naming the file and line or key).
+    """
+    out: dict[str, Coupling] = {}
+    files: dict[str, Path | str] = {}
+    for name in arm.axis_names:
+        joint = arm._joints[name]
+        if joint.mimic is not None:
+            other, multiplier, offset = joint.mimic
+            out[name] = Coupling(name, ((other, multiplier),), offset,
+                                 f"line {joint.line}: <mimic> of '{name}'")
+            files[name] = arm.source
+    sizes = sizes_path(arm.source)
+    for name, entry in arm.sizes.couplings.items():
+        if name in out:
+            raise ArmModelError(sizes, f"couplings.{name}: '{name}' has a <mimic> already "
+                                       f"({arm.source}: {out[name].source}); state it once")
+        if name not in arm.axis_names:
+            raise ArmModelError(sizes, f"couplings.{name}: '{name}' is not an axis of the arm "
+                                       f"(axes: {', '.join(arm.axis_names)})")
+        out[name] = Coupling(name, tuple(entry["of"].items()), entry["offset"], f"couplings.{name}")
+        files[name] = sizes
+    for c in out.values():
+        for other, _ in c.terms:
+            why = ("is not an axis of the arm" if other not in arm.axis_names else
+                   "is coupled itself: write it with the independent joints" if other in out
+                   else "")
+            if why:
+                raise ArmModelError(files[c.joint], f"{c.source}: follows '{other}', which {why}")
+    order = {name: k for k, name in enumerate(arm.axis_names)}
+    return dict(sorted(out.items(), key=lambda item: order[item[0]]))
 
 
 def _next_axis(joints: list[Joint]) -> np.ndarray | None:
@@ -243,6 +293,22 @@ class Arm:
                     raise ArmModelError(source, f"line {joint.line}: joint '{joint.name}' is "
                                                 f"{joint.type}; an AACMM chain holds only "
                                                 "revolute and fixed joints")
+        self.couplings: dict[str, Coupling] = _read_couplings(self)
+        """Coupled joint name -> its coupling (URDF ``<mimic>`` and the sizes file's
+        ``couplings``), in axis order."""
+        n = self.n_axes
+        index = {name: i for i, name in enumerate(self.axis_names)}
+        self.coupled: np.ndarray = np.array([name in self.couplings for name in self.axis_names])
+        """Per axis, whether it is coupled (no encoder, its angle follows others'), (n_axes,)."""
+        self.coupling_matrix: np.ndarray = np.eye(n)
+        """T, shape (n_axes, n_axes): the joint angles are ``T u + b`` for per-axis angles u
+        (independent axes: their true angles; coupled axes: their own angle errors)."""
+        self.coupling_offset: np.ndarray = np.zeros(n)
+        """b, shape (n_axes,), rad (zero but on coupled axes)."""
+        for name, c in self.couplings.items():
+            for other, a in c.terms:
+                self.coupling_matrix[index[name], index[other]] += a
+            self.coupling_offset[index[name]] = c.offset
         self.error_frames: list[ErrorFrame] = [_error_frame(j, next_axis[j.name], source)
                                                for j in joints if j.name in next_axis]
         """The DH error parameters in tree order (chain order for a serial arm)."""
@@ -261,6 +327,54 @@ class Arm:
     def __reduce__(self) -> tuple[Callable[[str, str], Arm], tuple[str, str]]:
         """Pickle as the URDF path and name (reloaded on the other side, e.g. in a worker)."""
         return (_load_named, (str(self.source), self.name))
+
+    # ------------------------------------------------------------------ couplings
+    @property
+    def measured_axes(self) -> list[int]:
+        """The axes with an encoder (all but the coupled ones), 1-based."""
+        return [a + 1 for a in range(self.n_axes) if not self.coupled[a]]
+
+    @cached_property
+    def axis_couplings(self) -> tuple[AxisCoupling, ...]:
+        """The coupled axes as the campaign readers see them (0-based axes, a tolerance, rad).
+
+        A readout column given for a coupled axis is checked against its coupling with the
+        tolerance :data:`COUPLING_TOLERANCE` times the arm's plausible angle error; a missing one
+        is filled.
+        """
+        index = {name: i for i, name in enumerate(self.axis_names)}
+        angle = max(self.sizes.dh_angle, self.sizes.map_node, self.sizes.effects["encoder"])
+        return tuple(AxisCoupling(index[c.joint], tuple((index[o], a) for o, a in c.terms),
+                                  COUPLING_TOLERANCE * angle * float(
+                                      np.sqrt(1.0 + sum(a * a for _, a in c.terms))), c)
+                     for c in self.couplings.values())
+
+    def couple(self, angles: np.ndarray) -> np.ndarray:
+        """Return the joint angles ``T u + b`` of per-axis angles u, shape (N, n_axes), rad.
+
+        u holds the independent axes' true angles and, on coupled axes, their own angle errors
+        (not a readout: a coupled joint has none). Without couplings, u itself.
+        """
+        if not self.couplings:
+            return angles
+        out: np.ndarray = angles @ self.coupling_matrix.T + self.coupling_offset
+        return out
+
+    def joint_angles(self, corrected: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
+        """Return the joint angles (N, n_axes), rad, of corrected readouts and further angle errors.
+
+        Without couplings ``corrected + offsets``; with them, a coupled axis' readout is dropped
+        and its angle is its coupling of the others plus its own offset (:meth:`couple`).
+        """
+        if self.couplings:
+            corrected = np.where(self.coupled, 0.0, corrected)
+        if offsets is not None:
+            corrected = corrected + offsets
+        return self.couple(corrected)
+
+    def fill_readouts(self, q: np.ndarray) -> np.ndarray:
+        """Return readouts (N, n_axes), rad, with every coupled axis' column set by its coupling."""
+        return fill_coupled(q, self.axis_couplings) if self.couplings else q
 
     # ------------------------------------------------------------------ names
     @property
@@ -434,6 +548,8 @@ class Arm:
         Its configuration is the n_axes true joint angles in axis order (readouts already corrected
         by the encoder maps, see :func:`aacmm_pin.model.encoder_map.correct_readouts`); the frames
         ``tool_links`` are the tool points. Movable joints on no tool's chain are fixed at zero.
+        A coupled joint stays free here: its entry is its angle, :meth:`joint_angles` of the
+        corrected readouts.
         """
         tree = self.urdf_tree(dh, tool, tools)
         for name in self.off_chain:

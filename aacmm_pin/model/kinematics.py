@@ -12,6 +12,11 @@ with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
 Inverse kinematics (:func:`solve_ik`, the simulator's postures, the planner's candidates) needs
 only the n_axes joint columns: :class:`JointKinematics` computes them on the runtime model, not the
 identification model's DH, tool and map columns.
+
+Coupled joints (:meth:`Arm.couple`): the joint angles are :math:`T u + b` of per-axis angles u (the
+independent axes' corrected readouts and angle errors, the coupled axes' own angle errors; a
+coupled axis' readout column is not read), so the ``angles`` columns are the chain rule
+:math:`J_\theta T` and a coupled axis has no ``readouts`` column (zero).
 """
 
 from __future__ import annotations
@@ -167,6 +172,14 @@ def _scaled(pos: np.ndarray, scale: np.ndarray, origin: np.ndarray) -> np.ndarra
     return scaled
 
 
+def _coupled_columns(arm: Arm, angles: np.ndarray) -> np.ndarray:
+    """Return d(position)/d(per-axis angles u) from d(position)/d(joint angles), (N, 3, n_axes)."""
+    if not arm.couplings:
+        return angles
+    out: np.ndarray = angles @ arm.coupling_matrix
+    return out
+
+
 def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndarray,
                                  frame: str = "mt", offsets: np.ndarray | None = None
                                  ) -> np.ndarray:
@@ -187,9 +200,13 @@ def identification_configuration(arm: Arm, params: Parameters, readouts: np.ndar
     if frame == "mt":
         alpha, beta, gamma = params.rotation_abc
         q[:, ident.base_idx] = [*params.translation, beta, alpha, gamma]
-    q[:, ident.axis_idx] = correct_readouts(q_read, params.encoder_maps)
-    if offsets is not None:
-        q[:, ident.axis_idx] += offsets
+    if arm.couplings:
+        q[:, ident.axis_idx] = arm.joint_angles(correct_readouts(q_read, params.encoder_maps),
+                                            offsets)
+    else:
+        q[:, ident.axis_idx] = correct_readouts(q_read, params.encoder_maps)
+        if offsets is not None:
+            q[:, ident.axis_idx] += offsets
     q[:, ident.error_idx] = [params.dh.get(n, f.nominal) for n, f in
                              zip(arm.error_names, arm.error_frames)]
     q[:, ident.tool_idx] = _tool_values(arm, params)
@@ -262,9 +279,11 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         jac *= scale[:, None, None]
         jac[:, :, ends[1]:ends[2]] /= scale[:, None, None]
     rotation, translation, angles, dh, tools = (jac[:, :, a:b] for a, b in zip(ends, ends[1:]))
+    angles = _coupled_columns(arm, angles)
     slope = np.ones_like(q_read)
     for axis in params.encoder_maps:
         slope[:, axis - 1] += params.encoder_maps[axis].slope(q_read[:, axis - 1])
+    slope[:, arm.coupled] = 0.0  # no readout
     return StylusJacobians(
         position=pos,
         readouts=angles * slope[:, None, :],
@@ -299,7 +318,7 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
     fids = np.array([model.getFrameId(link) for link in arm.tool_links])[
         tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
     change = _adjusted(adjust, q_read)
-    q = correct_readouts(q_read, params.encoder_maps) + change.offsets
+    q = arm.joint_angles(correct_readouts(q_read, params.encoder_maps), change.offsets)
     chain = BatchedChain(model)
     positions: np.ndarray = chain.positions(q, fids)
     if change.tilted:
@@ -345,8 +364,10 @@ class JointKinematics:
         change = _adjusted(adjust, q_read)
         q = np.zeros((len(q_read), self.chain.nq))
         angles, slope = correct_with_slopes(q_read, self.params.encoder_maps)
-        q[:, self.axes] = angles + change.offsets
+        q[:, self.axes] = self.arm.joint_angles(angles, change.offsets)
         pos, jac = self.chain.joint_jacobians(q, fids, self.axes)
+        jac = _coupled_columns(self.arm, jac)
+        slope[:, self.arm.coupled] = 0.0  # a coupled axis has no readout: no column
         if change.tilted:
             pos = pos + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
         if adjust is not None:

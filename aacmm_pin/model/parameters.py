@@ -364,5 +364,9 @@ def check_against_arm(params: Parameters, arm: Arm) -> None:
     problems += [Problem(params.arm, None, f"encoder_maps.axes.{k}",
                          f"the arm has axes 1..{arm.n_axes}")
                  for k in params.encoder_maps if not 1 <= k <= arm.n_axes]
+    problems += [Problem(params.arm, None, f"encoder_maps.axes.{k}",
+                         f"A{k} ({arm.axis_names[k - 1]}) is a coupled joint: it has no encoder, "
+                         "so no map") for k in params.encoder_maps
+                 if 1 <= k <= arm.n_axes and arm.coupled[k - 1]]
     if problems:
         raise FileFormatError(problems)

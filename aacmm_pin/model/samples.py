@@ -158,17 +158,12 @@ class Samples:
         Minus Pinocchio's generalized gravity (``dV/dq``, the torque the joint must hold) of the
         nominal runtime model (URDF inertias, gravity along -z of the r-CS): a compliant joint
         deflects by ``k * torque`` with k > 0, i.e. the arm sags. Every body of the tree loads the
-        axes that carry it (a torso axis carries both arms).
+        axes that carry it (a torso axis carries both arms). With coupled joints (see
+        :func:`gravity_torques`) at the coupled configuration, a coupled axis' own torque, the
+        others' in the independent coordinates.
         """
         if self._gravity is None:
-            model = self.arm.runtime_model()
-            data = model.createData()
-            v = [model.joints[model.getJointId(name)].idx_v for name in self.arm.axis_names]
-            q = [model.joints[model.getJointId(name)].idx_q for name in self.arm.axis_names]
-            qs = np.zeros((self.n, model.nq))
-            qs[:, q] = self.q
-            self._gravity = -np.array([pin.computeGeneralizedGravity(model, data, qi)[v]
-                                       for qi in qs]).reshape(self.n, self.arm.n_axes)
+            self._gravity = gravity_torques(self.arm, self.arm.runtime_model(), self.q)
         return self._gravity
 
     @property
@@ -190,7 +185,7 @@ class Samples:
             lateral = np.array([chain.basis(j)[:, :2] for j in ids])  # (n_axes, 3, 2)
             q = [model.joints[j].idx_q for j in ids]
             qs = np.zeros((self.n, model.nq))
-            qs[:, q] = self.q
+            qs[:, q] = self.arm.joint_angles(self.q)
             zero = np.zeros(model.nv)
             moment = np.empty((self.n, len(ids), 3))
             for i, qi in enumerate(qs):
@@ -212,6 +207,25 @@ class Samples:
             out[order] = motion_direction(self.q[order])
             self._direction = out
         return self._direction
+
+
+def gravity_torques(arm: Arm, model: pin.Model, q: np.ndarray) -> np.ndarray:
+    r"""Return the torque gravity exerts on every axis, shape (N, n_axes), N m.
+
+    Minus Pinocchio's generalized gravity of a runtime model of the arm at readouts q (N, n_axes),
+    rad. With coupled joints the configuration is the coupled one (:meth:`Arm.joint_angles`) and
+    the torques are :math:`T^T g` (virtual work: an independent axis also holds what its coupled
+    joints transmit, :math:`g_i + \sum_c a_{ci} g_c`), a coupled axis keeps its own :math:`g_c`
+    (the torque its joint and linkage carry, which its compliance bends under).
+    """
+    data = model.createData()
+    v = [model.joints[model.getJointId(name)].idx_v for name in arm.axis_names]
+    idx = [model.joints[model.getJointId(name)].idx_q for name in arm.axis_names]
+    qs = np.zeros((q.shape[0], model.nq))
+    qs[:, idx] = arm.joint_angles(q)
+    out: np.ndarray = -np.array([pin.computeGeneralizedGravity(model, data, qi)[v]
+                                 for qi in qs]).reshape(q.shape[0], arm.n_axes)
+    return out @ arm.coupling_matrix if arm.couplings else out
 
 
 def motion_direction(q: np.ndarray) -> np.ndarray:

@@ -18,6 +18,11 @@ errors to nothing.
      "effects": {"compliance": 1e-5, "backlash": 4.8e-5, "crosstalk": 4.8e-5,
                  "encoder": 9.7e-5, "thermal": 2.3e-5}}
 
+**Couplings.** The sizes file is the arm's sidecar: besides sizes, it may state coupled joints that
+a URDF ``<mimic>`` cannot (a sum of several joints), ``"couplings": {"T4": {"of": {"T2": -1,
+"T3": -1}, "offset": 0.0}}`` for :math:`q_{T4} = -(q_{T2} + q_{T3})` (joint names, offset in rad;
+:mod:`aacmm_pin.data.couplings`, checked against the URDF by :class:`aacmm_pin.model.arm.Arm`).
+
 Every key is optional: a missing one takes the default arm's value (:data:`DEFAULT`), and an arm
 without a file has exactly the default sizes. ``effects`` maps an effect name of the library
 (:mod:`aacmm_pin.effects`) to the size of each of its terms' parameters; an effect not listed
@@ -30,7 +35,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
@@ -74,6 +79,9 @@ class Sizes:
     the default arm's (:data:`DEFAULT_EFFECTS`), other effects not given their terms' own size."""
     source: str = "default AACMM sizes (aacmm_pin.model.sizes.DEFAULT)"
     """Where the sizes come from, in words."""
+    couplings: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Coupled joint name -> ``{"of": {joint name: coefficient}, "offset": rad}`` (the file's
+    ``couplings`` block; see the module)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "effects", {**DEFAULT_EFFECTS, **self.effects})
@@ -82,14 +90,16 @@ class Sizes:
         """Return the sizes file's content (plain JSON types, SI)."""
         out: dict[str, Any] = {"units": "SI", "source": self.source}
         out |= {f.name: getattr(self, f.name) for f in fields(self)
-                if f.name not in ("effects", "source")}
+                if f.name not in ("effects", "source", "couplings")}
         out["effects"] = dict(self.effects)
+        if self.couplings:
+            out["couplings"] = {k: dict(v) for k, v in self.couplings.items()}
         return out
 
 
 DEFAULT = Sizes()
 """The default arm's sizes (``urdf/aacmm7.urdf`` has no sizes file)."""
-_NUMBERS = tuple(f.name for f in fields(Sizes) if f.name not in ("effects", "source"))
+_NUMBERS = tuple(f.name for f in fields(Sizes) if f.name not in ("effects", "source", "couplings"))
 
 
 def sizes_path(urdf: str | Path) -> Path:
@@ -141,19 +151,52 @@ def sizes_from_dict(data: Any, path: Path | str = "<sizes>") -> Sizes:
                 if number is not None:
                     effects[str(name)] = number
             values["effects"] = effects
+        elif key == "couplings":
+            values["couplings"] = _couplings(value, bad)
         elif key in _NUMBERS:
             number = positive(value, key)
             if number is not None:
                 values[key] = number
         else:
-            meant = close_match(key, ("units", "source", *_NUMBERS, "effects"))
+            meant = close_match(key, ("units", "source", *_NUMBERS, "effects", "couplings"))
             log.add(None, key, f"unknown key{f'; did you mean {meant}?' if meant else ''}; the "
-                               f"keys are units, source, {', '.join(_NUMBERS)}, effects",
+                               f"keys are units, source, {', '.join(_NUMBERS)}, effects, couplings",
                     kind="unknown")
     log.close()
     if problems:
         raise FileFormatError(problems)
     return Sizes(**values)
+
+
+def _couplings(value: Any, bad: Callable[[str, str], None]) -> dict[str, dict[str, Any]]:
+    """Check a ``couplings`` block's form (names are checked by the arm); return the good entries."""
+    out: dict[str, dict[str, Any]] = {}
+    if not isinstance(value, dict):
+        bad("couplings", 'must be an object of joint: {"of": {joint: coefficient}, "offset": rad}')
+        return out
+
+    def finite(x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+    for joint, entry in value.items():
+        where = f"couplings.{joint}"
+        if not isinstance(entry, dict) or not isinstance(entry.get("of"), dict) or not entry["of"]:
+            bad(where, 'must be {"of": {joint: coefficient, ...}, "offset": rad}')
+            continue
+        if extra := sorted(set(entry) - {"of", "offset"}):
+            bad(f"{where}.{extra[0]}", "unknown key; a coupling has of and offset")
+            continue
+        terms = entry["of"]
+        offset = entry.get("offset", 0.0)
+        wrong = [k for k, a in terms.items() if not finite(a)]
+        if wrong:
+            bad(f"{where}.of.{wrong[0]}", f"must be a finite number, got {terms[wrong[0]]!r}")
+        elif not finite(offset):
+            bad(f"{where}.offset", f"must be a finite number of rad, got {offset!r}")
+        else:
+            out[str(joint)] = {"of": {str(k): float(a) for k, a in terms.items()},
+                               "offset": float(offset)}
+    return out
 
 
 def read_sizes(path: str | Path) -> Sizes:

@@ -51,6 +51,9 @@ class Joint:
     """Upper limit (rad or m), None when the joint has no ``<limit upper=...>``."""
     line: int | None
     """Line of the ``<joint>`` element in its file (None for a joint built in memory)."""
+    mimic: tuple[str, float, float] | None = None
+    """``<mimic joint multiplier offset>``: (the joint it follows, multiplier, offset in rad),
+    multiplier 1 and offset 0 where not written; None without a ``<mimic>``."""
 
 
 NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
@@ -161,8 +164,17 @@ class UrdfTree:
             node = element.find("limit")
             lower = None if node is None else _number(node, "lower", where, path)
             upper = None if node is None else _number(node, "upper", where, path)
+            node = element.find("mimic")
+            mimic = None
+            if node is not None:
+                if not node.get("joint"):
+                    raise ArmModelError(path, f"{where}: <mimic> without joint=\"...\"")
+                multiplier = _number(node, "multiplier", where, path)
+                offset = _number(node, "offset", where, path)
+                mimic = (str(node.get("joint")), 1.0 if multiplier is None else multiplier,
+                         0.0 if offset is None else offset)
             out.append(Joint(name, str(kind), ends["parent"], ends["child"], origin, axis, lower,
-                             upper, element.sourceline))
+                             upper, element.sourceline, mimic))
         return out
 
     # ------------------------------------------------------------------ editing

@@ -158,12 +158,14 @@ class ArmPoser:
         self.data = self.model.createData()
         self.visual_data = pin.GeometryData(self.visual)
         self.maps = params.encoder_maps
+        self.arm = arm
         self.paths = [f"{ARM}/visuals/{g.name}" for g in self.visual.geometryObjects]
         """Scene path of every visual, below ``/meshcat``."""
 
     def transforms(self, q_readout: np.ndarray) -> list[np.ndarray]:
         """Return the 4x4 placement of every visual (``paths`` order) for readouts, shape (n,), rad."""
-        q = correct_readouts(np.atleast_2d(q_readout), self.maps)[0]
+        q = correct_readouts(np.atleast_2d(q_readout), self.maps)
+        q = (self.arm.joint_angles(q) if self.arm.couplings else q)[0]  # coupled joints follow
         pin.forwardKinematics(self.model, self.data, q)
         pin.updateGeometryPlacements(self.model, self.data, self.visual, self.visual_data)
         out = []

@@ -50,6 +50,7 @@ class Backlash(Effect):
     """Direction-dependent angular error of an axis."""
 
     name = "backlash"
+    needs_encoder = True
     description = "direction-dependent angular error of an axis"
 
     def candidates(self, arm: Arm, samples: Samples) -> list[Term]:

@@ -39,6 +39,7 @@ class Crosstalk(Effect):
     """Angular error of an axis that depends on a neighbouring axis' angle."""
 
     name = "crosstalk"
+    needs_encoder = True
     description = "angular error of an axis that depends on a neighbouring axis' angle"
 
     def candidates(self, arm: Arm, samples: Samples) -> list[Term]:

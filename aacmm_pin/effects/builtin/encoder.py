@@ -85,6 +85,7 @@ class Encoder(Effect):
     """Angular position measurement error of an axis (encoder map or harmonics)."""
 
     name = "encoder"
+    needs_encoder = True
     description = "angular position measurement error of an axis (encoder map or harmonics)"
 
     def candidates(self, arm: Arm, samples: Samples) -> list[Term]:
