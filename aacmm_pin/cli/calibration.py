@@ -198,7 +198,6 @@ def _discover_into(args: argparse.Namespace) -> int:
     from aacmm_pin.units import UM
 
     arm = load_arm(args.arm)
-    _print_sizes(arm)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
                                                  if e.strip()]
     campaign = read_campaign(args.campaign, arm=arm)
@@ -212,7 +211,8 @@ def _discover_into(args: argparse.Namespace) -> int:
         result = discover(campaign, arm, args.start, effects=effects,
                           use_rtest=not args.no_rtest, max_steps=args.max_steps,
                           max_nfev=args.max_nfev, progress=True, noise=noise,
-                          on_start=functools.partial(_print_discovery_start, args.start),
+                          on_start=functools.partial(_print_discovery_start_sizes, args.start,
+                                                     arm),
                           on_step=_print_discovery_step)  # results as they are found, figures after
     except FitCapReached as exc:  # no model to write
         print(exc, file=sys.stderr)
@@ -241,6 +241,13 @@ def _print_discovery_start(start: str, heldout_rms: float, fit_rms: float, bar_r
         print("  the fit rejects the arm's sizes of " + ", ".join(
             f"{g} (x{f:.3g})" for g, f in size_factors.items()) + ": held-out priors widened")
     sys.stdout.flush()
+
+
+def _print_discovery_start_sizes(start: str, arm: Arm, *values: Any) -> None:
+    """Print the start model's line (:func:`_print_discovery_start`), then the sizes used."""
+    _print_discovery_start(start, *values)
+    print("  ", end="")
+    _print_sizes(arm)
 
 
 def _print_discovery_step(k: int, step: Step) -> None:

@@ -94,9 +94,10 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
     x_now = now.problem.x(z_now)
     residual = now.problem.data_residuals(x_now)
-    kept = residual if keep is None else residual[keep]
-    # inputs that are not this arm's, or in other units, end here (2 evaluations)
-    plausibility.check_agreement(float(np.sqrt(np.mean(kept ** 2))), plausible, sigma_class, nfev,
+    norms = np.linalg.norm(residual if keep is None else residual[keep], axis=1)
+    # inputs that are not this arm's, or in other units, end here (2 evaluations); the scale is
+    # the median's, so that a few outliers (the robust loop's business) do not count
+    plausibility.check_agreement(rob.robust_scale(norms), plausible, sigma_class, nfev,
                                  sizes_label(unknowns.arm.source))
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time

@@ -19,7 +19,7 @@ nuisance unknowns (nests, instrument frames) and :func:`refit`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -114,9 +114,6 @@ class FitOptions:
     """Reject outliers."""
     nests: str = "auto"
     """The R-Test nests' offsets: ``"auto"``, ``"estimate"`` or ``"fixed"``."""
-    budget: Budget | None = field(default=None, compare=False, repr=False)
-    """The evaluations left to the fit (``max_nfev`` in all), shared by its solves; None: a fresh
-    one per identification."""
 
     def __post_init__(self) -> None:
         if self.jac not in ("analytic", "2-point", "3-point", "cs"):
@@ -278,10 +275,11 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                          map_axes=map_axes, loss=loss, f_scale=f_scale, sigma=sigma,
                          sigma_location=sigma_location, max_nfev=max_nfev, jac=jac,
                          progress=progress, extensions=extensions, use_bar=use_bar,
-                         robust=robust, nests=nests, budget=Budget(max_nfev))
+                         robust=robust, nests=nests)
+    budget = Budget(max_nfev)  # every evaluation of every fit below
     arm = arm or load_arm()
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
-        cal = _identify(campaign, arm, options, fixed_nests=nests == "fixed")
+        cal = _identify(campaign, arm, options, budget, fixed_nests=nests == "fixed")
         rtest_nests = "spat" in cal.inputs
         if not rtest_nests:
             return cal
@@ -291,10 +289,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         if p_value >= NOISE_P:
             return replace(cal, nests=f"estimated: the fit's residual matches the stated R-Test "
                                       f"noise (RMS {ratio:.2f} x, p = {p_value:.2g})")
-        if options.budget is not None and options.budget.spent:
+        if budget.spent:
             return cal  # no evaluation left for the refit with fixed nests: it did not converge
         try:
-            fixed = _identify(campaign, arm, options, fixed_nests=True)
+            fixed = _identify(campaign, arm, options, budget, fixed_nests=True)
         except BudgetSpent:
             return replace(cal, success=False, status=0, message=_budget_message(options))
         return replace(fixed, nests=(
@@ -347,15 +345,20 @@ class _Setup(NamedTuple):
     """How every solve minimises."""
 
 
-def _identify(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool) -> Calibration:
-    """One identification with the R-Test nests' offsets estimated or held (``fixed_nests``)."""
+def _identify(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
+              fixed_nests: bool) -> Calibration:
+    """One identification with the R-Test nests' offsets estimated or held (``fixed_nests``).
+
+    ``budget``: the evaluations left to the whole fit (None: ``max_nfev`` per solve only).
+    """
     tic = time.perf_counter()
-    setup = _setup(campaign, arm, options, fixed_nests)
+    setup = _setup(campaign, arm, options, budget, fixed_nests)
     now, inlier, settled = _fits(setup, options)
     return _calibration(campaign, options, setup, now, inlier, settled, tic)
 
 
-def _setup(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool) -> _Setup:
+def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
+           fixed_nests: bool) -> _Setup:
     """Return the measurements, unknowns, noise and nuisance shared by the fits."""
     meas = measurements(campaign, arm, options.use_rtest, options.use_bar)
     if fixed_nests:
@@ -383,7 +386,7 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool)
                                                   options.sigma_location)
     base_w = np.ones(len(q)) if stated is None else sigma_class / stated
     settings = SolverSettings(loss=options.loss, f_scale=options.f_scale or 3 * sigma_class,
-                              max_nfev=options.max_nfev, budget=options.budget)
+                              max_nfev=options.max_nfev, budget=budget)
     return _Setup(meas, full_u, start, has_spat, sigma_class, stated, base_w, nuisance, measured,
                   nuisance_keys, settings)
 
@@ -398,7 +401,8 @@ def _fits(setup: _Setup, options: FitOptions) -> tuple[Fit, np.ndarray | None, b
         def shown(rms: float) -> None:
             bar.update(rms_um=rms * 1e6)
 
-        evaluated = shown if options.budget is None else Counted(options.budget, shown)
+        budget = s.settings.budget
+        evaluated = shown if budget is None else Counted(budget, shown)
 
         def fit(keep: np.ndarray | None) -> Fit:
             return fit_rounds(s.full_u, s.start, q, s.measured, s.nuisance, s.sigma_class,
@@ -461,7 +465,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm],
                                                   obs.scale)) is not None:
         success, message = False, f"{units}; {message}"
-    if not success and options.budget is not None and options.budget.spent:
+    if not success and setup.settings.budget is not None and setup.settings.budget.spent:
         message = _budget_message(options) + message.removeprefix(
             f"did not converge: {res.message}")
     checked = success
