@@ -89,10 +89,10 @@ def test_max_nfev_caps_every_evaluation_of_a_robust_fit(monkeypatch):
     free = ap.identify(campaign, arm, "dh", robust=True)
     used = counter.n
     assert free.success and len(free.outliers) == 3, free.message
-    cap = used - 2  # the fit needs more than this
+    cap = used // 2  # the fit needs twice this
     counter.n = 0
     capped = ap.identify(campaign, arm, "dh", robust=True, max_nfev=cap)
-    assert counter.n <= cap + 1  # + the residual at the point the fit ended, for its report
+    assert counter.n <= cap, (counter.n, cap)
     assert capped.nfev <= cap
     assert not capped.success
     assert f"within {cap} evaluations" in capped.message and "max_nfev" in capped.message
@@ -124,7 +124,7 @@ def test_discover_step_fit_at_its_cap_writes_the_steps_so_far(tmp_path, capsys, 
     """The fit of step 2 stopped at its cap (given 2 evaluations; the others 200): discover prints
     and writes step 1, exits 1 and names step 2's fit, its terms and --max-nfev."""
     arm = ap.load_arm()
-    sim = _points(arm, 200, effects=("dh", "encoder", "compliance"), compliance={2: 3e-5})
+    sim = _points(arm, 120, effects=("dh", "encoder", "compliance"), compliance={2: 3e-5})
     ap.write_simulation(sim, tmp_path / "camp")
     real = discovery.identify
     fits: list[int] = []
