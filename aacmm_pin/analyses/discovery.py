@@ -63,6 +63,10 @@ StepReport = Callable[[int, Step], None]
 """``(k, step)``: step k (1-based), called as soon as it is found (before any figure)."""
 
 
+class FitCapReached(AacmmError):
+    """The start model's fit reached its evaluation cap (``max_nfev``): no step to report."""
+
+
 def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
     if campaign.lengthbar is None or not campaign.bar:
         return None
@@ -93,6 +97,8 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         max_steps: most effects to add.
         alpha: family-wise error rate of a step's significance tests (Bonferroni).
         max_nfev: most residual evaluations of every fit (a cap: each stops at its tolerance).
+            A step's fit that reaches it ends the loop: the steps before it stand, and
+            :attr:`Discovery.capped` and :attr:`Discovery.stopped_because` say which fit.
         progress: show progress bars.
         noise: the measurement noise stated per kind (default: the campaign's ``campaign.json``,
             else the paper's values); the nest offsets' prior is its ``location``, and the final
@@ -109,6 +115,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     Raises:
         ValueError: for an unknown start or effect name.
         IdentificationError: if the campaign cannot be identified (see :func:`identify`).
+        FitCapReached: if the start model's fit reaches ``max_nfev``.
     """
     if start not in STARTS:
         raise ValueError(f"start: choose from {', '.join(STARTS)}, got {start!r}")
@@ -149,6 +156,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                        extensions=spec.terms, max_nfev=max_nfev,
                        nests="estimate",  # one treatment for every model
                        sigma_location=noise.location)
+        if _capped(cal):  # the caller ends the loop
+            return cal
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined
             raise AacmmError(f"discovery: the fit with "
                              f"{', '.join(t.key for t in spec.terms) or start} did not converge: "
@@ -156,6 +165,10 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         return cal
 
     cal = first = fit()
+    if _capped(cal):
+        raise FitCapReached(f"discover: the fit of the start model ({start}) reached its cap of "
+                            f"{max_nfev} evaluations before converging: raise --max-nfev "
+                            "(max_nfev)")
     bar_now = _linear_bar(arm, cal, campaign)
     lin = LinearScorer(cal, samples, bar_now)
     steps: list[Step] = []
@@ -164,7 +177,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     report[0](lin.heldout_rms, cal.fit_rms, None if bar_now is None else bar_now.rms,
               lin.size_factors)
     n_candidates: list[int] = []
-    stopped, missing = "", []
+    stopped, missing, capped = "", [], False
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
     def candidates() -> list[Term]:
         out = [t for e in effects for t in e.offered(arm, samples) if not t.in_model(spec)]
@@ -190,9 +203,17 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
             break
         chosen = _forward(lin, good[0], terms_now, threshold)
         new_terms = [s.term for s in chosen]
+        spec_before = spec
         for t in new_terms:
             spec = t.added_to(spec)
         new_cal = fit()
+        if _capped(new_cal):
+            capped = True
+            stopped = (f"the fit of step {len(steps) + 1} ({', '.join(t.key for t in new_terms)}) "
+                       f"reached its cap of {max_nfev} evaluations before converging: the "
+                       f"{len(steps)} steps before it stand; raise --max-nfev (max_nfev)")
+            spec = spec_before  # the model of the steps that stand
+            break
         new_bar = _linear_bar(arm, new_cal, campaign)
         new_lin = LinearScorer(new_cal, samples, new_bar)
         step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
@@ -232,7 +253,12 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
                      noise=cal.sigma, n_candidates=n_candidates,
                      runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
-                     stated_noise=noise)
+                     stated_noise=noise, capped=capped)
+
+
+def _capped(cal: Calibration) -> bool:
+    """Whether a fit stopped at its evaluation cap (scipy's status 0) without converging."""
+    return not cal.success and cal.status == 0
 
 
 def _step(new_terms: list[Term], best: Score, scores: list[Score],

@@ -169,6 +169,9 @@ class Discovery:
     (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`)."""
     stated_noise: StatedNoise | None = None
     """The measurement noise the run judged the residual against."""
+    capped: bool = False
+    """Whether a fit reached its evaluation cap (``max_nfev``) and ended the loop there
+    (:attr:`stopped_because` names the fit); the steps before it stand."""
 
     @property
     def unexplained(self) -> dict[str, Any] | None:

@@ -195,11 +195,14 @@ def no_rtest_option(text: str) -> argparse.ArgumentParser:
 
 
 def max_nfev_option() -> argparse.ArgumentParser:
-    """``--max-nfev N``: the evaluation cap of every solve (they stop at their tolerance)."""
+    """``--max-nfev N``: the evaluation cap of every fit (its solves stop at their tolerance)."""
     p = _parent()
     p.add_argument("--max-nfev", type=positive(int), default=200, metavar="N",
-                   help="most residual evaluations per solve (a cap: every solve stops at its "
-                        "tolerance; the count used is printed and in report.json)")
+                   help="most residual evaluations of a fit, all its solves together (rounds, "
+                        "robust passes, the refit with fixed nests; a cap: a fit stops at its "
+                        "tolerance, the count used is printed and in report.json; discover: a "
+                        "step's fit that reaches it ends the loop, its steps so far written, "
+                        "exit 1)")
     return p
 
 

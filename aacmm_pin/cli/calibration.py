@@ -41,6 +41,7 @@ from aacmm_pin.units import SIMULATOR_EFFECTS
 if TYPE_CHECKING:
     from aacmm_pin.analyses.discovery_results import Step
     from aacmm_pin.fit.identification_result import Calibration
+    from aacmm_pin.model.arm import Arm
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -136,6 +137,7 @@ def _identify_into(args: argparse.Namespace) -> int:
     terms = tuple(term_from_key(k.strip()) for k in (args.terms or "").split(",") if k.strip())
     phase("loading the arm")
     arm = load_arm(args.arm)
+    _print_sizes(arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)
     print("stated noise per coordinate: " + (f"{args.sigma_um:g} um (--sigma-um)" if args.sigma_um
@@ -154,6 +156,13 @@ def _identify_into(args: argparse.Namespace) -> int:
     if choice is not None and (advice := choice.advice(args.model == AUTO)):
         print(f"  {advice}")
     return 0 if cal.success else 1
+
+
+def _print_sizes(arm: Arm) -> None:
+    """Print which plausible sizes the arm uses: its sizes file, or the built-in defaults."""
+    from aacmm_pin.model.sizes import sizes_label
+
+    print(f"sizes: {sizes_label(arm.source)}")
 
 
 def _print_calibration(cal: Calibration, out: Path) -> None:
@@ -195,7 +204,7 @@ def _discover(args: argparse.Namespace) -> int:
 
 
 def _discover_into(args: argparse.Namespace) -> int:
-    from aacmm_pin.analyses.discovery import discover
+    from aacmm_pin.analyses.discovery import FitCapReached, discover
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
     from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.model.arm import load_arm
@@ -212,12 +221,17 @@ def _discover_into(args: argparse.Namespace) -> int:
         noise = dataclasses.replace(campaign.noise or StatedNoise(), **given)
     except ValueError as exc:
         raise SystemExit(f"discover: --sigma-*-um: {exc}") from exc
-    result = discover(campaign, arm, args.start, effects=effects,
-                      use_rtest=not args.no_rtest, max_steps=args.max_steps,
-                      max_nfev=args.max_nfev, progress=True, noise=noise,
-                      on_start=functools.partial(_print_discovery_start, args.start,
-                                                 noise_summary(campaign, noise if given else None)),
-                      on_step=_print_discovery_step)  # results as they are found, figures after
+    try:
+        result = discover(campaign, arm, args.start, effects=effects,
+                          use_rtest=not args.no_rtest, max_steps=args.max_steps,
+                          max_nfev=args.max_nfev, progress=True, noise=noise,
+                          on_start=functools.partial(
+                              _print_discovery_start_sizes, args.start, arm,
+                              noise_summary(campaign, noise if given else None)),
+                          on_step=_print_discovery_step)  # results as they are found, figures after
+    except FitCapReached as exc:  # no model to write
+        print(exc, file=sys.stderr)
+        return 1
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
@@ -227,6 +241,9 @@ def _discover_into(args: argparse.Namespace) -> int:
     write_discovery(result, arm, args.out, force=args.force)
     print(f"wrote {args.out / 'discovery.json'}, figures and the final model (CALDIR) "
           f"in {args.out} ({result.runtime_s:.1f} s)")
+    if result.capped:  # the steps so far are written; the loop ended at a fit's cap
+        print(f"discover: {result.stopped_because}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -244,6 +261,13 @@ def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: 
         print("  the fit rejects the arm's sizes of " + ", ".join(
             f"{g} (x{f:.3g})" for g, f in size_factors.items()) + ": held-out priors widened")
     sys.stdout.flush()
+
+
+def _print_discovery_start_sizes(start: str, arm: Arm, noise: str, *values: Any) -> None:
+    """Print the start model's line (:func:`_print_discovery_start`), then the sizes used."""
+    _print_discovery_start(start, noise, *values)
+    print("  ", end="")
+    _print_sizes(arm)
 
 
 def _print_discovery_step(k: int, step: Step) -> None:
@@ -313,6 +337,7 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     from aacmm_pin.outputs.plots import plot_encoder_maps
 
     arm = load_arm(args.arm)
+    _print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
                    max_nfev=args.max_nfev, progress=True)
@@ -375,6 +400,7 @@ def _plan_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     from aacmm_pin.model.arm import load_arm
 
     arm = load_arm(args.arm)
+    _print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     check_plannable(campaign)  # before minutes of identification
     cal = identify(campaign, arm, model=args.model, max_nfev=args.max_nfev,
@@ -412,6 +438,7 @@ def _axes(args: argparse.Namespace) -> int:
     arm = load_arm(args.arm)
     print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order "
           "(or <joint>_deg, any order)")
+    _print_sizes(arm)
     for n, (name, (lo, hi)) in enumerate(zip(arm.axis_names, np.degrees(arm.joint_limits)), 1):
         coupled = arm.couplings.get(name)
         note = f"  coupled: {coupled.formula()} (no readout needed)" if coupled else ""

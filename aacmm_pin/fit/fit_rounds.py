@@ -17,10 +17,13 @@ import scipy.sparse as sp
 from scipy.optimize import OptimizeResult
 
 from aacmm_pin.fit import identifiability as ident
+from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
+from aacmm_pin.fit.solver_values import BudgetSpent
 from aacmm_pin.fit.unknowns import BlockJacobian, Unknowns
 from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.model.sizes import sizes_label
 
 
 class Fit(NamedTuple):
@@ -85,9 +88,17 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
         return decide(jac_x, x)
 
     now = decide(jac_now, x_start)
+    n_kept = len(q) if keep is None else int(keep.sum())
+    plausible = plausibility.plausible_rms(unknowns, jac_now, now.obs.scale, 3 * n_kept)
     z_now, f_at, nfev = decision_point(now.problem, jac_now if same else None, on_evaluation)
     f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
     x_now = now.problem.x(z_now)
+    residual = now.problem.data_residuals(x_now)
+    norms = np.linalg.norm(residual if keep is None else residual[keep], axis=1)
+    # inputs that are not this arm's, or in other units, end here (2 evaluations); the scale is
+    # the median's, so that a few outliers (the robust loop's business) do not count
+    plausibility.check_agreement(rob.robust_scale(norms), plausible, sigma_class, nfev,
+                                 sizes_label(unknowns.arm.source))
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
         jac_now = jacobian(x_now)
@@ -103,8 +114,8 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
             jac_now = last if last is not None else jacobian(x_now)
             last = None
             again = check(jac_now, x_now, now)
-            if again is None:
-                at_solution = jac_now  # the same number held: the decision stands
+            if again is None or (settings.budget is not None and settings.budget.spent):
+                at_solution = jac_now  # the decision stands (or no evaluation is left to solve)
                 break
             now, z_now, f_now = again, again.problem.z(x_now), None
         # the solve's first Jacobian is this one (handed over, not kept here: a campaign's
@@ -165,14 +176,18 @@ def decision_point(problem: Problem, jacobian: BlockJacobian | None,
     f0 = problem.fun_reported(z0, on_evaluation)
     z1 = problem.newton_step(z0, f0, jacobian)
     del jacobian
-    f1 = problem.fun_reported(z1, on_evaluation)
+    try:
+        f1 = problem.fun_reported(z1, on_evaluation)
+    except BudgetSpent:  # the fit's evaluations are spent: its start stands
+        return z0, f0, 1
     # the plain sum of squares even for a robust loss: the point only decides the held directions
     # and starts the solve, which minimises the loss from there
     return (z1, f1, 2) if f1 @ f1 < f0 @ f0 else (z0, f0, 2)
 
 
 def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
-                    reweight: Callable[[Fit, np.ndarray], Fit], base_w: np.ndarray
+                    reweight: Callable[[Fit, np.ndarray], Fit], base_w: np.ndarray,
+                    spent: Callable[[], bool] = lambda: False
                     ) -> tuple[np.ndarray, bool, Fit]:
     """Reject outliers from a least-squares fit (see :mod:`aacmm_pin.fit.robust`).
 
@@ -183,6 +198,7 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
     identifies from the start values with the samples of ``keep``; ``reweight(fit, w)`` solves
     the same structure again from its solution with sample weights ``w``. Returns the mask of
     samples kept, whether the set settled and the final fit (its ``nfev`` counts every solve).
+    ``spent()``: whether the fit's evaluations are spent (the loop ends, not settled).
     """
     now, nfev = first, first.nfev
     n = len(base_w)
@@ -197,6 +213,8 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
     norms = norms_of(now)
     weight = np.ones(n)
     for _ in range(rob.MAX_HUBER_ITERATIONS):
+        if spent():
+            return np.ones(n, bool), False, now._replace(nfev=nfev)
         new = rob.huber_weights(norms, rob.robust_scale(norms, fraction(now, n)))
         if np.max(np.abs(new - weight)) < rob.WEIGHT_TOL:
             break
@@ -217,6 +235,8 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
             norms = norms_of(first)
             if not rob.flag(norms, rob.robust_scale(norms, fraction(first, n))).any():
                 return ~out, True, first._replace(nfev=nfev)
+        if spent():
+            break
         mask, refitted = out, True
         now = fit(~mask)
         nfev += now.nfev

@@ -31,6 +31,7 @@ from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.fit import identifiability as ident
+from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit.fit_rounds import Fit, fit_rounds, reject_outliers
 from aacmm_pin.fit.identification_result import Calibration
@@ -44,9 +45,11 @@ from aacmm_pin.fit.noise_judgement import (
 )
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Factor, Nuisance, Problem, SolverSettings
+from aacmm_pin.fit.solver_values import Budget, BudgetSpent, Counted
 from aacmm_pin.fit.unknowns import FrameKey, NestKey, UnknownKey, Unknowns
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.model.sizes import sizes_label
 from aacmm_pin.progress import Progress
 from aacmm_pin.units import (
     SIGMA_BAR,
@@ -98,7 +101,7 @@ class FitOptions:
     sigma_location: float = SIGMA_LOCATION
     """Prior standard deviation of each R-Test zero position per coordinate, m."""
     max_nfev: int = 200
-    """Most residual evaluations per solve."""
+    """Most residual evaluations of the whole fit (every solve of it together)."""
     jac: str = "analytic"
     """``"analytic"`` or a scipy finite-difference scheme."""
     progress: bool = False
@@ -232,9 +235,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         sigma: R-Test noise per coordinate, m; None estimates it from the residuals.
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
             (paper Section 5: 3 um); each nest's offset is estimated with this prior.
-        max_nfev: most residual evaluations per solve, a cap well above what a solve needs to
-            reach its tolerance (``nfev`` reports what was used; not converged within it:
-            ``success`` False).
+        max_nfev: most residual evaluations of the whole fit (the rounds, the robust passes and
+            the refit with fixed nests together), a cap well above what a fit needs to reach its
+            tolerance (``nfev`` reports what was used; not converged within it: ``success``
+            False, ``status`` 0, the message names the cap).
         jac: ``"analytic"`` (Pinocchio, sparse in the map nodes) or a scipy finite-difference
             scheme (``"2-point"``, ``"3-point"``) on the same problem, for comparison.
         progress: show progress (evaluations and residual RMS; log lines when stderr is not a
@@ -272,9 +276,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                          sigma_location=sigma_location, max_nfev=max_nfev, jac=jac,
                          progress=progress, extensions=extensions, use_bar=use_bar,
                          robust=robust, nests=nests)
+    budget = Budget(max_nfev)  # every evaluation of every fit below
     arm = arm or load_arm()
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
-        cal = _identify(campaign, arm, options, fixed_nests=nests == "fixed")
+        cal = _identify(campaign, arm, options, budget, fixed_nests=nests == "fixed")
         rtest_nests = "spat" in cal.inputs
         if not rtest_nests:
             return cal
@@ -284,7 +289,12 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         if p_value >= NOISE_P:
             return replace(cal, nests=f"estimated: the fit's residual matches the stated R-Test "
                                       f"noise (RMS {ratio:.2f} x, p = {p_value:.2g})")
-        fixed = _identify(campaign, arm, options, fixed_nests=True)
+        if budget.spent:
+            return cal  # no evaluation left for the refit with fixed nests: it did not converge
+        try:
+            fixed = _identify(campaign, arm, options, budget, fixed_nests=True)
+        except BudgetSpent:
+            return replace(cal, success=False, status=0, message=_budget_message(options))
         return replace(fixed, nests=(
             f"fixed at their measured positions: the model's residual is {ratio:.1f} x the stated "
             f"R-Test noise (p = {p_value:.2g}), so nest offsets estimated with it would take up "
@@ -335,21 +345,32 @@ class _Setup(NamedTuple):
     """How every solve minimises."""
 
 
-def _identify(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool) -> Calibration:
-    """One identification with the R-Test nests' offsets estimated or held (``fixed_nests``)."""
+def _identify(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
+              fixed_nests: bool) -> Calibration:
+    """One identification with the R-Test nests' offsets estimated or held (``fixed_nests``).
+
+    ``budget``: the evaluations left to the whole fit (None: ``max_nfev`` per solve only).
+    """
     tic = time.perf_counter()
-    setup = _setup(campaign, arm, options, fixed_nests)
+    setup = _setup(campaign, arm, options, budget, fixed_nests)
     now, inlier, settled = _fits(setup, options)
     return _calibration(campaign, options, setup, now, inlier, settled, tic)
 
 
-def _setup(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool) -> _Setup:
+def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
+           fixed_nests: bool) -> _Setup:
     """Return the measurements, unknowns, noise and nuisance shared by the fits."""
     meas = measurements(campaign, arm, options.use_rtest, options.use_bar)
     if fixed_nests:
         meas = _without_rtest_nests(meas)
     q, group, samples, stated = meas.q, meas.group, meas.samples, meas.sigma
     main = ~np.isnan(meas.measured[:, 0]) & (True if meas.frame is None else meas.frame < 0)
+    if campaign.points is not None:  # points in other units, or not this arm's: before the fit
+        pts = _point_rows(campaign, meas) & ~np.isnan(meas.measured[:, 0])
+        nominal = stylus_positions(arm, Parameters.nominal(arm, options.step_deg), q[pts], "r",
+                                   tool=None if samples.tool is None else samples.tool[pts])
+        plausibility.check_point_spread(meas.measured[pts], nominal, group[pts],
+                                        sizes_label(arm.source))
     start = options.start or _initial_frame(arm, Parameters.nominal(arm, options.step_deg),
                                             q[main], meas.measured[main], group[main],
                                             None if samples.tool is None else samples.tool[main])
@@ -368,7 +389,7 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, fixed_nests: bool)
                                                   options.sigma_location)
     base_w = np.ones(len(q)) if stated is None else sigma_class / stated
     settings = SolverSettings(loss=options.loss, f_scale=options.f_scale or 3 * sigma_class,
-                              max_nfev=options.max_nfev)
+                              max_nfev=options.max_nfev, budget=budget)
     return _Setup(meas, full_u, start, has_spat, sigma_class, stated, base_w, nuisance, measured,
                   nuisance_keys, settings)
 
@@ -380,8 +401,11 @@ def _fits(setup: _Setup, options: FitOptions) -> tuple[Fit, np.ndarray | None, b
     """
     s, q = setup, setup.meas.q
     with Progress(f"identify {options.model}", "evaluation", enabled=options.progress) as bar:
-        def evaluated(rms: float) -> None:
+        def shown(rms: float) -> None:
             bar.update(rms_um=rms * 1e6)
+
+        budget = s.settings.budget
+        evaluated = shown if budget is None else Counted(budget, shown)
 
         def fit(keep: np.ndarray | None) -> Fit:
             return fit_rounds(s.full_u, s.start, q, s.measured, s.nuisance, s.sigma_class,
@@ -400,7 +424,9 @@ def _fits(setup: _Setup, options: FitOptions) -> tuple[Fit, np.ndarray | None, b
         if not options.robust:
             return now, None, True
         # the first fit's Jacobian is not held through the refits
-        inlier, settled, now = reject_outliers(now._replace(jac=None), fit, reweight, s.base_w)
+        inlier, settled, now = reject_outliers(now._replace(jac=None), fit, reweight, s.base_w,
+                                               lambda: s.settings.budget is not None
+                                               and s.settings.budget.spent)
         return now, inlier, settled
 
 
@@ -439,6 +465,12 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     success, message = _verdict(res, robust, settled, outliers, suspects, scale, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
+    if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm],
+                                                  obs.scale)) is not None:
+        success, message = False, f"{units}; {message}"
+    if not success and setup.settings.budget is not None and setup.settings.budget.spent:
+        message = _budget_message(options) + message.removeprefix(
+            f"did not converge: {res.message}")
     checked = success
     if enough and success:
         success, message = _parts_dof(success, message, problem, x_full, setup, kept)
@@ -457,12 +489,19 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
                        raw=OptimizeResult({k: v for k, v in res.items() if k != "jac"}),
                        unknowns=unknowns, constraints=now.constraints,
                        identifiable=obs.identifiable, q=setup.meas.q, problem=problem,
-                       settings=setup.settings, nuisance_keys=tuple(setup.nuisance_keys),
+                       settings=replace(setup.settings, budget=None),
+                       nuisance_keys=tuple(setup.nuisance_keys),
                        inputs=tuple(k for k, on in (("spat", setup.has_spat),
                                                     ("points", campaign.points is not None),
                                                     ("bar", options.use_bar)) if on),
                        robust=robust, outliers=outliers, suspects=suspects, inlier=inlier,
                        judged=checked and not success)
+
+
+def _budget_message(options: FitOptions) -> str:
+    """Return the message of a fit that spent its evaluations before converging."""
+    return (f"did not converge within {options.max_nfev} evaluations (max_nfev, --max-nfev: the "
+            "cap of all the fit's solves together); raise it or check the inputs")
 
 
 def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[Outlier, ...],

@@ -30,10 +30,17 @@ from typing import TypeVar
 import numpy as np
 import pinocchio as pin
 import scipy.sparse as sp
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 from scipy.sparse.linalg import LinearOperator, lsmr
 
-from aacmm_pin.fit.solver_values import Factor, Solution, SolverSettings, WarmStart
+from aacmm_pin.fit.solver_values import (
+    BudgetSpent,
+    Counted,
+    Factor,
+    Solution,
+    SolverSettings,
+    WarmStart,
+)
 from aacmm_pin.fit.unknowns import BlockJacobian, Unknowns
 
 __all__ = ["DENSE_LIMIT", "STEP_TOL", "Factor", "Nuisance", "Problem", "Solution", "SolverSettings",
@@ -55,6 +62,8 @@ sigma for 1,600 to 160,000 samples), but it does not wait for the cost: below su
 cost's change is its rounding, and the trust region rejected steps at random until the step's
 tolerance stopped it (5 to 13 evaluations at every size, depending on the noise, the last ones
 moving nothing)."""
+BUDGET_MESSAGE = "The maximum number of function evaluations is exceeded."
+"""scipy's message for a solve stopped at its cap, also given when the fit's budget is spent."""
 RANK_TOL = 1e-10
 """Relative singular value below which a constraint row adds no rank."""
 FRAME_ANGLE = 1e-2
@@ -369,8 +378,12 @@ class Problem:
         """Return :meth:`fun` at z (shape (n_rows,), m) and report its RMS to ``on_evaluation``.
 
         The RMS is in m (in units of the solve's sigma for weighted rows); ``on_evaluation`` is
-        called once per evaluation when given (progress).
+        called once per evaluation when given (progress). A :class:`~aacmm_pin.fit.solver_values.Counted`
+        callback takes the evaluation from its budget first (raising
+        :class:`~aacmm_pin.fit.solver_values.BudgetSpent` when none is left).
         """
+        if isinstance(on_evaluation, Counted):
+            on_evaluation.budget.take()
         out = self.fun(z)
         if on_evaluation is not None:
             on_evaluation(float(np.sqrt(np.mean(out ** 2))))
@@ -510,13 +523,17 @@ class Problem:
         exact = warm.at is None or np.array_equal(warm.at, self.x(z0))
         del warm, start
         evaluations = [0]
+        best: list[tuple[float, np.ndarray, np.ndarray]] = []  # (cost, z, f) of the lowest cost
 
         def fun(z: np.ndarray) -> np.ndarray:
             given = handover.residual(z)
-            if given is not None:
-                return given
-            evaluations[0] += 1
-            return self.fun_reported(z, on_evaluation)
+            if given is None:
+                given = self.fun_reported(z, on_evaluation)
+                evaluations[0] += 1
+            cost = 0.5 * float(given @ given)
+            if not best or cost < best[0][0]:
+                best[:] = [(cost, np.array(z, dtype=float), given)]
+            return given
 
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
         previous: list[list[BlockJacobian]] = []
@@ -539,10 +556,22 @@ class Problem:
 
         if jac == "analytic":
             jac_fun = self.jac if dense else operator
-        out = least_squares(fun, z0, jac=jac_fun, method="trf",
-                            tr_solver="exact" if dense else "lsmr", loss=settings.loss,
-                            f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
-                            xtol=1e-12, gtol=STEP_TOL * self.sigma_class)
+        try:
+            out = least_squares(fun, z0, jac=jac_fun, method="trf",
+                                tr_solver="exact" if dense else "lsmr", loss=settings.loss,
+                                f_scale=settings.f_scale, max_nfev=settings.max_nfev, ftol=1e-12,
+                                xtol=1e-12, gtol=STEP_TOL * self.sigma_class)
+        except BudgetSpent:  # the fit's evaluations are spent: it ends at its lowest cost
+            while previous:
+                previous.pop().clear()
+            if best:
+                cost, z_best, f_best = best[0]
+            else:  # nothing evaluated here: the start's residual (for the report, not a step)
+                z_best = np.array(z0, dtype=float)
+                f_best = self.fun(z_best)
+                cost = 0.5 * float(f_best @ f_best)
+            out = OptimizeResult(x=z_best, fun=f_best, cost=cost, status=0, success=False,
+                                 message=BUDGET_MESSAGE, njev=0, optimality=np.nan)
         out.nfev = evaluations[0]
         last: BlockJacobian | None = None
         if previous:  # the last operator's Jacobian, if taken at the solution

@@ -8,6 +8,7 @@ otherwise compute again). :class:`Factor` is what Gauss-Newton refits share.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -27,6 +28,9 @@ class SolverSettings:
     """Residual scale of a robust loss, m."""
     max_nfev: int
     """Most residual evaluations of one solve."""
+    budget: Budget | None = field(default=None, compare=False)
+    """The evaluations left to the whole fit (rounds, robust passes), shared by its solves; None:
+    only ``max_nfev`` per solve."""
 
 
 class Factor(NamedTuple):
@@ -70,3 +74,49 @@ class Solution:
     """:meth:`~aacmm_pin.fit.solver.Problem.data_jacobian` at the solution when the solver's last
     Jacobian was taken there (analytic Jacobian), else None: a caller that needs it there need not
     compute it again."""
+
+
+class BudgetSpent(Exception):
+    """Raised before an evaluation that would exceed a fit's :class:`Budget` (caught in the fit)."""
+
+
+class Budget:
+    """The residual evaluations one identification may make in all (``max_nfev``), and those made.
+
+    Every evaluation of every solve of the fit (the decision point, the rounds, the robust passes,
+    the refit with fixed nests) takes one; one more raises :class:`BudgetSpent` before it is made.
+    """
+
+    def __init__(self, cap: int):
+        self.cap = int(cap)
+        """Most evaluations."""
+        self.used = 0
+        """Evaluations made."""
+
+    @property
+    def spent(self) -> bool:
+        """Whether no evaluation is left."""
+        return self.used >= self.cap
+
+    def take(self) -> None:
+        """Count one evaluation, or raise :class:`BudgetSpent` if none is left."""
+        if self.spent:
+            raise BudgetSpent(f"the fit's {self.cap} evaluations are spent")
+        self.used += 1
+
+
+class Counted:
+    """An ``on_evaluation`` callback that takes each evaluation from a :class:`Budget` first.
+
+    :meth:`~aacmm_pin.fit.solver.Problem.fun_reported` calls :meth:`Budget.take` before it
+    evaluates and this object, with the residual's RMS (m), after.
+    """
+
+    def __init__(self, budget: Budget, report: Callable[[float], None] | None = None):
+        self.budget = budget
+        self.report = report
+
+    def __call__(self, rms: float) -> None:
+        """Report one evaluation's residual RMS (m), already taken from the budget."""
+        if self.report is not None:
+            self.report(rms)

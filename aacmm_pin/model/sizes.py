@@ -209,6 +209,18 @@ def read_sizes(path: str | Path) -> Sizes:
     return sizes_from_dict(read_json(path, MAX_SIZES_BYTES, "a sizes file"), path)
 
 
+def sizes_file(urdf: str | Path) -> Path | None:
+    """Return the sizes file an arm's URDF uses, or None when it has none (the defaults)."""
+    path = sizes_path(urdf)
+    return path if path.is_file() else None
+
+
+def sizes_label(urdf: str | Path) -> str:
+    """Return which sizes an arm uses, for a line or a report: the file's path or the defaults."""
+    path = sizes_file(urdf)
+    return str(path) if path is not None else "built-in defaults"
+
+
 def sizes_of_urdf(urdf: str | Path) -> Sizes:
     """Return the sizes of the arm of a URDF: its sizes file if there is one, else the defaults."""
     path = sizes_path(urdf)

@@ -20,7 +20,7 @@ from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.effects.registry import write_parameters
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.sizes import sizes_path, write_sizes
+from aacmm_pin.model.sizes import sizes_label, sizes_path, write_sizes
 from aacmm_pin.outputs.calibration_folder import (
     MAPS_FILE,
     PARAMETERS_FILE,
@@ -94,6 +94,7 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path,
     write_maps_csv(cal, folder / MAPS_FILE)
     report = cal.report()
     report["arm"] = arm.name
+    report["sizes"] = sizes_label(arm.source)  # the sizes file the fit used, or the defaults
     if frames := instrument_frames(cal):  # predict --frame GROUP
         report[FRAMES_KEY] = frames
     report.update(extra or {})
