@@ -98,6 +98,25 @@ def test_max_nfev_caps_every_evaluation_of_a_robust_fit(monkeypatch):
     assert f"within {cap} evaluations" in capped.message and "max_nfev" in capped.message
 
 
+
+@pytest.mark.slow
+def test_sizes_30x_on_the_coupled_torso_campaign(tmp_path):
+    """Issue 25's campaign (torso with T4 = -(T2 + T3), hidden compliance on T4 and 3 others, two
+    markers, one camera frame, 500 points), seeds 0-4, the default sizes x30: the DH fit costs
+    within 1.5x the evaluations and finds the same parameters to 1e-3 of their std."""
+    from tests.test_coupled import HIDDEN
+
+    arm = ap.load_arm("torso_coupled")
+    wide = ap.load_arm(str(_scaled_arm(tmp_path, "torso_coupled", 30.0)))
+    axes = {arm.axis_names.index(name) + 1: k for name, k in HIDDEN.items()}
+    for seed in range(5):
+        sim = _points(arm, 500, seed=seed, effects=("dh", "compliance"), compliance=axes)
+        plain, scaled = ap.identify(sim.campaign, arm, "dh"), ap.identify(sim.campaign, wide, "dh")
+        assert plain.success and scaled.success, (seed, plain.message, scaled.message)
+        assert scaled.nfev <= 1.5 * plain.nfev, (seed, scaled.nfev, plain.nfev)
+        std = np.sqrt(np.diag(plain.covariance))
+        assert np.max(np.abs(scaled.x - plain.x) / std) < 1e-3, seed
+
 def _with_points(campaign: ap.Campaign, point: np.ndarray) -> ap.Campaign:
     import dataclasses
 
