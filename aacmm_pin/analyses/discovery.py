@@ -42,6 +42,7 @@ from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
 from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.analyses.residual_scan import TIME, scan_residuals
+from aacmm_pin.analyses.term_elimination import Dropped, eliminate
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, ModelSpec, Term
 from aacmm_pin.effects.registry import default_effects, library
@@ -143,15 +144,16 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     spec = ModelSpec((), tuple(range(1, arm.n_axes + 1)) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
 
-    def fit() -> Calibration:
-        cal = identify(campaign, arm, model="proposed" if spec.map_axes else "dh",
-                       use_rtest=spec.use_rtest, map_axes=spec.map_axes or None,
-                       extensions=spec.terms, max_nfev=max_nfev,
+    def fit(model: ModelSpec | None = None) -> Calibration:
+        model = model or spec
+        cal = identify(campaign, arm, model="proposed" if model.map_axes else "dh",
+                       use_rtest=model.use_rtest, map_axes=model.map_axes or None,
+                       extensions=model.terms, max_nfev=max_nfev,
                        nests="estimate",  # one treatment for every model
                        sigma_location=noise.location)
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined
             raise AacmmError(f"discovery: the fit with "
-                             f"{', '.join(t.key for t in spec.terms) or start} did not converge: "
+                             f"{', '.join(t.key for t in model.terms) or start} did not converge: "
                              f"{cal.message}")
         return cal
 
@@ -166,8 +168,10 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     n_candidates: list[int] = []
     stopped, missing = "", []
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
-    def candidates() -> list[Term]:
-        out = [t for e in effects for t in e.candidates(arm, samples) if not t.in_model(spec)]
+    named_in: dict[str, int] = {}  # term key -> step that named it
+    def candidates() -> list[Term]:  # a term dropped as not earned is not tried again
+        out = [t for e in effects for t in e.candidates(arm, samples)
+               if not t.in_model(spec) and t.key not in named_in]
         n_candidates.append(len(out))
         return out
 
@@ -192,11 +196,15 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         new_terms = [s.term for s in chosen]
         for t in new_terms:
             spec = t.added_to(spec)
-        new_cal = fit()
+            named_in[t.key] = len(steps) + 1
+        # every term of the model earned given all the others (a term may have stood in for an
+        # effect named later): the least significant dropped and the model refitted, until none
+        new_cal, spec, dropped = eliminate(fit(), spec, fit, alpha, named_in)
+        new_terms = [t for t in new_terms if t.in_model(spec)]
         new_bar = _linear_bar(arm, new_cal, campaign)
         new_lin = LinearScorer(new_cal, samples, new_bar)
         step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
-                     samples)
+                     samples, (chosen, dropped))
         steps.append(step)
         report[1](len(steps), step)
         cal, lin, bar_now = new_cal, new_lin, new_bar
@@ -237,8 +245,12 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
 
 def _step(new_terms: list[Term], best: Score, scores: list[Score],
           before: tuple[Calibration, LinearScorer, LinearBar | None],
-          after: tuple[Calibration, LinearScorer, LinearBar | None], samples: Samples) -> Step:
-    """Return the record of one step: what was added, and the model before and after it."""
+          after: tuple[Calibration, LinearScorer, LinearBar | None], samples: Samples,
+          selection: tuple[list[Score], list[Dropped]] = ([], [])) -> Step:
+    """Return the record of one step: what was added, and the model before and after it.
+
+    ``selection``: the terms the step tried (as they joined) and the terms dropped after its refit.
+    """
     (cal, lin, bar_now), (new_cal, new_lin, new_bar) = before, after
     views = []
     for t in sorted(new_terms, key=lambda t: t.axes):
@@ -261,7 +273,8 @@ def _step(new_terms: list[Term], best: Score, scores: list[Score],
         bar_covered_rms_before=None if bar_now is None else bar_now.covered_rms,
         bar_covered_rms_after=None if new_bar is None else new_bar.covered_rms,
         bar_normalised_before=None if bar_now is None else lin.bar_normalised(bar_now.errors),
-        bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors))
+        bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors),
+        tried=selection[0], dropped=selection[1])
 
 
 def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float

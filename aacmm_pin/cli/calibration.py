@@ -234,6 +234,9 @@ def _print_discovery_step(k: int, step: Step) -> None:
           f"{step.fit_rms_after * 1e6:.2f} um")
     if step.bar_rms_before is not None:
         print(f"  length bar: {step.bar_summary()}")
+    for line in (step.bar_disagreement(), step.selection_summary()):
+        if line:
+            print(f"  {line}")
     sys.stdout.flush()
 
 
