@@ -349,8 +349,9 @@ def main() -> None:
         "0.9 (seed 0). Absorbed: the share of the effect's sum of squares that the start model's "
         "own parameters take. \"Oracle searching m candidates\": the oracle's test at level "
         f"{ORACLE_LEVEL} / m, m the candidates discovery's first step scores (Bonferroni): the "
-        "power any search over m candidates at the same family-wise false-alarm rate can have "
-        "with a union bound.", "",
+        "power of a search over m candidates with a union bound at that family-wise rate "
+        "(discovery's steps name at 1e-3 / m, and the residual scan spends 0.005 + 0.005 of its "
+        "false alarms).", "",
         "| effect | size | oracle power (predicted) | oracle (counted) | oracle searching m "
         "candidates (predicted; m) | discovery | absorbed |",
         "|---|---|---|---|---|---|---|", *rows, "",
