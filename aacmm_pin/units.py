@@ -90,7 +90,7 @@ REFERENCE_TEMPERATURE_C = 20.0
 """ISO 1 reference temperature, deg C: thermal terms are zero there."""
 
 SIMULATOR_EFFECTS = ("dh", "encoder", "rtest", "compliance", "thermal", "backlash",
-                     "lateral_compliance")
+                     "lateral_compliance", "crosstalk")
 """Effects the simulator (:mod:`aacmm_pin.analyses.simulate`) can switch on."""
 DEFAULT_SIMULATOR_EFFECTS = ("dh", "encoder", "rtest")
 """Effects a simulated campaign has by default: the paper's model."""

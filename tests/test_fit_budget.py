@@ -116,6 +116,17 @@ def test_sizes_30x_on_the_coupled_torso_campaign(tmp_path):
         assert scaled.nfev <= 1.5 * plain.nfev, (seed, scaled.nfev, plain.nfev)
         std = np.sqrt(np.diag(plain.covariance))
         assert np.max(np.abs(scaled.x - plain.x) / std) < 1e-3, seed
+    # discover with --max-nfev 5 (all its fits together) on that campaign: the start model's fit
+    # (3 evaluations) stands, step 1's fit reaches the cap; written, exit 1, the fit and option named
+    ap.write_simulation(sim, tmp_path / "camp")
+    code = main(["discover", str(tmp_path / "camp"), "--arm", str(wide.source), "--max-nfev", "5",
+                 "--out", str(tmp_path / "disc")])
+    assert code == 1
+    written = json.loads((tmp_path / "disc" / "discovery.json").read_text())
+    assert written["capped"] and "step 1" in written["stopped_because"], written["stopped_because"]
+    assert "--max-nfev" in written["stopped_because"]
+    assert (tmp_path / "disc" / "parameters.json").is_file()
+
 
 def _with_points(campaign: ap.Campaign, point: np.ndarray) -> ap.Campaign:
     import dataclasses

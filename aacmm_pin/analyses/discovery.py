@@ -42,6 +42,7 @@ from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
 from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.analyses.residual_scan import TIME, scan_residuals
+from aacmm_pin.analyses.term_elimination import Dropped, eliminate
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, ModelSpec, Term
 from aacmm_pin.effects.registry import default_effects, library
@@ -63,8 +64,17 @@ StepReport = Callable[[int, Step], None]
 """``(k, step)``: step k (1-based), called as soon as it is found (before any figure)."""
 
 
+MAX_NFEV_PER_FIT = 200
+"""Default evaluation budget of discovery per fit it may make: ``max_nfev`` defaults to this
+times ``max_steps + 1`` (the start and one refit a step; refits after a dropped term share it)."""
+
+
 class FitCapReached(AacmmError):
-    """The start model's fit reached its evaluation cap (``max_nfev``): no step to report."""
+    """The start model's fit spent discovery's evaluation budget (``max_nfev``): no step to report."""
+
+
+class _CapReached(Exception):
+    """A fit of a step spent the rest of discovery's evaluation budget (the loop ends)."""
 
 
 def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
@@ -79,7 +89,7 @@ def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | N
 
 def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
              effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
-             alpha: float = ALPHA, max_nfev: int = 200, progress: bool = False,
+             alpha: float = ALPHA, max_nfev: int | None = None, progress: bool = False,
              noise: StatedNoise | None = None, on_start: StartReport | None = None,
              on_step: StepReport | None = None) -> Discovery:
     """Find the effects the ``start`` model is missing on a campaign, add them and refit.
@@ -96,9 +106,11 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         use_rtest: whether the start model uses each sample's R-Test displacement.
         max_steps: most effects to add.
         alpha: family-wise error rate of a step's significance tests (Bonferroni).
-        max_nfev: most residual evaluations of every fit (a cap: each stops at its tolerance).
-            A step's fit that reaches it ends the loop: the steps before it stand, and
-            :attr:`Discovery.capped` and :attr:`Discovery.stopped_because` say which fit.
+        max_nfev: most residual evaluations of all the discovery's fits together (the start, each
+            step's refit, the refits after dropped terms; each fit stops at its tolerance);
+            None: :data:`MAX_NFEV_PER_FIT` x (``max_steps`` + 1). A step's fit that spends it
+            ends the loop: the steps before it stand, and :attr:`Discovery.capped` and
+            :attr:`Discovery.stopped_because` say which fit.
         progress: show progress bars.
         noise: the measurement noise stated per kind (default: the campaign's ``campaign.json``,
             else the paper's values); the nest offsets' prior is its ``location``, and the final
@@ -115,7 +127,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     Raises:
         ValueError: for an unknown start or effect name.
         IdentificationError: if the campaign cannot be identified (see :func:`identify`).
-        FitCapReached: if the start model's fit reaches ``max_nfev``.
+        FitCapReached: if the start model's fit spends ``max_nfev``.
     """
     if start not in STARTS:
         raise ValueError(f"start: choose from {', '.join(STARTS)}, got {start!r}")
@@ -126,7 +138,8 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
     if unknown := [n for n in names if n not in known]:
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(known)}")
     with single_threaded_blas():  # many small products: threads only spin
-        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, max_nfev,
+        budget = MAX_NFEV_PER_FIT * (max_steps + 1) if max_nfev is None else max_nfev
+        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, budget,
                          progress, noise or campaign.noise or StatedNoise(),
                          (on_start or _quiet_start, on_step or _quiet_step))
 
@@ -150,25 +163,32 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
 
-    def fit() -> Calibration:
-        cal = identify(campaign, arm, model="proposed" if spec.map_axes else "dh",
-                       use_rtest=spec.use_rtest, map_axes=spec.map_axes or None,
-                       extensions=spec.terms, max_nfev=max_nfev,
+    left = [max_nfev]  # evaluations left to all the fits below together
+
+    def fit(model: ModelSpec | None = None) -> Calibration:
+        model = model or spec
+        if left[0] <= 0:
+            raise _CapReached
+        cal = identify(campaign, arm, model="proposed" if model.map_axes else "dh",
+                       use_rtest=model.use_rtest, map_axes=model.map_axes or None,
+                       extensions=model.terms, max_nfev=left[0],
                        nests="estimate",  # one treatment for every model
                        sigma_location=noise.location)
+        left[0] -= cal.nfev
         if _capped(cal):  # the caller ends the loop
-            return cal
+            raise _CapReached
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined
             raise AacmmError(f"discovery: the fit with "
-                             f"{', '.join(t.key for t in spec.terms) or start} did not converge: "
+                             f"{', '.join(t.key for t in model.terms) or start} did not converge: "
                              f"{cal.message}")
         return cal
 
-    cal = first = fit()
-    if _capped(cal):
-        raise FitCapReached(f"discover: the fit of the start model ({start}) reached its cap of "
+    try:
+        cal = first = fit()
+    except _CapReached:
+        raise FitCapReached(f"discover: the fit of the start model ({start}) reached the cap of "
                             f"{max_nfev} evaluations before converging: raise --max-nfev "
-                            "(max_nfev)")
+                            "(max_nfev)") from None
     bar_now = _linear_bar(arm, cal, campaign)
     lin = LinearScorer(cal, samples, bar_now)
     steps: list[Step] = []
@@ -179,8 +199,10 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     n_candidates: list[int] = []
     stopped, missing, capped = "", [], False
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
-    def candidates() -> list[Term]:
-        out = [t for e in effects for t in e.offered(arm, samples) if not t.in_model(spec)]
+    named_in: dict[str, int] = {}  # term key -> step that named it
+    def candidates() -> list[Term]:  # a term dropped as not earned is not tried again
+        out = [t for e in effects for t in e.offered(arm, samples)
+               if not t.in_model(spec) and t.key not in named_in]
         n_candidates.append(len(out))
         return out
 
@@ -206,18 +228,24 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         spec_before = spec
         for t in new_terms:
             spec = t.added_to(spec)
-        new_cal = fit()
-        if _capped(new_cal):
+            named_in[t.key] = len(steps) + 1
+        # every term of the model earned given all the others (a term may have stood in for an
+        # effect named later): the least significant dropped and the model refitted, until none
+        try:
+            new_cal, spec, dropped = eliminate(fit(), spec, fit, alpha, named_in)
+        except _CapReached:
             capped = True
             stopped = (f"the fit of step {len(steps) + 1} ({', '.join(t.key for t in new_terms)}) "
-                       f"reached its cap of {max_nfev} evaluations before converging: the "
-                       f"{len(steps)} steps before it stand; raise --max-nfev (max_nfev)")
+                       f"reached the cap of {max_nfev} evaluations of all the discovery's fits "
+                       f"before converging: the {len(steps)} steps before it stand; raise "
+                       "--max-nfev (max_nfev)")
             spec = spec_before  # the model of the steps that stand
             break
+        new_terms = [t for t in new_terms if t.in_model(spec)]
         new_bar = _linear_bar(arm, new_cal, campaign)
         new_lin = LinearScorer(new_cal, samples, new_bar)
         step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
-                     samples)
+                     samples, (chosen, dropped))
         steps.append(step)
         report[1](len(steps), step)
         cal, lin, bar_now = new_cal, new_lin, new_bar
@@ -263,8 +291,12 @@ def _capped(cal: Calibration) -> bool:
 
 def _step(new_terms: list[Term], best: Score, scores: list[Score],
           before: tuple[Calibration, LinearScorer, LinearBar | None],
-          after: tuple[Calibration, LinearScorer, LinearBar | None], samples: Samples) -> Step:
-    """Return the record of one step: what was added, and the model before and after it."""
+          after: tuple[Calibration, LinearScorer, LinearBar | None], samples: Samples,
+          selection: tuple[list[Score], list[Dropped]] = ([], [])) -> Step:
+    """Return the record of one step: what was added, and the model before and after it.
+
+    ``selection``: the terms the step tried (as they joined) and the terms dropped after its refit.
+    """
     (cal, lin, bar_now), (new_cal, new_lin, new_bar) = before, after
     views = []
     for t in sorted(new_terms, key=lambda t: t.axes):
@@ -287,7 +319,8 @@ def _step(new_terms: list[Term], best: Score, scores: list[Score],
         bar_covered_rms_before=None if bar_now is None else bar_now.covered_rms,
         bar_covered_rms_after=None if new_bar is None else new_bar.covered_rms,
         bar_normalised_before=None if bar_now is None else lin.bar_normalised(bar_now.errors),
-        bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors))
+        bar_normalised_after=None if new_bar is None else lin.bar_normalised(new_bar.errors),
+        tried=selection[0], dropped=selection[1])
 
 
 def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: float

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aacmm_pin.analyses.residual_scan import Scan
+from aacmm_pin.analyses.term_elimination import Dropped
 from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.registry import library
@@ -82,6 +83,38 @@ class Step:
     bar_normalised_before: float | None = None
     """Length-bar error normalised by its predicted covariance (of the model before the step)."""
     bar_normalised_after: float | None = None
+    tried: list[Score] = field(default_factory=list)
+    """The terms the step's forward selection took, each scored as it joined (p given the ones
+    before it); some may be dropped after the refit (:attr:`dropped`)."""
+    dropped: list[Dropped] = field(default_factory=list)
+    """Terms of the model (this step's or an earlier one's) not significant given the others after
+    this step's refit, dropped (:mod:`aacmm_pin.analyses.term_elimination`)."""
+
+    def selection_summary(self) -> str:
+        """Return the terms tried and dropped with their p-values in one line (empty if none dropped)."""
+        if not self.dropped:
+            return ""
+        tried = ", ".join(f"{s.term.key} (p = {s.p_value:.2g})" for s in self.tried)
+        dropped = ", ".join(
+            f"{d.term.key} (p = {d.p_value:.2g} given the others, needed < {d.threshold:.2g}"
+            + (f"; named in step {d.named_in}" if d.named_in and not any(
+                s.term.key == d.term.key for s in self.tried) else "") + ")"
+            for d in self.dropped)
+        return f"tried {tried}; dropped {dropped}"
+
+    def bar_disagreement(self) -> str:
+        """Return a line when the length-bar RMS and the held-out RMS move opposite ways, else ''."""
+        if self.bar_rms_before is None or self.bar_rms_after is None:
+            return ""
+        bar = self.bar_rms_after - self.bar_rms_before
+        held = self.heldout_rms_after - self.heldout_rms_before
+        if bar * held >= 0:
+            return ""
+        return (f"the length bar and the held-out SPATs disagree: bar RMS "
+                f"{self.bar_rms_before * 1e6:.2f} -> {self.bar_rms_after * 1e6:.2f} um "
+                f"{'rose' if bar > 0 else 'fell'} while held-out RMS "
+                f"{self.heldout_rms_before * 1e6:.2f} -> {self.heldout_rms_after * 1e6:.2f} um "
+                f"{'rose' if held > 0 else 'fell'}")
 
     def bar_summary(self) -> str:
         """Return the length-bar errors before -> after in one line (empty without a bar)."""
@@ -117,6 +150,8 @@ class Step:
             "bic_gain": self.score.bic_gain, "k_eff": self.score.k_eff,
             "runners_up": [s.to_dict() for s in self.runners_up],
             "values": self.values,
+            "tried": [{"term": s.term.key, "p_value": s.p_value} for s in self.tried],
+            "dropped": [d.to_dict() for d in self.dropped],
         }
         if forms:
             out["form"] = forms
@@ -127,6 +162,7 @@ class Step:
             out["bar_covered_rms_after_um"] = _um(self.bar_covered_rms_after)
             out["bar_normalised_before"] = self.bar_normalised_before
             out["bar_normalised_after"] = self.bar_normalised_after
+            out["bar_heldout_disagree"] = self.bar_disagreement() or None
         return out
 
 
@@ -194,6 +230,7 @@ class Discovery:
         return {
             "start": self.start, "steps": [s.to_dict() for s in self.steps],
             "missing": self.missing, "stopped_because": self.stopped_because,
+            "capped": self.capped,
             "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
                     "fit_rms_um": [v * 1e6 for v in self.fit_rms],
                     "bar_rms_um": [_um(v) for v in self.bar_rms],

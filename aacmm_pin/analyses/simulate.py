@@ -16,7 +16,9 @@ optional further effects that the paper's model lacks:
 * ``lateral_compliance``: gravity-induced tilt of a joint about the two axes perpendicular to its
   own, (kx, ky) x the gravity moment about each (:mod:`aacmm_pin.effects.builtin.lateral_compliance`),
   held as extension terms of the truth (``truth.json`` ``extensions``) and applied by the model's
-  own kinematics.
+  own kinematics;
+* ``crosstalk``: an axis' angle error that depends on a neighbour's angle, c cos + s sin of it
+  (:mod:`aacmm_pin.effects.builtin.crosstalk`), held as extension terms of the truth too.
 
 A campaign is SPATs and a length bar (:func:`simulate_campaign`), or, with ``points`` > 0, tool
 points of every tool (alternately) measured by one instrument (a laser tracker, motion capture) in
@@ -114,6 +116,10 @@ class SimulationConfig:
     with ``lateral_compliance``; the default: the torso axis and the shoulder pitch of each arm
     of ``urdf/torso.urdf``, 0.3-1 mrad under their 10-40 N m; axes beyond the arm's are left
     out)."""
+    crosstalk: dict[tuple[int, int], tuple[float, float]] = field(
+        default_factory=lambda: {(4, 3): (6 * ARCSEC, -4 * ARCSEC)})
+    """(axis, source) -> (c, s): the axis' angle error c cos + s sin of the source's angle, rad
+    (used with ``crosstalk``; the default: A4 <- A3, 6 and -4 arcsec)."""
     points: int = 0
     """Tool points measured by an instrument (> 0: a points campaign, :func:`simulate_points`)."""
     sigma_point: float = SIGMA_POINT
@@ -264,6 +270,10 @@ def random_truth(arm: Arm, config: SimulationConfig, rng: np.random.Generator) -
     if "lateral_compliance" in config.effects:
         extensions = {f"lateral_compliance[A{a}]": np.asarray(k, dtype=float)
                       for a, k in sorted(config.lateral_compliance.items()) if a <= arm.n_axes}
+    if "crosstalk" in config.effects:
+        extensions |= {f"crosstalk[A{a}<-A{b}]": np.asarray(cs, dtype=float)
+                       for (a, b), cs in sorted(config.crosstalk.items())
+                       if max(a, b) <= arm.n_axes}
     return Parameters(arm=arm.name, dh=dh, tool=tool,
                       rotation_abc=rng.normal(0.0, config.rotation_sigma, 3),
                       translation=np.asarray(config.mt_translation, dtype=float),
@@ -379,6 +389,8 @@ def _truth_record(config: SimulationConfig, locations_true: dict[int, np.ndarray
         effects["backlash_half_rad"] = {str(a): b for a, b in config.backlash.items()}
     if "lateral_compliance" in config.effects:
         effects["lateral_compliance"] = "extensions (kx, ky in rad per N m)"
+    if "crosstalk" in config.effects:
+        effects["crosstalk"] = "extensions (cos, sin amplitudes in rad)"
     return effects
 
 

@@ -194,15 +194,23 @@ def no_rtest_option(text: str) -> argparse.ArgumentParser:
     return p
 
 
-def max_nfev_option() -> argparse.ArgumentParser:
-    """``--max-nfev N``: the evaluation cap of every fit (its solves stop at their tolerance)."""
+def max_nfev_option(discovery: bool = False) -> argparse.ArgumentParser:
+    """``--max-nfev N``: the evaluation cap of a fit (its solves stop at their tolerance).
+
+    With ``discovery``: of all the discovery's fits together (default from ``--max-steps``).
+    """
     p = _parent()
+    if discovery:
+        p.add_argument("--max-nfev", type=positive(int), default=None, metavar="N",
+                       help="most residual evaluations of all the discovery's fits together (the "
+                            "start, each step's refit, refits after a dropped term; default 200 x "
+                            "(--max-steps + 1)); a step's fit that reaches it ends the loop, the "
+                            "steps so far written, exit 1")
+        return p
     p.add_argument("--max-nfev", type=positive(int), default=200, metavar="N",
                    help="most residual evaluations of a fit, all its solves together (rounds, "
                         "robust passes, the refit with fixed nests; a cap: a fit stops at its "
-                        "tolerance, the count used is printed and in report.json; discover: a "
-                        "step's fit that reaches it ends the loop, its steps so far written, "
-                        "exit 1)")
+                        "tolerance, the count used is printed and in report.json)")
     return p
 
 

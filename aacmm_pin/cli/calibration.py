@@ -278,6 +278,9 @@ def _print_discovery_step(k: int, step: Step) -> None:
           f"{step.fit_rms_after * 1e6:.2f} um")
     if step.bar_rms_before is not None:
         print(f"  length bar: {step.bar_summary()}")
+    for line in (step.bar_disagreement(), step.selection_summary()):
+        if line:
+            print(f"  {line}")
     sys.stdout.flush()
 
 
@@ -557,7 +560,8 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                                              "(location means)"),
                              arm, out_option(Path("discovery"), "output folder: discovery.json, "
                                                                 "figures, final CALDIR"),
-                             max_nfev_option(), force_option(), effects_file_option()])
+                             max_nfev_option(discovery=True), force_option(),
+                             effects_file_option()])
     p.add_argument("campaign", type=input_path,
                    help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
                         "lengthbar.csv and bar.csv)")
