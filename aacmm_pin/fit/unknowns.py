@@ -269,7 +269,10 @@ class Unknowns:
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
             return cache[2]
-        _release_cached_jacobians()  # their memory is free for the new one
+        # their memory is free for the new one (this frame's reference to the old one included:
+        # held here, the previous Jacobian stayed alive while the new one was built)
+        del cache
+        _release_cached_jacobians()
         params = self.parameters(x)
         if self.terms or params.extensions:
             position, dense, angles = self._general_blocks(params, q)
@@ -394,16 +397,31 @@ class BlockJacobian:
         """Return the whole Jacobian as one sparse matrix (for small campaigns and tests)."""
         return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
 
-    def node_rmatmul(self, u: np.ndarray) -> np.ndarray:
-        """Return (node block)^T @ u for u of shape (3N, k), shape (n_nodes, k)."""
+    def node_rmatmul(self, u: np.ndarray | sp.spmatrix | sp.sparray) -> np.ndarray:
+        """Return (node block)^T @ u for u of shape (3N, k), shape (n_nodes, k).
+
+        A sparse u (the nests' and frames' columns) is made dense one block of rows at a time,
+        never whole (a dense copy costs 24 k bytes per sample).
+        """
         out = np.zeros((self.n_nodes, u.shape[1]))
         if not self.axes or not u.shape[1]:
             return out
-        u3 = u.reshape(-1, 3, u.shape[1])
+        n, k = u.shape[0] // 3, u.shape[1]
+        if sp.issparse(u):
+            rows = sp.csr_matrix(u)
+
+            def block(lo: int) -> np.ndarray:
+                dense: np.ndarray = rows[3 * lo:3 * (lo + CHUNK)].toarray().reshape(-1, 3, k)
+                return dense
+        else:
+            u3 = np.asarray(u).reshape(-1, 3, k)
+
+            def block(lo: int) -> np.ndarray:
+                return u3[lo:lo + CHUNK]
         for ax in self.axes:
-            s = np.empty((u3.shape[0], u.shape[1]))
-            for lo in range(0, u3.shape[0], CHUNK):
-                s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], u3[lo:lo + CHUNK])
+            s = np.empty((n, k))
+            for lo in range(0, n, CHUNK):
+                s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], block(lo))
             out[ax.offset:ax.offset + ax.size] = ax.transposed_weights() @ s
         return out
 
