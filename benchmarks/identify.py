@@ -3,7 +3,9 @@ hand-written numpy + scipy identification of the same model (``benchmarks/handwr
 whole process), against scipy's finite differences on aacmm_pin's own problem, and the growth with
 the number of SPAT samples (1.6k, 16k, 160k): CPU time and peak memory of each.
 
-Run: ``python benchmarks/identify.py`` (about 5 minutes; writes its section of BENCHMARKS.md).
+Run: ``python benchmarks/identify.py`` (about 5 minutes; writes its section of BENCHMARKS.md);
+``python benchmarks/identify.py --large``: the 160k and 1.6M-sample points with their peak memory
+(on request: several minutes of CPU, 2-3 GB; its own section).
 The larger campaigns repeat the paper-sized campaign's postures with fresh R-Test noise; each runs
 in a process of its own (``python benchmarks/identify.py --case K``, K copies), so that its peak
 resident memory is its own.
@@ -268,8 +270,49 @@ block."""
     write_section("identify", body)
 
 
+LARGE = (100, 1000)
+"""Copies of the paper-sized campaign in the on-request scaling run: 160,000 and 1,600,000 samples."""
+PEAK_LIMIT_MB = 2048
+"""Issue 28's target for 1.6M samples."""
+
+
+def large() -> None:
+    """The on-request scaling point (``--large``): 160k and 1.6M samples, one process each.
+
+    Minutes of CPU and about 2-3 GB of memory: run it alone on the machine. Writes the section
+    ``identify-large`` of BENCHMARKS.md.
+    """
+    rows = [case(k) for k in LARGE]
+    small, big = rows
+    per = [r["cpu"] / r["n"] * 1e6 for r in rows]
+    table = "\n".join(
+        f"| {r['n']:,} | {r['wall']:.0f} | {r['cpu']:.0f} | {p:.0f} | {r['peak_mb']:,.0f} | "
+        f"{(r['peak_mb'] - r['base_mb']) * 2 ** 20 / r['n']:,.0f} | {r['nfev']} | "
+        f"{r['rms'] * 1e6:.2f} | {r['success']} |" for r, p in zip(rows, per))
+    body = f"""## Identification at 1.6M samples (`python benchmarks/identify.py --large`)
+
+{machine()}. On request only (minutes of CPU): the paper-sized campaign repeated 100 and 1000
+times with fresh R-Test noise (as the growth table above), one process per size, one BLAS thread;
+peak resident memory of the process (`ru_maxrss`: simulating and tiling the campaign included) and
+what `identify` added above the set-up's peak, per sample. Issue 28's targets: peak <= \
+{PEAK_LIMIT_MB:,} MB at 1.6M samples, CPU per sample within 1.2x of the 160k run's. Once each (a \
+single run: the spread of the CPU per sample is that of the growth table's noise draws, 5 to 7 \
+evaluations at 160k).
+
+| samples | wall (s) | CPU (s) | CPU per sample (us) | peak (MB) | identify per sample (bytes) | \
+evaluations | RMS (um) | converged |
+|---|---|---|---|---|---|---|---|---|
+{table}
+
+CPU per sample, 1.6M against 160k: {per[1] / per[0]:.2f}x; peak at 1.6M: \
+{big['peak_mb']:,.0f} MB ({'within' if big['peak_mb'] <= PEAK_LIMIT_MB else 'above'} the target)."""
+    write_section("identify-large", body)
+
+
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--case":
         print(json.dumps(run_case(int(sys.argv[2]))))
+    elif sys.argv[1:] == ["--large"]:
+        large()
     else:
         main()
