@@ -79,3 +79,20 @@ def test_node_products_with_sparse_columns_match_and_need_no_dense_copy():
     tracemalloc.stop()
     assert np.array_equal(got, expected)
     assert peak < dense_copy, (peak, dense_copy)
+
+
+def test_the_jacobian_holds_its_entries_and_no_more(arm: ap.Arm):
+    """The dense block the solver keeps is one contiguous array of exactly its entries: the map
+    axes' angle columns, read once to build the node columns, are not kept beside it (7 columns,
+    168 bytes per sample), and products with it need no contiguous copy (a copy of the whole block
+    at each normal matrix)."""
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-2.0, 2.0, (300, arm.n_axes))
+    u = Unknowns.full(arm, ap.Parameters.nominal(arm), tuple(range(1, arm.n_axes + 1)))
+    jac = u.jacobian(u.vector(u.start), q)[1]
+    dense = jac.dense
+    assert dense.flags.c_contiguous
+    owner = dense if dense.base is None else dense.base
+    while isinstance(owner.base, np.ndarray):
+        owner = owner.base
+    assert owner.nbytes == dense.nbytes

@@ -228,8 +228,8 @@ class Unknowns:
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return positions, free non-map columns and map axes' angle columns, without terms.
 
-        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): views of one array the batched chain
-        writes, so no block is copied.
+        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): the two blocks the batched chain writes
+        (contiguous, not copied).
         """
         ident = self.arm.identification
         fids = np.asarray(ident.tool_frames)[tool_rows(self.arm, q.shape[0], None,
@@ -238,9 +238,10 @@ class Unknowns:
         order = np.concatenate([ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.error_idx,
                                 ident.tool_idx])[self.free[:self.n_dense]]
         maps = ident.axis_idx[[a - 1 for a in self.map_axes]]
-        pos, jac = ident.chain.jacobians(config, fids, np.concatenate([order, maps]))
-        k = order.size
-        return pos, jac.reshape(3 * q.shape[0], -1)[:, :k], jac[:, :, k:]
+        # two contiguous blocks: the dense one is kept, the maps' angle columns only read (the
+        # node columns copy them per axis), and products with a contiguous block copy nothing
+        pos, dense, angles = ident.chain.jacobian_blocks(config, fids, order, maps)
+        return pos, dense.reshape(3 * q.shape[0], -1), angles
 
     def _general_blocks(self, params: Parameters, q: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
