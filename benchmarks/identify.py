@@ -21,6 +21,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,8 +40,17 @@ from aacmm_pin import (  # noqa: E402
 )
 from aacmm_pin.analyses.simulate import SimulationConfig  # noqa: E402
 from aacmm_pin.fit.identification import identify  # noqa: E402
-from benchmarks._report import best_of as timed
 from benchmarks._report import compile_package, machine, write_section  # noqa: E402
+
+
+def cpu_runs(f, repeat: int) -> tuple[list[float], Any]:
+    """CPU seconds of ``repeat`` calls of f (this process) and its last result."""
+    out, times = None, []
+    for _ in range(repeat):
+        tic = time.process_time()
+        out = f()
+        times.append(time.process_time() - tic)
+    return times, out
 
 
 def tiled(sim, k: int, rng: np.random.Generator) -> Campaign:
@@ -86,7 +96,7 @@ and finite differences with trf."""
 
 
 def cli_vs_handwritten(repeat: int = 3) -> dict:
-    """CPU of the CLI (whole process, median of ``repeat``), of ``identify`` in-process (best of 5)
+    """CPU of the CLI (whole process, median of ``repeat``), of ``identify`` in-process (median of 5)
     and of the hand-written script's variants (whole processes, one BLAS thread; median of
     ``repeat`` with the analytic Jacobian, once with finite differences: it takes minutes), on
     one campaign."""
@@ -110,12 +120,14 @@ def cli_vs_handwritten(repeat: int = 3) -> dict:
                                                 str(Path(tmp) / f"{key}.json"), *args],
                                                OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1"))
         identify(camp, arm)  # warm-up (imports)
-        inproc, cal = np.inf, None
+        runs, cal = [], None
         for _ in range(5):
             tic = time.process_time()
             cal = identify(camp, arm)
-            inproc = min(inproc, time.process_time() - tic)
+            runs.append(time.process_time() - tic)
+        inproc = float(np.median(runs))
         out = {"cli": float(np.median(cli)), "cli_all": cli, "inproc": inproc,
+               "inproc_range": f"{min(runs):.2f} - {max(runs):.2f}",
                "rms": cal.fit_rms, "nfev": cal.nfev, "n_x": len(cal.x),
                "bar": validate(arm, cal.parameters, camp).rms,
                "bar_cli": validate(arm, read_parameters(Path(tmp) / "cal0"), camp).rms,
@@ -155,8 +167,9 @@ def main() -> None:
     sim = simulate_campaign(arm, SimulationConfig(seed=0, samples_per_location=400))
     camp = sim.campaign
     fast = identify(camp, arm)  # warm-up
-    t_fast, fast = timed(lambda: identify(camp, arm), 5)
-    t_slow, slow = timed(lambda: identify(camp, arm, jac="2-point"), 2)
+    fast_runs, fast = cpu_runs(lambda: identify(camp, arm), 5)
+    slow_runs, slow = cpu_runs(lambda: identify(camp, arm, jac="2-point"), 3)
+    t_fast, t_slow = float(np.median(fast_runs)), float(np.median(slow_runs))
     same = abs(fast.fit_rms - slow.fit_rms) / fast.fit_rms
     c = cli_vs_handwritten()
     lm, trf = c["lm"]["cpu"], c["trf"]["cpu"]
@@ -205,7 +218,8 @@ Ratios against the fastest hand-written variant (MINPACK's `lm`) and against `tr
 | `aacmm-pin identify CAMPAIGN --model proposed --out DIR`, whole process (median of \
 {len(c['cli_all'])}: {', '.join(f'{v:.2f}' for v in c['cli_all'])}) | {c['cli']:.2f} | \
 {c['cli'] / lm:.3f}x | {c['cli'] / trf:.3f}x | {c['rms'] * 1e6:.3f} | {c['bar_cli'] * 1e6:.2f} |
-| `identify(campaign, arm)` in-process (best of 5, {c['nfev']} evaluations) | {c['inproc']:.2f} | \
+| `identify(campaign, arm)` in-process (median of 5: {c['inproc_range']}, {c['nfev']} evaluations) \
+| {c['inproc']:.2f} | \
 {c['inproc'] / lm:.3f}x | {c['inproc'] / trf:.3f}x | {c['rms'] * 1e6:.3f} | {c['bar'] * 1e6:.2f} |
 
 The hand-written fit alone (after its imports; reading the files included) took
@@ -216,13 +230,15 @@ checking the campaign and writing the calibration folder (figures excluded: `ide
 none); it runs as `python -m aacmm_pin identify ...`, the entry point of the `aacmm-pin` script.
 
 aacmm_pin's own problem solved by scipy with finite differences instead of the analytic Jacobian,
-best of 5 (analytic) and of 2 (finite differences) runs, in-process:
+CPU time in-process, median (range) of 5 (analytic) and of 3 (finite differences) runs:
 
 | Jacobian | time (s) | ratio | fit RMS (um) |
 |---|---|---|---|
-| aacmm_pin: analytic (Pinocchio), sparse in the map nodes | {t_fast:.2f} | 1x | \
+| aacmm_pin: analytic (Pinocchio), sparse in the map nodes | {t_fast:.2f} \
+({min(fast_runs):.2f} - {max(fast_runs):.2f}) | 1x | \
 {fast.fit_rms * 1e6:.3f} |
-| plain `scipy.optimize.least_squares`, same problem, `jac="2-point"` | {t_slow:.2f} | \
+| plain `scipy.optimize.least_squares`, same problem, `jac="2-point"` | {t_slow:.2f} \
+({min(slow_runs):.2f} - {max(slow_runs):.2f}) | \
 {t_slow / t_fast:.0f}x slower | {slow.fit_rms * 1e6:.3f} |
 
 The two reach the same fit (relative difference {same:.1e}).
