@@ -103,8 +103,8 @@ CPU = user + system; the figures' CPU is measured in the same process around the
 The figures are drawn after the results are printed, with fixed margins (no constrained layout)
 and one legend per step figure. Median (range) of {REPEAT} runs per campaign; issue 28's target:
 figures <= 25 % of the command's CPU. Before issue 28 (constrained layout, a legend per panel;
-the same runs on that code, 23:18 UTC, load 5): 39 % (37 - 42) on the sample campaign, 27 % on
-the simulated one.
+the same runs on that code): 36 - 37 % on the sample campaign (3 runs, load 0.8; 37 - 42 % in 5
+runs at load 1.5), 27 % on the simulated one (2 runs, load 5).
 
 | campaign | command CPU (s) | figures CPU (s) | figures' share (%) | PNGs written |
 |---|---|---|---|---|
