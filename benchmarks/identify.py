@@ -320,7 +320,8 @@ evaluations | RMS (um) | converged |
 |---|---|---|---|---|---|---|---|---|
 {table}
 
-CPU per sample, 1.6M against 160k: {per[1] / per[0]:.2f}x; peak at 1.6M: \
+CPU per sample, 1.6M against 160k: {per[1] / per[0]:.2f}x (per sample and evaluation: \
+{per[1] / big['nfev'] / (per[0] / small['nfev']):.2f}x); peak at 1.6M: \
 {big['peak_mb']:,.0f} MB ({'within' if big['peak_mb'] <= PEAK_LIMIT_MB else 'above'} the target)."""
     write_section("identify-large", body)
 
