@@ -3,7 +3,8 @@
 Run: ``python benchmarks/discover.py`` (a minute or two; writes its section of BENCHMARKS.md).
 Paper-sized campaigns (4 locations x 200 SPAT samples, 7 bar placements, seed 0): the proposed
 start on a campaign with gravity compliance added to the default effects, the DH start on the
-default effects (DH, encoder, R-Test). Median of 3 runs each, identify and discover alternating.
+default effects (DH, encoder, R-Test). Median and range of 3 runs each (CPU), identify and
+discover alternating.
 """
 
 from __future__ import annotations
@@ -25,10 +26,10 @@ SPREAD = 1.5
 
 
 def timed(f):
-    """Return the wall time of one call and its result."""
-    tic = time.perf_counter()
+    """Return the CPU time of one call (this process) and its result."""
+    tic = time.process_time()
     out = f()
-    return time.perf_counter() - tic, out
+    return time.process_time() - tic, out
 
 
 def bar(values: list[float | None]) -> str:
@@ -59,8 +60,11 @@ def main() -> None:
         named = ", ".join(f"{s.effect} ({', '.join(f'A{a}' for a in s.axes) or 'arm-wide'})"
                           for s in result.steps) or "nothing"
         med_id, med_disc = float(np.median(t_id)), float(np.median(t_disc))
-        rows.append(f"| `{start}` | {label} | {med_id:.2f} | {med_disc:.2f} | "
-                    f"{med_disc / med_id:.1f}x | {len(result.steps)} | "
+        ratio = np.array(t_disc) / np.array(t_id)  # per round: identify, then discover
+        rows.append(f"| `{start}` | {label} | {med_id:.2f} ({min(t_id):.2f} - {max(t_id):.2f}) | "
+                    f"{med_disc:.2f} ({min(t_disc):.2f} - {max(t_disc):.2f}) | "
+                    f"{med_disc / med_id:.1f}x ({ratio.min():.1f} - {ratio.max():.1f}) | "
+                    f"{len(result.steps)} | "
                     f"{sum(result.n_candidates)} ({' + '.join(map(str, result.n_candidates))}) | "
                     f"{named} | {result.heldout_rms[0] * 1e6:.2f} -> "
                     f"{result.heldout_rms[-1] * 1e6:.2f} | {bar(result.bar_normalised)} |")
@@ -75,7 +79,9 @@ placements, seed 0). Baseline: one `identify` of the start model (`model=start`,
 on the same campaign; `discover(campaign, arm, start=...)` fits the start model, scores every
 candidate term of the effect library on held-out data (left-out locations and the length bar),
 refits with each named effect and stops when nothing is significant (times include the length-bar
-linearisation of every model). Median of {REPEAT} runs each. Last column: the length-bar error
+linearisation of every model). Median (range) of {REPEAT} runs each, identify and
+discover alternating, CPU time (the 2 cores are shared); the ratio's range is over the rounds.
+Last column: the length-bar error
 normalised by its predicted covariance (final model's), start -> final.
 
 | start | simulated effects | identify (s) | discover (s) | discover / identify | steps | \

@@ -465,7 +465,7 @@ class Problem:
         na, nn = self.n_arm, self.n_loc + self.n_frame
         info = np.empty((na + nn, na + nn))
         info[:na, :na] = jac.normal()
-        cross = np.vstack([np.asarray(nuis.T @ jac.dense).T, jac.node_rmatmul(nuis.toarray())])
+        cross = np.vstack([np.asarray(nuis.T @ jac.dense).T, jac.node_rmatmul(nuis)])
         info[:na, na:] = cross
         info[na:, :na] = cross.T
         info[na:, na:] = (nuis.T @ nuis + lengths.T @ lengths).toarray()

@@ -228,8 +228,8 @@ class Unknowns:
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return positions, free non-map columns and map axes' angle columns, without terms.
 
-        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): views of one array the batched chain
-        writes, so no block is copied.
+        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): the two blocks the batched chain writes
+        (contiguous, not copied).
         """
         ident = self.arm.identification
         fids = np.asarray(ident.tool_frames)[tool_rows(self.arm, q.shape[0], None,
@@ -238,9 +238,10 @@ class Unknowns:
         order = np.concatenate([ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.error_idx,
                                 ident.tool_idx])[self.free[:self.n_dense]]
         maps = ident.axis_idx[[a - 1 for a in self.map_axes]]
-        pos, jac = ident.chain.jacobians(config, fids, np.concatenate([order, maps]))
-        k = order.size
-        return pos, jac.reshape(3 * q.shape[0], -1)[:, :k], jac[:, :, k:]
+        # two contiguous blocks: the dense one is kept, the maps' angle columns only read (the
+        # node columns copy them per axis), and products with a contiguous block copy nothing
+        pos, dense, angles = ident.chain.jacobian_blocks(config, fids, order, maps)
+        return pos, dense.reshape(3 * q.shape[0], -1), angles
 
     def _general_blocks(self, params: Parameters, q: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -269,7 +270,10 @@ class Unknowns:
         cache = self._cache  # read once: other threads may replace it
         if cache is not None and cache[0] == key and cache[1] is q:
             return cache[2]
-        _release_cached_jacobians()  # their memory is free for the new one
+        # their memory is free for the new one (this frame's reference to the old one included:
+        # held here, the previous Jacobian stayed alive while the new one was built)
+        del cache
+        _release_cached_jacobians()
         params = self.parameters(x)
         if self.terms or params.extensions:
             position, dense, angles = self._general_blocks(params, q)
@@ -394,16 +398,31 @@ class BlockJacobian:
         """Return the whole Jacobian as one sparse matrix (for small campaigns and tests)."""
         return sp.csr_matrix(sp.hstack([sp.csr_matrix(self.dense), self.nodes]))
 
-    def node_rmatmul(self, u: np.ndarray) -> np.ndarray:
-        """Return (node block)^T @ u for u of shape (3N, k), shape (n_nodes, k)."""
+    def node_rmatmul(self, u: np.ndarray | sp.spmatrix | sp.sparray) -> np.ndarray:
+        """Return (node block)^T @ u for u of shape (3N, k), shape (n_nodes, k).
+
+        A sparse u (the nests' and frames' columns) is made dense one block of rows at a time,
+        never whole (a dense copy costs 24 k bytes per sample).
+        """
         out = np.zeros((self.n_nodes, u.shape[1]))
         if not self.axes or not u.shape[1]:
             return out
-        u3 = u.reshape(-1, 3, u.shape[1])
+        n, k = u.shape[0] // 3, u.shape[1]
+        if sp.issparse(u):
+            rows = sp.csr_matrix(u)
+
+            def block(lo: int) -> np.ndarray:
+                dense: np.ndarray = rows[3 * lo:3 * (lo + CHUNK)].toarray().reshape(-1, 3, k)
+                return dense
+        else:
+            u3 = np.asarray(u).reshape(-1, 3, k)
+
+            def block(lo: int) -> np.ndarray:
+                return u3[lo:lo + CHUNK]
         for ax in self.axes:
-            s = np.empty((u3.shape[0], u.shape[1]))
-            for lo in range(0, u3.shape[0], CHUNK):
-                s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], u3[lo:lo + CHUNK])
+            s = np.empty((n, k))
+            for lo in range(0, n, CHUNK):
+                s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], block(lo))
             out[ax.offset:ax.offset + ax.size] = ax.transposed_weights() @ s
         return out
 

@@ -180,10 +180,30 @@ class BatchedChain:
             frames: Pinocchio frame id per sample, shape (N,).
             columns: the velocity indices to return, in this order (default: all, shape (nv,)).
         """
+        pos, jac, _ = self._jacobians(q, frames, columns, None)
+        return pos, jac
+
+    def jacobian_blocks(self, q: np.ndarray, frames: np.ndarray, first: np.ndarray,
+                        second: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return frame origins (N, 3) and two blocks of Jacobian columns, (N, 3, F) and (N, 3, S).
+
+        The columns ``first`` and ``second`` of :meth:`jacobians` (velocity indices), each block
+        contiguous: a caller that keeps the first and only reads the second holds no memory for
+        the second's columns.
+        """
+        pos, jac, extra = self._jacobians(q, frames, first, second)
+        assert extra is not None
+        return pos, jac, extra
+
+    def _jacobians(self, q: np.ndarray, frames: np.ndarray, columns: np.ndarray | None,
+                   second: np.ndarray | None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """:meth:`jacobians`, and the columns ``second`` in an array of their own (None: none)."""
         n = q.shape[0]
         pos = np.empty((n, 3))
         columns = np.arange(self.nv) if columns is None else np.asarray(columns)
         jac = np.empty((n, 3, columns.size))
+        extra = None if second is None else np.empty((n, 3, len(second)))
         for lo in range(0, n, CHUNK):
             pose = self._forward(q[lo:lo + CHUNK])
             size = min(CHUNK, n - lo)
@@ -201,7 +221,9 @@ class BatchedChain:
                     else:
                         block[np.ix_(self.idx_v[joints], np.arange(3), rows)] = cols
             jac[lo:lo + size] = block[columns].transpose(2, 1, 0)
-        return pos, jac
+            if extra is not None:
+                extra[lo:lo + size] = block[second].transpose(2, 1, 0)
+        return pos, jac, extra
 
     def joint_jacobians(self, q: np.ndarray, frames: np.ndarray, joints: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,7 @@ from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.outputs.export import write_calibration_files
-from aacmm_pin.outputs.plots import DPI, MODEL_COLOURS, _new_figure
+from aacmm_pin.outputs.plots import DPI, MODEL_COLOURS, _fixed_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -49,8 +49,10 @@ def _step_figure(step: Step, k: int) -> Figure:
     views: list[dict[str, Any]] = step.views
     ncols = min(max(len(views), 1), 3)
     nrows = max(1, -(-len(views) // ncols))
-    fig = _new_figure(4.2 * ncols, 0.6 + 3.0 * nrows)
-    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    # at least 8.4 in wide: the title (left) and the legend (right) share the top margin
+    fig, grid = _fixed_figure(max(4.2 * ncols, 8.4), 0.6 + 3.0 * nrows, nrows, ncols,
+                              margins=(1.0, 0.15, 0.55, 0.6), gaps=(1.1, 0.8))
+    axes = grid.ravel()
     for ax in axes[len(views):]:
         ax.remove()
     for ax, view in zip(axes, views):  # every named term, one panel each
@@ -64,11 +66,13 @@ def _step_figure(step: Step, k: int) -> Figure:
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set_xlabel(view["variable"])
         ax.set_ylabel(view["residual"])
-        ax.set_title(view["term"], fontsize=9)
-        ax.legend(fontsize=7)
+        ax.set_title(view["term"], fontsize=9, y=1.0)  # at the top (no search for room)
+    # one legend for every panel, in the top margin (a legend per panel searched its data for room)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="upper right", fontsize=7, ncols=2,
+               frameon=False)
     fig.suptitle(f"step {k}: {step.effect} {step.axes or ''} - held-out RMS "
                  f"{step.heldout_rms_before * 1e6:.2f} -> {step.heldout_rms_after * 1e6:.2f} um",
-                 fontsize=10)
+                 fontsize=10, x=0.1 / fig.get_figwidth(), ha="left")
     return fig
 
 
@@ -100,8 +104,10 @@ def gap_figure(result: Discovery, path: str | Path) -> None:
 
 def _gap_figure(result: Discovery) -> Figure:
     """Build the figure of :func:`gap_figure`."""
-    fig = _new_figure(6.4, 3.6)
-    ax = fig.subplots()
+    title = "gap per step (stopped: " + "\n".join(textwrap.wrap(result.stopped_because, 90)) + ")"
+    # the title's lines at 7 pt (0.12 in each), the rotated labels below
+    fig, grid = _fixed_figure(6.4, 3.6, margins=(0.6, 0.6, 0.75, 0.15 + 0.12 * (title.count("\n") + 1)))
+    ax = grid[0, 0]
     labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
                                             for s in result.steps]
     x = np.arange(len(labels))
@@ -126,10 +132,10 @@ def _gap_figure(result: Discovery) -> Figure:
     ax.set_xticks(x, labels, rotation=15, fontsize=8)
     ax.set_ylabel("um")
     ax.set_ylim(0.0, None)
-    ax.set_title("gap per step (stopped: " + "\n".join(textwrap.wrap(result.stopped_because, 90))
-                 + ")", fontsize=7)
+    ax.set_title(title, fontsize=7, y=1.0)
     lines, labels_ = ax.get_legend_handles_labels()
-    ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7)
+    ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7,
+              loc="upper right")
     return fig
 
 
@@ -147,10 +153,14 @@ def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = (
 def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
     """Build the figure of :func:`unexplained_figure`."""
     top = (scan.structure or scan.variables)[0]
-    fig = _new_figure(11.0, 3.4)
+    hint = "\n".join(textwrap.wrap(scan.hint(), 130))
+    # the suptitle's lines at 8 pt (0.14 in each) above the panels' titles
+    fig, grid = _fixed_figure(11.0, 3.4, 1, 3, margins=(0.75, 0.15, 0.55,
+                                                        0.4 + 0.14 * (hint.count("\n") + 1)),
+                              gaps=(0.3, 0.0), sharey=True)
     x = np.asarray(top.values, dtype=float)
     noise = scan.noise * 1e6
-    for c, ax in enumerate(fig.subplots(1, 3, sharey=True)):
+    for c, ax in enumerate(grid[0]):
         y = scan.residual[:, c] * 1e6
         ax.plot(x, y, ".", ms=2, alpha=0.35, color=MODEL_COLOURS[0])
         bx, by = _binned(x, y)
@@ -158,11 +168,11 @@ def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
         ax.axhspan(-noise, noise, color="0.85", zorder=0, label="stated noise (+- sigma)")
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set_xlabel(top.label or top.variable)
-        ax.set_title(f"{'xyz'[c]} residual", fontsize=9)
+        ax.set_title(f"{'xyz'[c]} residual", fontsize=9, y=1.0)
         if c == 0:
             ax.set_ylabel(f"residual less {group_text(inputs)} (um)")
             ax.legend(fontsize=7)
-    fig.suptitle("\n".join(textwrap.wrap(scan.hint(), 130)), fontsize=8)
+    fig.suptitle(hint, fontsize=8)
     return fig
 
 

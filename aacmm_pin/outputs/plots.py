@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -28,14 +28,47 @@ DPI = 150
 MODEL_COLOURS = ("#8c8c8c", "#e69f00", "#d55e00", "#0072b2", "#009e73", "#cc79a7", "#56b4e9")
 
 
-def _new_figure(width_in: float, height_in: float) -> Figure:
-    """Return an empty constrained-layout Figure on its own Agg canvas (no pyplot)."""
+def _new_figure(width_in: float, height_in: float,
+                layout: Literal["constrained"] | None = "constrained") -> Figure:
+    """Return an empty Figure on its own Agg canvas (no pyplot), constrained layout by default."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    fig = Figure(figsize=(width_in, height_in), layout=layout)
     FigureCanvasAgg(fig)
     return fig
+
+
+def _fixed_figure(width_in: float, height_in: float, nrows: int = 1, ncols: int = 1,
+                  margins: tuple[float, float, float, float] = (0.75, 0.2, 0.6, 0.5),
+                  gaps: tuple[float, float] = (0.75, 0.85), **subplots: Any
+                  ) -> tuple[Figure, np.ndarray]:
+    """Return a Figure on its own Agg canvas with fixed margins, no layout engine, and its panels.
+
+    Constrained layout measures every tick label and title at each draw (on a discovery step's
+    six panels, 40 % of drawing the figure); fixed margins cost nothing at draw time.
+
+    Args:
+        width_in: figure width, in.
+        height_in: figure height, in.
+        nrows: rows of panels.
+        ncols: columns of panels.
+        margins: left, right, bottom and top margins, in (room for labels and titles).
+        gaps: width and height of the gaps between panels, in.
+        subplots: passed to ``Figure.subplots`` (``sharey``, ...).
+
+    Returns:
+        The figure and its panels, shape (nrows, ncols).
+    """
+    left, right, bottom, top = margins
+    panel_w = (width_in - left - right - (ncols - 1) * gaps[0]) / ncols
+    panel_h = (height_in - bottom - top - (nrows - 1) * gaps[1]) / nrows
+    fig = _new_figure(width_in, height_in, layout=None)
+    axes = fig.subplots(nrows, ncols, squeeze=False, gridspec_kw={
+        "left": left / width_in, "right": 1.0 - right / width_in, "bottom": bottom / height_in,
+        "top": 1.0 - top / height_in, "wspace": gaps[0] / panel_w, "hspace": gaps[1] / panel_h},
+        **subplots)
+    return fig, axes
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
