@@ -207,10 +207,11 @@ def max_nfev_option(discovery: bool = False) -> argparse.ArgumentParser:
                             "(--max-steps + 1)); a step's fit that reaches it ends the loop, the "
                             "steps so far written, exit 1")
         return p
-    p.add_argument("--max-nfev", type=positive(int), default=200, metavar="N",
+    p.add_argument("--max-nfev", type=positive(int), default=None, metavar="N",
                    help="most residual evaluations of a fit, all its solves together (rounds, "
-                        "robust passes, the refit with fixed nests; a cap: a fit stops at its "
-                        "tolerance, the count used is printed and in report.json)")
+                        "robust passes, the refit with fixed nests; a fit stops at its tolerance, "
+                        "the count used is printed and in report.json); default: no cap on the "
+                        "whole fit, each solve stops after 200")
     return p
 
 

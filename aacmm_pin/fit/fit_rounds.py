@@ -94,10 +94,14 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
     x_now = now.problem.x(z_now)
     residual = now.problem.data_residuals(x_now)
-    norms = np.linalg.norm(residual if keep is None else residual[keep], axis=1)
     # inputs that are not this arm's, or in other units, end here (2 evaluations); the scale is
     # the median's, so that a few outliers (the robust loop's business) do not count
-    plausibility.check_agreement(rob.robust_scale(norms), plausible, sigma_class, nfev,
+    scale = _median_scale(residual, keep)
+    if not plausibility.agrees(scale, plausible, sigma_class):
+        # a wild sample (a readout of 720 deg) drags the least-squares step and every residual
+        # with it, but not the start's: the inputs disagree only if the start's bulk does too
+        scale = min(scale, _median_scale(now.problem.data_residuals(x_start), keep))
+    plausibility.check_agreement(scale, plausible, sigma_class, nfev,
                                  sizes_label(unknowns.arm.source))
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
@@ -135,6 +139,11 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
         at_solution = last  # three rounds: the last solve's (None if it kept none)
     return Fit(unknowns, unvisited, gauges, now.obs, now.constraints, now.problem, res, x_now,
                 nfev, at_solution if same else None)
+
+
+def _median_scale(residual: np.ndarray, keep: np.ndarray | None) -> float:
+    """Median-based scale per coordinate of data residuals, shape (N, 3) m, of the kept rows, m."""
+    return rob.robust_scale(np.linalg.norm(residual if keep is None else residual[keep], axis=1))
 
 
 class _Decision(NamedTuple):

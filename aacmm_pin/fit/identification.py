@@ -60,10 +60,12 @@ from aacmm_pin.units import (
     noise_problem,
 )
 
-__all__ = ["MAX_FIT_RMS", "MIN_DOF_FRACTION", "MODELS", "NESTS", "NOISE_P", "FitOptions", "identify",
-           "refit"]
+__all__ = ["MAX_FIT_RMS", "MAX_NFEV_PER_SOLVE", "MIN_DOF_FRACTION", "MODELS", "NESTS", "NOISE_P",
+           "FitOptions", "identify", "refit"]
 
 MODELS = ("dh", "proposed")
+MAX_NFEV_PER_SOLVE = 200
+"""Most residual evaluations of one solve of a fit when no cap of the whole fit is given."""
 NESTS = ("auto", "estimate", "fixed")
 """How :func:`identify` treats the R-Test nests' offsets."""
 MIN_DOF_FRACTION = 0.1
@@ -100,8 +102,9 @@ class FitOptions:
     """R-Test noise per coordinate, m; None: estimated from the residuals."""
     sigma_location: float = SIGMA_LOCATION
     """Prior standard deviation of each R-Test zero position per coordinate, m."""
-    max_nfev: int = 200
-    """Most residual evaluations of the whole fit (every solve of it together)."""
+    max_nfev: int | None = None
+    """Most residual evaluations of the whole fit (every solve of it together); None: each solve
+    stops after :data:`MAX_NFEV_PER_SOLVE` (see :attr:`solve_nfev`)."""
     jac: str = "analytic"
     """``"analytic"`` or a scipy finite-difference scheme."""
     progress: bool = False
@@ -114,6 +117,11 @@ class FitOptions:
     """Reject outliers."""
     nests: str = "auto"
     """The R-Test nests' offsets: ``"auto"``, ``"estimate"`` or ``"fixed"``."""
+
+    @property
+    def solve_nfev(self) -> int:
+        """Most residual evaluations of one solve: ``max_nfev``, else :data:`MAX_NFEV_PER_SOLVE`."""
+        return MAX_NFEV_PER_SOLVE if self.max_nfev is None else self.max_nfev
 
     def __post_init__(self) -> None:
         if self.jac not in ("analytic", "2-point", "3-point", "cs"):
@@ -210,7 +218,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = STEP_DEG,
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
-             sigma_location: float = SIGMA_LOCATION, max_nfev: int = 200, jac: str = "analytic",
+             sigma_location: float = SIGMA_LOCATION, max_nfev: int | None = None,
+             jac: str = "analytic",
              progress: bool = False, extensions: tuple[Term, ...] = (),
              use_bar: bool = False, robust: bool = False, nests: str = "auto") -> Calibration:
     """Identify the arm's parameters from the SPATs of a campaign.
@@ -236,9 +245,10 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
             (paper Section 5: 3 um); each nest's offset is estimated with this prior.
         max_nfev: most residual evaluations of the whole fit (the rounds, the robust passes and
-            the refit with fixed nests together), a cap well above what a fit needs to reach its
-            tolerance (``nfev`` reports what was used; not converged within it: ``success``
-            False, ``status`` 0, the message names the cap).
+            the refit with fixed nests together: ``nfev`` reports what was used; not converged
+            within it: ``success`` False, ``status`` 0, the message names the cap). None: no cap
+            on the whole fit, each solve stops at its tolerance or after
+            :data:`MAX_NFEV_PER_SOLVE` evaluations (a robust fit makes up to a dozen solves).
         jac: ``"analytic"`` (Pinocchio, sparse in the map nodes) or a scipy finite-difference
             scheme (``"2-point"``, ``"3-point"``) on the same problem, for comparison.
         progress: show progress (evaluations and residual RMS; log lines when stderr is not a
@@ -276,7 +286,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
                          sigma_location=sigma_location, max_nfev=max_nfev, jac=jac,
                          progress=progress, extensions=extensions, use_bar=use_bar,
                          robust=robust, nests=nests)
-    budget = Budget(max_nfev)  # every evaluation of every fit below
+    # every evaluation of every fit below (none given: each solve's own cap only)
+    budget = None if max_nfev is None else Budget(max_nfev)
     arm = arm or load_arm()
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
         cal = _identify(campaign, arm, options, budget, fixed_nests=nests == "fixed")
@@ -289,7 +300,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         if p_value >= NOISE_P:
             return replace(cal, nests=f"estimated: the fit's residual matches the stated R-Test "
                                       f"noise (RMS {ratio:.2f} x, p = {p_value:.2g})")
-        if budget.spent:
+        if budget is not None and budget.spent:
             return cal  # no evaluation left for the refit with fixed nests: it did not converge
         try:
             fixed = _identify(campaign, arm, options, budget, fixed_nests=True)
@@ -389,7 +400,7 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | N
                                                   options.sigma_location)
     base_w = np.ones(len(q)) if stated is None else sigma_class / stated
     settings = SolverSettings(loss=options.loss, f_scale=options.f_scale or 3 * sigma_class,
-                              max_nfev=options.max_nfev, budget=budget)
+                              max_nfev=options.solve_nfev, budget=budget)
     return _Setup(meas, full_u, start, has_spat, sigma_class, stated, base_w, nuisance, measured,
                   nuisance_keys, settings)
 

@@ -101,6 +101,14 @@ def plausible_rms(unknowns: Unknowns, jac: BlockJacobian, scale: np.ndarray, n_r
     return float(np.sqrt(np.sum(power[arm]) / max(n_rows, 1)))
 
 
+def agrees(rms: float, plausible: float, sigma: float) -> bool:
+    """Whether a residual scale per coordinate (m) is within what noise and plausible errors leave.
+
+    The bound of :func:`check_agreement`: :data:`DISAGREE_K` x hypot(sigma, plausible).
+    """
+    return rms <= DISAGREE_K * float(np.hypot(sigma, plausible))
+
+
 def check_agreement(rms: float, plausible: float, sigma: float, evaluations: int,
                     sizes: str) -> None:
     """Raise :class:`InputsDisagree` when the residual is far beyond noise and plausible errors.
@@ -113,8 +121,7 @@ def check_agreement(rms: float, plausible: float, sigma: float, evaluations: int
         evaluations: evaluations made so far (for the message).
         sizes: which sizes file the arm uses (for the message).
     """
-    bound = DISAGREE_K * float(np.hypot(sigma, plausible))
-    if rms <= bound:
+    if agrees(rms, plausible, sigma):
         return
     raise InputsDisagree(
         f"the inputs disagree: after {evaluations} evaluations the residual is "
