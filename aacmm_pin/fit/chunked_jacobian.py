@@ -42,6 +42,25 @@ def is_chunked(unknowns: Unknowns, n_samples: int) -> bool:
     return unknowns.chain_only() and jacobian_bytes(unknowns, n_samples) > CHUNKED_BYTES
 
 
+def sparse_cross(jac: BlockJacobian, u: sp.csr_matrix) -> np.ndarray:
+    """Return J^T u for a sparse u, shape (3N, k), in sparse products only, shape (n_free, k).
+
+    :meth:`~aacmm_pin.fit.unknowns.BlockJacobian.cross` with the node block's part taken as
+    ``W^T (D u)``: D (N, 3N) holds each sample's d(point)/d(angle) on its three rows and W the
+    interpolation weights (:meth:`~aacmm_pin.fit.unknowns.AxisNodes.transposed_weights`), so the
+    cost follows u's nonzeros (one per row for the nests) instead of a dense copy of u's rows.
+    """
+    n = jac.dense.shape[0] // 3
+    out = np.empty((jac.shape[1], u.shape[1]))
+    nd = jac.dense.shape[1]
+    out[:nd] = np.asarray(u.T @ jac.dense).T
+    rows, starts = np.arange(3 * n), np.arange(0, 3 * n + 1, 3)
+    for ax in jac.axes:
+        d = sp.csr_matrix((ax.d.ravel(), rows, starts), shape=(n, 3 * n))
+        out[nd + ax.offset:nd + ax.offset + ax.size] = (ax.transposed_weights() @ (d @ u)).toarray()
+    return out
+
+
 class ChunkedJacobian:
     """d(data residuals)/d(free arm entries) at one point, rows weighted, shape (3N, n_free).
 
@@ -60,6 +79,10 @@ class ChunkedJacobian:
         self.unknowns, self.x_arm, self.q = unknowns, np.array(x_arm, dtype=float), q
         self.row_weight = row_weight
         self._normal: np.ndarray | None = None
+        self._cross: tuple[sp.csr_matrix, np.ndarray] | None = None
+        """The last J^T u and its u (the covariance at a solve's solution asks for the solve's)."""
+        self._grad: tuple[np.ndarray, np.ndarray] | None = None
+        """The last J^T f and its f (a pass primed by the fit serves the solve's first step)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -85,26 +108,47 @@ class ChunkedJacobian:
                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """Return J^T J, J^T u (sparse u, shape (3N, k)) and J^T f (f shape (3N,)) in one pass.
 
-        Each of u and f may be None (its product None); J^T J is kept (:meth:`normal`).
+        Each of u and f may be None (its product None). J^T J, the last J^T u and the last J^T f
+        are kept: asked again (same entries of u, of f), they take no pass.
         """
-        if u is None and f is None and self._normal is not None:
-            return self._normal.copy(), None, None
         rows = None if u is None else sp.csr_matrix(u)
+        known = self._known_cross(rows)
+        known_grad = None
+        if f is not None and self._grad is not None and np.array_equal(self._grad[0], f):
+            known_grad = self._grad[1].copy()
+        if (self._normal is not None and (rows is None or known is not None)
+                and (f is None or known_grad is not None)):
+            return self._normal.copy(), known, known_grad
         m = self.shape[1]
         normal = None if self._normal is not None else np.zeros((m, m))
-        cross = None if rows is None else np.zeros((m, rows.shape[1]))
-        grad = None if f is None else np.zeros(m)
+        cross = None if rows is None or known is not None else np.zeros((m, rows.shape[1]))
+        grad = None if f is None or known_grad is not None else np.zeros(m)
         for a, b, jac in self.chunks():
             if normal is not None:
                 normal += jac.normal()
             if cross is not None and rows is not None:
-                cross += jac.cross(rows[a:b])
+                cross += sparse_cross(jac, rows[a:b])
             if grad is not None and f is not None:
                 grad += jac.rmatmul(f[a:b])
         if normal is not None:
             self._normal = normal
+        if cross is not None and rows is not None:
+            self._cross = (rows, cross)
+        if grad is not None and f is not None:
+            self._grad = (np.array(f, dtype=float), grad)
         assert self._normal is not None
-        return self._normal.copy(), cross, grad
+        return (self._normal.copy(), known if cross is None else cross.copy(),
+                known_grad if grad is None else grad.copy())
+
+    def _known_cross(self, rows: sp.csr_matrix | None) -> np.ndarray | None:
+        """Return the kept J^T u if u is the kept one's (same entries), else None."""
+        if rows is None or self._cross is None:
+            return None
+        kept, cross = self._cross
+        if kept.shape != rows.shape or (kept != rows).nnz:
+            return None
+        out: np.ndarray = cross.copy()
+        return out
 
     def normal(self) -> np.ndarray:
         """Return J^T J, shape (n_free, n_free) (computed once)."""

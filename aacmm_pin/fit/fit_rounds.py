@@ -109,6 +109,9 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
         jac_now = jacobian(x_now)
+        if same and isinstance(jac_now, ChunkedJacobian):  # one pass serves the check and the
+            # solve's first step: J^T J, J^T (nuisance columns) and J^T f there
+            jac_now.products(now.problem.nuisance_jacobian(x_now), f_at[:now.problem.n_data])
         again = check(jac_now, x_now, now)
         if again is not None:
             # the solve starts at x_now put on the new constraints (held at the start's values),
