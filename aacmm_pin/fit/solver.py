@@ -247,6 +247,11 @@ class Problem:
         frame_scale = np.tile([FRAME_ANGLE, FRAME_ANGLE, FRAME_ANGLE, FRAME_LENGTH, FRAME_LENGTH,
                                FRAME_LENGTH], nuisance.n_frames)
         t[self.n_arm:, n_null:] = np.diag(np.concatenate([self.nest_sigma, frame_scale]))
+        if isinstance(jac_lin, ChunkedJacobian) and np.array_equal(x_lin, x_ref):
+            # at z = 0 (a fit's start): one pass gives the preconditioner's J^T (nuisance
+            # columns) and the first Gauss-Newton step's J^T f (fun(0) is this residual)
+            jac_lin.products(self.nuisance_jacobian(x_lin),
+                             self.residual_at(x_lin)[:self.n_data])
         # any nearby point preconditions well
         info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t
         chol = np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info) * np.eye(len(info)))
@@ -378,7 +383,10 @@ class Problem:
 
     def fun(self, z: np.ndarray) -> np.ndarray:
         """Return the residuals: data (model - measured, 3N, weighted), nest prior rows, lengths."""
-        x = self.x(z)
+        return self.residual_at(self.x(z))
+
+    def residual_at(self, x: np.ndarray) -> np.ndarray:
+        """Return :meth:`fun` at the full vector x (no reduced coordinates needed)."""
         pred = self.unknowns.positions(x[:self.n_arm], self.q).reshape(-1)
         data = pred - self.main_measured(x).reshape(-1)
         if self.row_weight is not None:
