@@ -19,9 +19,10 @@ from scipy.optimize import OptimizeResult
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
+from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian, is_chunked
 from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
 from aacmm_pin.fit.solver_values import BudgetSpent
-from aacmm_pin.fit.unknowns import BlockJacobian, Unknowns
+from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.sizes import sizes_label
 
@@ -38,7 +39,7 @@ class Fit(NamedTuple):
     res: OptimizeResult
     x: np.ndarray
     nfev: int
-    jac: BlockJacobian | None = None
+    jac: DataJacobian | None = None
     """The data Jacobian at ``x`` when the fit has it (for the covariance; then released)."""
 
 
@@ -63,8 +64,14 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     x_start = np.concatenate([unknowns.vector(start),
                               np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)])
 
-    def jacobian(x: np.ndarray) -> BlockJacobian:
-        _, jac_x = unknowns.jacobian(x[:n_arm], q)
+    chunked = is_chunked(unknowns, len(q))  # a large campaign: never held whole
+
+    def jacobian(x: np.ndarray) -> DataJacobian:
+        jac_x: DataJacobian
+        if chunked:
+            jac_x = ChunkedJacobian(unknowns, x[:n_arm], q)
+        else:
+            _, jac_x = unknowns.jacobian(x[:n_arm], q)
         return jac_x if rows is None else jac_x.scaled(rows)
 
     # without row weights the solver's data Jacobian is this one: computed once per point
@@ -73,7 +80,7 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
 
-    def decide(jac_x: BlockJacobian, x: np.ndarray) -> _Decision:
+    def decide(jac_x: DataJacobian, x: np.ndarray) -> _Decision:
         """Held directions decided at x (``jac_x``: the Jacobian there), the problem at x."""
         obs = ident.observability(unknowns, jac_x, gauge, sigma_class)
         constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
@@ -81,7 +88,7 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
                                                    obs.scale, x_start, x, sigma_class, weight,
                                                    jac_x if same else None))
 
-    def check(jac_x: BlockJacobian, x: np.ndarray, now: _Decision) -> _Decision | None:
+    def check(jac_x: DataJacobian, x: np.ndarray, now: _Decision) -> _Decision | None:
         """The decision taken again at x if x holds another number of directions, else None."""
         if ident.held_count(unknowns, jac_x, gauge, sigma_class) == now.obs.hold.shape[0]:
             return None
@@ -106,13 +113,16 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
         jac_now = jacobian(x_now)
+        if same and isinstance(jac_now, ChunkedJacobian):  # one pass serves the check and the
+            # solve's first step: J^T J, J^T (nuisance columns) and J^T f there
+            jac_now.products(now.problem.nuisance_jacobian(x_now), f_at[:now.problem.n_data])
         again = check(jac_now, x_now, now)
         if again is not None:
             # the solve starts at x_now put on the new constraints (held at the start's values),
             # a held component away from it: x_now's Jacobian still serves the first step
             now, z_now, f_now = again, again.problem.z(x_now), None
-    last: BlockJacobian | None = None  # the solver's last, taken at its solution: jacobian(x_now)
-    at_solution: BlockJacobian | None = None  # the data Jacobian at the final x, for the covariance
+    last: DataJacobian | None = None  # the solver's last, taken at its solution: jacobian(x_now)
+    at_solution: DataJacobian | None = None  # the data Jacobian at the final x, for the covariance
     for _round in range(3):  # checked at the solution
         if _round:
             jac_now = last if last is not None else jacobian(x_now)
@@ -156,7 +166,7 @@ class _Decision(NamedTuple):
     """Constrained by ``constraints``, preconditioned at the point of the decision."""
 
 
-def decision_point(problem: Problem, jacobian: BlockJacobian | None,
+def decision_point(problem: Problem, jacobian: DataJacobian | None,
                     on_evaluation: Callable[[float], None]
                     ) -> tuple[np.ndarray, np.ndarray, int]:
     """Return where the held directions are checked before the solve, its residual, evaluations.

@@ -31,12 +31,14 @@ step lands and at the solution).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from aacmm_pin.fit.unknowns import BlockJacobian, NodeKey, Unknowns
+from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian
+from aacmm_pin.fit.unknowns import NodeKey, Unknowns
 from aacmm_pin.model.encoder_map import touched_nodes
 
 GAUGE_TOL = 1e-6
@@ -82,7 +84,7 @@ def unvisited_nodes(unknowns: Unknowns, q: np.ndarray) -> np.ndarray:
     return mask
 
 
-def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
+def gauge_axes(unknowns: Unknowns, jac: DataJacobian) -> list[int]:
     """Return the map axes whose constant lies in the span of the non-map columns.
 
     Args:
@@ -90,14 +92,13 @@ def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
         jac: data Jacobian w.r.t. the free entries, shape (3N, n_free).
     """
     full_cols = np.flatnonzero(unknowns.free)
-    dense = jac.dense
-    axes, constants = [], []
+    axes, col_sets = [], []
     for axis in unknowns.map_axes:
         sl = unknowns.map_slice(axis)
         cols = np.flatnonzero((full_cols >= sl.start) & (full_cols < sl.stop))
         if cols.size:
             axes.append(axis)
-            constants.append(jac.columns_sum(cols))
+            col_sets.append(cols)
     if not axes:
         return []
     # The least-squares fit of a constant column is its projection on the dense block's numerical
@@ -106,19 +107,37 @@ def gauge_axes(unknowns: Unknowns, jac: BlockJacobian) -> list[int]:
     # block's singular values and left vectors are R11's (u), and the residual of column j is
     # ||(I - u u^T) R12[:, j]||^2 + ||R22[:, j]||^2. R is taken by blocks of rows (the blocks'
     # R stacked and factored again): no copy of the tall matrix.
-    nd = dense.shape[1]
-    blocks = [_r_factor(np.column_stack([dense[i:i + QR_ROWS], *(c[i:i + QR_ROWS]
-                                                                 for c in constants)]))
-              for i in range(0, dense.shape[0], QR_ROWS)]
+    nd = int(unknowns.free[:unknowns.n_dense].sum())
+    blocks = list(_qr_blocks(jac, col_sets))
     r = _r_factor(np.vstack(blocks)) if len(blocks) > 1 else blocks[0]
     u, sv, _ = np.linalg.svd(r[:nd, :nd], full_matrices=False)
-    rng = u[:, sv > (sv.max(initial=0.0) * np.finfo(float).eps * max(dense.shape))]
+    rng = u[:, sv > (sv.max(initial=0.0) * np.finfo(float).eps * max(jac.shape[0], nd))]
     r12 = r[:nd, nd:]
     off = r12 - rng @ (rng.T @ r12)
     residual = np.sqrt(np.sum(off ** 2, axis=0) + np.sum(r[nd:, nd:] ** 2, axis=0))
     norm = np.linalg.norm(r[:, nd:], axis=0)  # = the constants' norms (Q is orthonormal)
     return [axis for axis, res, nrm in zip(axes, residual, norm)
             if nrm == 0.0 or res / nrm < GAUGE_TOL]
+
+
+def _qr_blocks(jac: DataJacobian, col_sets: list[np.ndarray]) -> Iterator[np.ndarray]:
+    """Yield R of ``[dense block | sums of the columns of each set]`` per block of QR_ROWS rows.
+
+    A :class:`ChunkedJacobian` chunk by chunk (its J^T J kept from the same pass: the
+    observability analysis asks for it next).
+    """
+    if isinstance(jac, ChunkedJacobian):
+        normal = np.zeros((jac.shape[1], jac.shape[1]))
+        for _, _, part in jac.chunks():
+            normal += part.normal()
+            yield from _qr_blocks(part, col_sets)
+        jac.keep_normal(normal)
+        return
+    dense = jac.dense
+    constants = [jac.columns_sum(cols) for cols in col_sets]
+    for i in range(0, dense.shape[0], QR_ROWS):
+        yield _r_factor(np.column_stack([dense[i:i + QR_ROWS], *(c[i:i + QR_ROWS]
+                                                                for c in constants)]))
 
 
 def _r_factor(a: np.ndarray) -> np.ndarray:
@@ -156,7 +175,7 @@ class Observability:
         return sp.csr_matrix(GAUGE_WEIGHT * self.hold / self.scale[None, :])
 
 
-def observability(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, sigma: float
+def observability(unknowns: Unknowns, jac: DataJacobian, extra: sp.csr_matrix, sigma: float
                   ) -> Observability:
     """Find the directions the data does not determine (truncated SVD of the scaled Jacobian).
 
@@ -175,14 +194,14 @@ def observability(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, 
     return Observability(eigvec[:, held].T, singular[held], identifiable, scale)
 
 
-def held_count(unknowns: Unknowns, jac: BlockJacobian, extra: sp.csr_matrix, sigma: float) -> int:
+def held_count(unknowns: Unknowns, jac: DataJacobian, extra: sp.csr_matrix, sigma: float) -> int:
     """Return how many directions :func:`observability` would hold (eigenvalues only, cheaper)."""
     scale = plausible_sizes(unknowns)[unknowns.free]
     eigval = np.linalg.eigvalsh(_scaled_information(jac, extra, scale))
     return int(np.sum(np.sqrt(np.clip(eigval, 0.0, None)) < DETERMINED_K * sigma))
 
 
-def _scaled_information(jac: BlockJacobian, extra: sp.csr_matrix, scale: np.ndarray) -> np.ndarray:
+def _scaled_information(jac: DataJacobian, extra: sp.csr_matrix, scale: np.ndarray) -> np.ndarray:
     """Return (J^T J + extra^T extra) with rows and columns scaled by ``scale``, (n_free, n_free)."""
     out: np.ndarray = (jac.normal() + (extra.T @ extra).toarray()) * np.outer(scale, scale)
     return out

@@ -27,8 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from aacmm_pin.fit.chunked_jacobian import DataJacobian
 from aacmm_pin.fit.measurements import IdentificationError
-from aacmm_pin.fit.unknowns import BASE_NAMES, BlockJacobian, Unknowns
+from aacmm_pin.fit.unknowns import BASE_NAMES, Unknowns
 
 UNIT_FACTOR = 3.0
 """Largest ratio of the nominal arm's point spread to the measured one (either way) accepted."""
@@ -83,7 +84,7 @@ def check_point_spread(measured: np.ndarray, nominal: np.ndarray, group: np.ndar
             "?  ", "? "))
 
 
-def plausible_rms(unknowns: Unknowns, jac: BlockJacobian, scale: np.ndarray, n_rows: int) -> float:
+def plausible_rms(unknowns: Unknowns, jac: DataJacobian, scale: np.ndarray, n_rows: int) -> float:
     """Return ``m``: the RMS per coordinate that plausible errors of every arm parameter make, m.
 
     ``sqrt(sum_j s_j^2 |J_j|^2 / n_rows)`` over the free entries but X0 and the translation (the

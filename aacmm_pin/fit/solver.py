@@ -33,6 +33,7 @@ import scipy.sparse as sp
 from scipy.optimize import OptimizeResult, least_squares
 from scipy.sparse.linalg import LinearOperator, lsmr
 
+from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian, is_chunked
 from aacmm_pin.fit.solver_values import (
     BudgetSpent,
     Counted,
@@ -41,7 +42,7 @@ from aacmm_pin.fit.solver_values import (
     SolverSettings,
     WarmStart,
 )
-from aacmm_pin.fit.unknowns import BlockJacobian, Unknowns
+from aacmm_pin.fit.unknowns import Unknowns
 
 __all__ = ["DENSE_LIMIT", "STEP_TOL", "Factor", "Nuisance", "Problem", "Solution", "SolverSettings",
            "WarmStart"]
@@ -127,7 +128,7 @@ class _Handover:
         """Return the start's residual on the first call if z is the start, else None."""
         return self._take(self._residual, z)
 
-    def jacobian(self, z: np.ndarray) -> BlockJacobian | None:
+    def jacobian(self, z: np.ndarray) -> DataJacobian | None:
         """Return the start's data Jacobian on the first call if z is the start, else None."""
         return self._take(self._jacobian, z)
 
@@ -158,6 +159,11 @@ class Problem:
         weight: per sample, ``sigma / (its stated noise)``, shape (N,); None: all 1 (generalised
             least squares with per-sample noise: the data rows are multiplied by it).
         jac_lin: :meth:`data_jacobian` at x_lin when the caller has it (not computed again).
+
+    A campaign whose data Jacobian would exceed
+    :data:`~aacmm_pin.fit.chunked_jacobian.CHUNKED_BYTES` is :attr:`chunked`: its data Jacobian is
+    a :class:`~aacmm_pin.fit.chunked_jacobian.ChunkedJacobian` (products chunk by chunk, never
+    held whole) and the solver's steps come from the normal equations (:meth:`compressed`).
     """
 
     unknowns: Unknowns
@@ -196,14 +202,17 @@ class Problem:
     """R^-1: scaled basis coordinates y of reduced coordinates z (``y = R^-1 z``), shape (n_y, n_z)."""
     p: np.ndarray
     """P = T R^-1: full-vector change per reduced coordinate (``x = x_ref + P z``), shape (n_x, n_z)."""
+    chunked: bool
+    """Whether the data Jacobian is taken chunk by chunk (a large campaign, see the class doc)."""
 
     def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
                  nuisance: Nuisance, constraints: sp.csr_matrix, scale: np.ndarray,
                  x_ref: np.ndarray, x_lin: np.ndarray, sigma: float,
-                 weight: np.ndarray | None = None, jac_lin: BlockJacobian | None = None):
+                 weight: np.ndarray | None = None, jac_lin: DataJacobian | None = None):
         self.unknowns, self.q, self.measured = unknowns, q, measured
         self.nuisance = nuisance
         n = len(q)
+        self.chunked = is_chunked(unknowns, n)
         self.n_arm = int(unknowns.free.sum())
         self.n_loc = 3 * nuisance.n_nests
         self.n_frame = 6 * nuisance.n_frames
@@ -238,6 +247,11 @@ class Problem:
         frame_scale = np.tile([FRAME_ANGLE, FRAME_ANGLE, FRAME_ANGLE, FRAME_LENGTH, FRAME_LENGTH,
                                FRAME_LENGTH], nuisance.n_frames)
         t[self.n_arm:, n_null:] = np.diag(np.concatenate([self.nest_sigma, frame_scale]))
+        if isinstance(jac_lin, ChunkedJacobian) and np.array_equal(x_lin, x_ref):
+            # at z = 0 (a fit's start): one pass gives the preconditioner's J^T (nuisance
+            # columns) and the first Gauss-Newton step's J^T f (fun(0) is this residual)
+            jac_lin.products(self.nuisance_jacobian(x_lin),
+                             self.residual_at(x_lin)[:self.n_data])
         # any nearby point preconditions well
         info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t
         chol = np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info) * np.eye(len(info)))
@@ -357,14 +371,22 @@ class Problem:
                              shape=(n, self.n_loc + self.n_frame))
 
     # ------------------------------------------------------------ residuals and Jacobians
-    def data_jacobian(self, x_arm: np.ndarray) -> BlockJacobian:
-        """Return d(data residuals)/d(free arm entries) at x_arm (weighted rows), (3N, n_arm)."""
+    def data_jacobian(self, x_arm: np.ndarray) -> DataJacobian:
+        """Return d(data residuals)/d(free arm entries) at x_arm (weighted rows), (3N, n_arm).
+
+        A :class:`~aacmm_pin.fit.chunked_jacobian.ChunkedJacobian` for a :attr:`chunked` problem.
+        """
+        if self.chunked:
+            return ChunkedJacobian(self.unknowns, x_arm, self.q, self.row_weight)
         _, jac = self.unknowns.jacobian(x_arm, self.q)
         return jac if self.row_weight is None else jac.scaled(self.row_weight)
 
     def fun(self, z: np.ndarray) -> np.ndarray:
         """Return the residuals: data (model - measured, 3N, weighted), nest prior rows, lengths."""
-        x = self.x(z)
+        return self.residual_at(self.x(z))
+
+    def residual_at(self, x: np.ndarray) -> np.ndarray:
+        """Return :meth:`fun` at the full vector x (no reduced coordinates needed)."""
         pred = self.unknowns.positions(x[:self.n_arm], self.q).reshape(-1)
         data = pred - self.main_measured(x).reshape(-1)
         if self.row_weight is not None:
@@ -413,15 +435,15 @@ class Problem:
                                      self._prior_rows(p_nuis), self.length_jacobian(x) @ p_nuis])
         return out
 
-    def jac_operator(self, z: np.ndarray, data: BlockJacobian | None = None) -> LinearOperator:
+    def jac_operator(self, z: np.ndarray, data: DataJacobian | None = None) -> LinearOperator:
         """Return d(fun)/dz as an operator (products only), for large campaigns.
 
         ``data``: :meth:`data_jacobian` at ``x(z)`` when the caller has it (not computed again).
         """
         return self._operator(z, data)[0]
 
-    def _operator(self, z: np.ndarray, data: BlockJacobian | None = None
-                  ) -> tuple[LinearOperator, list[BlockJacobian]]:
+    def _operator(self, z: np.ndarray, data: DataJacobian | None = None
+                  ) -> tuple[LinearOperator, list[DataJacobian]]:
         """Return the operator of :meth:`jac_operator` and the list holding its data Jacobian.
 
         The list is emptied when the operator is no longer used, so that its memory is freed.
@@ -450,29 +472,111 @@ class Problem:
                             matvec=matvec, rmatvec=rmatvec)
         return op, held
 
+    def compressed(self, z: np.ndarray, f: np.ndarray, data: DataJacobian | None = None
+                   ) -> tuple[LinearOperator, list[DataJacobian]]:
+        r"""Return an operator K, shape (n_rows, n_z), equivalent to d(fun)/dz for least squares at z.
+
+        ``K^T K = (J P)^T (J P)`` and ``K^T f = (J P)^T f`` for the residual f at z: a linear
+        least-squares problem ``min ||f + K dz||`` (a trust-region step, the Gauss-Newton step,
+        the predicted reduction, scipy's gradient) has the same solution and values as with
+        ``J P``, and K holds no per-sample Jacobian. With ``A = (J P)^T (J P) = R^T R`` and
+        ``c = R^{-T} (J P)^T f`` (the residual's coefficients on an orthonormal basis of the
+        columns' span, ``|c| <= |f|``), ``K = H [g^T; B; 0] R`` with ``g = c / |f|``,
+        ``B = (I - g g^T)^{1/2}`` and H the Householder reflection taking the first unit vector to
+        ``f / |f|``. A and ``(J P)^T f`` are taken in one pass over the data Jacobian's chunks
+        (:meth:`~aacmm_pin.fit.chunked_jacobian.ChunkedJacobian.products`).
+
+        Args:
+            z: reduced coordinates, shape (n_z,).
+            f: :meth:`fun` at z, shape (n_rows,), m.
+            data: :meth:`data_jacobian` at ``x(z)`` when the caller has it (not computed again).
+
+        Returns:
+            K, and the list holding the data Jacobian (as :meth:`_operator`'s).
+        """
+        x = self.x(z)
+        jac = self.data_jacobian(x[:self.n_arm]) if data is None else data
+        nuis = self.nuisance_jacobian(x)
+        n_data, n_loc = self.n_data, self.n_loc
+        f_data = f[:n_data]
+        if isinstance(jac, ChunkedJacobian):  # one pass over the chunks
+            normal, cross, g_arm = jac.products(nuis, f_data)
+            assert cross is not None and g_arm is not None
+        else:
+            normal, cross, g_arm = jac.normal(), jac.cross(nuis), jac.rmatmul(f_data)
+        info = self._information(x, normal, cross, nuis)
+        back = nuis.T @ f_data + self.length_jacobian(x).T @ f[n_data + n_loc:]
+        back[:n_loc] += self.prior * f[n_data:n_data + n_loc]
+        a = self.p.T @ info @ self.p
+        b = self.p.T @ np.concatenate([g_arm, back])
+        lam, vec = np.linalg.eigh(a)
+        root = np.sqrt(np.clip(lam, 0.0, None))
+        r = root[:, None] * vec.T                                        # A = R^T R
+        seen = root > root.max(initial=0.0) * RANK_TOL
+        c = np.where(seen, (vec.T @ b) / np.where(seen, root, 1.0), 0.0)  # R^-T b
+        size = float(np.linalg.norm(f))
+        g = c / size if size > 0.0 else np.zeros_like(c)
+        g2 = float(g @ g)
+        if g2 > 1.0:  # rounding: c is a projection of f
+            g, g2 = g / np.sqrt(g2), 1.0
+        b_mat = np.eye(g.size) - np.outer(g, g) / (1.0 + np.sqrt(1.0 - g2))  # (I - g g^T)^(1/2)
+        w = f / size if size > 0.0 else np.zeros_like(f)
+        w[0] -= 1.0
+        ww = float(w @ w)
+        n_z, n_rows = g.size, f.size
+
+        def reflect(u: np.ndarray) -> np.ndarray:
+            out: np.ndarray = u - (2.0 * float(w @ u) / ww) * w if ww > 1e-300 else u.copy()
+            return out
+
+        def matvec(v: np.ndarray) -> np.ndarray:
+            t = r @ np.ravel(v)
+            top = np.zeros(n_rows)
+            top[0] = g @ t
+            top[1:n_z + 1] = b_mat @ t
+            return reflect(top)
+
+        def rmatvec(u: np.ndarray) -> np.ndarray:
+            h = reflect(np.ravel(u))
+            out: np.ndarray = r.T @ (g * h[0] + b_mat @ h[1:n_z + 1])
+            return out
+
+        op = LinearOperator(shape=(n_rows, n_z), dtype=float, matvec=matvec, rmatvec=rmatvec)
+        return op, [jac]
+
     def factor(self, z: np.ndarray) -> Factor:
         """Return the reduced QR factors of the dense Jacobian at z."""
         q, r = np.linalg.qr(self.jac(z))
         return Factor(q, r)
 
-    def normal_matrix(self, x: np.ndarray, jac: BlockJacobian | None = None) -> np.ndarray:
+    def normal_matrix(self, x: np.ndarray, jac: DataJacobian | None = None) -> np.ndarray:
         """Return J^T J of the data, prior and length rows w.r.t. the full vector at x, (n_x, n_x).
 
         ``jac``: :meth:`data_jacobian` at x when the caller has it (not computed again).
         """
         jac = self.data_jacobian(x[:self.n_arm]) if jac is None else jac
-        nuis, lengths = self.nuisance_jacobian(x), self.length_jacobian(x)
+        nuis = self.nuisance_jacobian(x)
+        if isinstance(jac, ChunkedJacobian):  # one pass over the chunks
+            normal, cross, _ = jac.products(nuis)
+            assert cross is not None
+        else:
+            normal, cross = jac.normal(), jac.cross(nuis)
+        return self._information(x, normal, cross, nuis)
+
+    def _information(self, x: np.ndarray, normal: np.ndarray, cross: np.ndarray,
+                     nuis: sp.csr_matrix) -> np.ndarray:
+        """Return :meth:`normal_matrix` from the data block's J^T J and J^T (nuisance columns)."""
+        lengths = self.length_jacobian(x)
         na, nn = self.n_arm, self.n_loc + self.n_frame
         info = np.empty((na + nn, na + nn))
-        info[:na, :na] = jac.normal()
-        cross = np.vstack([np.asarray(nuis.T @ jac.dense).T, jac.node_rmatmul(nuis)])
+        info[:na, :na] = normal
         info[:na, na:] = cross
         info[na:, :na] = cross.T
         info[na:, na:] = (nuis.T @ nuis + lengths.T @ lengths).toarray()
         info[na:na + self.n_loc, na:na + self.n_loc] += np.diag(self.prior ** 2)
         return info
 
-    def covariance(self, x: np.ndarray, sigma: float, jac: BlockJacobian | None = None
+    def covariance(self, x: np.ndarray, sigma: float, jac: DataJacobian | None = None
                    ) -> np.ndarray:
         """Return the linearised covariance of the full vector at x for data noise sigma (m).
 
@@ -524,6 +628,7 @@ class Problem:
         del warm, start
         evaluations = [0]
         best: list[tuple[float, np.ndarray, np.ndarray]] = []  # (cost, z, f) of the lowest cost
+        latest: list[tuple[np.ndarray, np.ndarray]] = []  # (z, f) of the last evaluation
 
         def fun(z: np.ndarray) -> np.ndarray:
             given = handover.residual(z)
@@ -531,12 +636,13 @@ class Problem:
                 given = self.fun_reported(z, on_evaluation)
                 evaluations[0] += 1
             cost = 0.5 * float(given @ given)
+            latest[:] = [(np.array(z, dtype=float), given)]
             if not best or cost < best[0][0]:
                 best[:] = [(cost, np.array(z, dtype=float), given)]
             return given
 
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = jac
-        previous: list[list[BlockJacobian]] = []
+        previous: list[list[DataJacobian]] = []
         at: list[np.ndarray] = []
         used_given = [False]  # the current operator holds the caller's (maybe inexact) Jacobian
 
@@ -547,13 +653,20 @@ class Problem:
             while previous:
                 previous.pop().clear()
             given = handover.jacobian(z)
-            op, held = self._operator(z, given)
+            if normal_equations:  # scipy evaluated the residual at z just before
+                f = latest[0][1] if latest and np.array_equal(latest[0][0], z) else self.fun(z)
+                op, held = self.compressed(z, f, given)
+            else:
+                op, held = self._operator(z, given)
             used_given[0] = given is not None
             del given
             previous.append(held)
             at[:] = [np.array(z, dtype=float)]
             return op
 
+        # a chunked problem's steps from its normal equations (a linear loss: a robust loss
+        # reweights the rows, which the normal equations do not keep)
+        normal_equations = self.chunked and settings.loss == "linear"
         if jac == "analytic":
             jac_fun = self.jac if dense else operator
         try:
@@ -573,7 +686,7 @@ class Problem:
             out = OptimizeResult(x=z_best, fun=f_best, cost=cost, status=0, success=False,
                                  message=BUDGET_MESSAGE, njev=0, optimality=np.nan)
         out.nfev = evaluations[0]
-        last: BlockJacobian | None = None
+        last: DataJacobian | None = None
         if previous:  # the last operator's Jacobian, if taken at the solution
             held = previous.pop()
             if held and np.array_equal(at[0], out.x) and (exact or not used_given[0]):
@@ -582,7 +695,7 @@ class Problem:
             out.pop("jac", None)
         return Solution(out, last)
 
-    def newton_step(self, z: np.ndarray, f: np.ndarray, data: BlockJacobian | None = None
+    def newton_step(self, z: np.ndarray, f: np.ndarray, data: DataJacobian | None = None
                     ) -> np.ndarray:
         """Return the Gauss-Newton step at z: the dz minimising ``||f + (J P) dz||``, shape (n_z,).
 
@@ -596,7 +709,8 @@ class Problem:
             f: :meth:`fun` at z, shape (n_data + n_loc + n_lengths,), m.
             data: :meth:`data_jacobian` at ``x(z)`` when the caller has it (not computed again).
         """
-        step: np.ndarray = lsmr(self.jac_operator(z, data), -f, atol=1e-12, btol=1e-12)[0]
+        op = self.compressed(z, f, data)[0] if self.chunked else self.jac_operator(z, data)
+        step: np.ndarray = lsmr(op, -f, atol=1e-12, btol=1e-12)[0]
         return step
 
     def gauss_newton(self, z: np.ndarray, factor: Factor, iterations: int

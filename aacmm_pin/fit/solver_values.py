@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from aacmm_pin.fit.unknowns import BlockJacobian
+from aacmm_pin.fit.chunked_jacobian import DataJacobian
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class WarmStart:
     """Start, reduced coordinates, shape (n_z,)."""
     residual: np.ndarray | None = None
     """:meth:`~aacmm_pin.fit.solver.Problem.fun` at ``z``, or None (evaluated)."""
-    jacobian: BlockJacobian | None = field(default=None, repr=False)
+    jacobian: DataJacobian | None = field(default=None, repr=False)
     """:meth:`~aacmm_pin.fit.solver.Problem.data_jacobian` (shape (3N, n_arm), m per unit) at ``at``,
     or None."""
     at: np.ndarray | None = None
@@ -70,7 +70,7 @@ class Solution:
     result: OptimizeResult
     """scipy's result without its ``jac`` (``nfev``: the residual evaluations made; ``status`` 1
     when it ended on :data:`STEP_TOL`)."""
-    jacobian: BlockJacobian | None = field(default=None, repr=False)
+    jacobian: DataJacobian | None = field(default=None, repr=False)
     """:meth:`~aacmm_pin.fit.solver.Problem.data_jacobian` at the solution when the solver's last
     Jacobian was taken there (analytic Jacobian), else None: a caller that needs it there need not
     compute it again."""

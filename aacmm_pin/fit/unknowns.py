@@ -221,31 +221,53 @@ class Unknowns:
     def positions(self, x: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Return predicted MT-CS stylus centres for readouts q (N, n_axes), shape (N, 3), m."""
         params = self.parameters(x)
+        n = q.shape[0]
+        if n > BUILD_CHUNK and self.chain_only(params):
+            # a large campaign's chunk by chunk: the configurations (8 nq bytes per sample)
+            # exist for one chunk only (every sample's arithmetic is that of one call)
+            tools = tool_rows(self.arm, n, None, self._samples(q))
+            out = np.empty((n, 3))
+            for lo in range(0, n, BUILD_CHUNK):
+                hi = min(n, lo + BUILD_CHUNK)
+                out[lo:hi] = stylus_positions(self.arm, params, q[lo:hi], frame="mt",
+                                              tool=tools[lo:hi])
+            return out
         pos = stylus_positions(self.arm, params, q, frame="mt", samples=self._samples(q))
         return pos + self.measurement_shift(params, q) if self.terms else pos
 
-    def _chain_blocks(self, params: Parameters, q: np.ndarray
+    def _chain_blocks(self, params: Parameters, q: np.ndarray, lo: int = 0, hi: int | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return positions, free non-map columns and map axes' angle columns, without terms.
 
-        Shapes (N, 3), (3N, k) and (N, 3, n_map_axes): the two blocks the batched chain writes
-        (contiguous, not copied).
+        Shapes (N, 3), (3N, k) and (n_map_axes, N, 3): the dense block is kept, the maps' angle
+        columns only read (each axis' block contiguous, so the node columns keep it without a
+        copy). Built :data:`BUILD_CHUNK` samples at a time into the results: the configurations
+        (8 ``nq`` bytes per sample) and the chain's blocks exist for one chunk only, and every
+        sample's columns are those of a single call (the chain works sample by sample).
+        ``lo:hi``: the samples of q to take (default all; N = hi - lo).
         """
         ident = self.arm.identification
         fids = np.asarray(ident.tool_frames)[tool_rows(self.arm, q.shape[0], None,
-                                                       self._samples(q))]
-        config = identification_configuration(self.arm, params, q, "mt")
+                                                       self._samples(q))][lo:hi]
+        q = q[lo:hi]
+        n = q.shape[0]
         order = np.concatenate([ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.error_idx,
                                 ident.tool_idx])[self.free[:self.n_dense]]
         maps = ident.axis_idx[[a - 1 for a in self.map_axes]]
-        # two contiguous blocks: the dense one is kept, the maps' angle columns only read (the
-        # node columns copy them per axis), and products with a contiguous block copy nothing
-        pos, dense, angles = ident.chain.jacobian_blocks(config, fids, order, maps)
-        return pos, dense.reshape(3 * q.shape[0], -1), angles
+        pos = np.empty((n, 3))
+        dense = np.empty((n, 3, order.size))
+        angles = np.empty((maps.size, n, 3))
+        for lo in range(0, n, BUILD_CHUNK):
+            hi = min(n, lo + BUILD_CHUNK)
+            config = identification_configuration(self.arm, params, q[lo:hi], "mt")
+            pos[lo:hi], dense[lo:hi], extra = ident.chain.jacobian_blocks(config, fids[lo:hi],
+                                                                           order, maps)
+            angles[:, lo:hi] = extra.transpose(2, 0, 1)
+        return pos, dense.reshape(3 * n, -1), angles
 
     def _general_blocks(self, params: Parameters, q: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """As :meth:`_chain_blocks`, through :func:`stylus_jacobians` (terms, extensions)."""
+        """As :meth:`_chain_blocks` (in one piece), through :func:`stylus_jacobians` (terms)."""
         jac = stylus_jacobians(self.arm, params, q, frame="mt", samples=self._samples(q),
                                tilts=needs_tilts(self.terms))
         n = q.shape[0]
@@ -258,7 +280,7 @@ class Unknowns:
             k = int(sel.sum())
             dense[:, :, col:col + k] = part if k == sel.size else part[:, :, sel]
             at, col = at + sel.size, col + k
-        angles = jac.angles[:, :, [a - 1 for a in self.map_axes]]
+        angles = jac.angles[:, :, [a - 1 for a in self.map_axes]].transpose(2, 0, 1)
         return jac.position, dense.reshape(3 * n, -1), angles
 
     def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
@@ -275,22 +297,47 @@ class Unknowns:
         del cache
         _release_cached_jacobians()
         params = self.parameters(x)
-        if self.terms or params.extensions:
+        if not self.chain_only(params):
             position, dense, angles = self._general_blocks(params, q)
         else:  # straight from the chain into one array: no per-block copies
             position, dense, angles = self._chain_blocks(params, q)
+        if self.terms:
+            position = position + self.measurement_shift(params, q)
+        out = (position, self._with_nodes(params, q, dense, angles))
+        object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
+        _CACHED.append(weakref.ref(self))
+        return out
+
+    def _with_nodes(self, params: Parameters, q: np.ndarray, dense: np.ndarray,
+                    angles: np.ndarray) -> BlockJacobian:
+        """Return the Jacobian of readouts q from its dense block and the maps' angle columns."""
         # map nodes: d(p)/d(node) = d(p)/d(angle) * interpolation weight, free nodes only
         axes, at = [], 0
         for k, a in enumerate(self.map_axes):
             keep = self.free[self.map_slice(a)]
-            axes.append(AxisNodes.build(params.map(a), q[:, a - 1], angles[:, :, k], keep, at))
+            axes.append(AxisNodes.build(params.map(a), q[:, a - 1], angles[k], keep, at))
             at += int(keep.sum())
-        if self.terms:
-            position = position + self.measurement_shift(params, q)
-        out = (position, BlockJacobian(dense, tuple(axes), at))
-        object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
-        _CACHED.append(weakref.ref(self))
-        return out
+        return BlockJacobian(dense, tuple(axes), at)
+
+    def chain_only(self, params: Parameters | None = None) -> bool:
+        """Whether the Jacobian comes from the chain alone (no terms, no extensions' values)."""
+        params = self.start if params is None else params
+        return not (self.terms or params.extensions)
+
+    def jacobian_rows(self, x: np.ndarray, q: np.ndarray, lo: int, hi: int
+                      ) -> tuple[np.ndarray, BlockJacobian]:
+        """Return :meth:`jacobian`'s positions and Jacobian for the samples ``lo:hi`` of q only.
+
+        Shapes (hi - lo, 3) and (3 (hi - lo), n_free); the same values as those rows of
+        :meth:`jacobian` (not cached). Only for a layout whose Jacobian comes from the chain alone
+        (:meth:`chain_only`): the chunked products of a large campaign
+        (:class:`aacmm_pin.fit.chunked_jacobian.ChunkedJacobian`).
+        """
+        params = self.parameters(x)
+        if not self.chain_only(params):
+            raise ValueError("jacobian_rows: only for a layout without terms or extensions")
+        position, dense, angles = self._chain_blocks(params, q, lo, hi)
+        return position, self._with_nodes(params, q[lo:hi], dense, angles)
 
 
 _CACHED: list[weakref.ref[Unknowns]] = []
@@ -307,6 +354,9 @@ def _release_cached_jacobians() -> None:
 
 CHUNK = 16384
 """Samples per block in the products over samples (keeps their temporaries in cache)."""
+BUILD_CHUNK = 65536
+"""Samples per block when the chain's Jacobian is built (:meth:`Unknowns._chain_blocks`): a
+multiple of the chain's own block, so that every sample's arithmetic is that of one call."""
 
 
 class AxisNodes(NamedTuple):
@@ -424,6 +474,11 @@ class BlockJacobian:
             for lo in range(0, n, CHUNK):
                 s[lo:lo + CHUNK] = np.einsum("ik,ikj->ij", ax.d[lo:lo + CHUNK], block(lo))
             out[ax.offset:ax.offset + ax.size] = ax.transposed_weights() @ s
+        return out
+
+    def cross(self, u: sp.spmatrix | sp.sparray) -> np.ndarray:
+        """Return J^T @ u for a sparse u of shape (3N, k) (the nests' and frames' columns), (n_free, k)."""
+        out: np.ndarray = np.vstack([np.asarray(u.T @ self.dense).T, self.node_rmatmul(u)])
         return out
 
     def normal(self) -> np.ndarray:
