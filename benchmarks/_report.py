@@ -25,6 +25,18 @@ def best_of(f, repeat: int):
     return best, out
 
 
+def cpu_runs(f, repeat: int):
+    """Return the CPU seconds of ``repeat`` calls of ``f`` (this process) and the last result."""
+    import time
+
+    out, times = None, []
+    for _ in range(repeat):
+        tic = time.process_time()
+        out = f()
+        times.append(time.process_time() - tic)
+    return times, out
+
+
 def compile_package() -> None:
     """Write aacmm_pin's bytecode (``__pycache__``), as ``pip install`` does, so that whole-process
     timings do not include compiling the package's sources (this machine sets

@@ -21,7 +21,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -40,17 +39,7 @@ from aacmm_pin import (  # noqa: E402
 )
 from aacmm_pin.analyses.simulate import SimulationConfig  # noqa: E402
 from aacmm_pin.fit.identification import identify  # noqa: E402
-from benchmarks._report import compile_package, machine, write_section  # noqa: E402
-
-
-def cpu_runs(f, repeat: int) -> tuple[list[float], Any]:
-    """CPU seconds of ``repeat`` calls of f (this process) and its last result."""
-    out, times = None, []
-    for _ in range(repeat):
-        tic = time.process_time()
-        out = f()
-        times.append(time.process_time() - tic)
-    return times, out
+from benchmarks._report import compile_package, cpu_runs, machine, write_section  # noqa: E402
 
 
 def tiled(sim, k: int, rng: np.random.Generator) -> Campaign:

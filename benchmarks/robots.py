@@ -26,7 +26,6 @@ import resource
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 import aacmm_pin as ap  # noqa: E402
 from aacmm_pin._blas import single_threaded_blas  # noqa: E402
 from aacmm_pin.fit.unknowns import Unknowns  # noqa: E402
-from benchmarks._report import compile_package, machine, write_section  # noqa: E402
+from benchmarks._report import compile_package, cpu_runs, machine, write_section  # noqa: E402
 
 REPEAT = 5
 """Runs of each whole-process command and of the in-process identify."""
@@ -50,16 +49,6 @@ assert spec is not None and spec.loader is not None
 example = importlib.util.module_from_spec(spec)
 sys.modules[spec.name] = example  # its dataclasses look their module up while it runs
 spec.loader.exec_module(example)
-
-
-def cpu_times(f, repeat: int) -> tuple[list[float], object]:
-    """CPU seconds of ``repeat`` calls of f, and its last result."""
-    out, times = None, []
-    for _ in range(repeat):
-        tic = time.process_time()
-        out = f()
-        times.append(time.process_time() - tic)
-    return times, out
 
 
 def child(cmd: list[str], **env: str) -> tuple[float, str]:
@@ -128,8 +117,8 @@ def main() -> None:
 
     with single_threaded_blas():  # as the CLI and the hand-written fit: one BLAS thread
         ours()  # warm-up (first calls build caches)
-        t_ours, cal = cpu_times(ours, REPEAT)
-        t_plain, x_plain = cpu_times(plain, REPEAT_WEAK)
+        t_ours, cal = cpu_runs(ours, REPEAT)
+        t_plain, x_plain = cpu_runs(plain, REPEAT_WEAK)
     assert isinstance(cal, ap.Calibration) and isinstance(x_plain, np.ndarray)
 
     def test_error(params: ap.Parameters) -> float:
