@@ -172,3 +172,21 @@ def test_predict_on_independent_sample_campaign(tmp_path):
         for (a, b), length in camp.bar.items():
             assert abs(np.linalg.norm(mean[b] - mean[a]) - length) < 1e-9  # 1 nm
     np.testing.assert_allclose(read_readouts(SAMPLE / "lengthbar.csv"), bar.q)
+
+
+def test_compliance_option_sets_the_hidden_joints_by_axis_or_joint_name(tmp_path, capsys):
+    """simulate --compliance T2=...,A15=...: the truth holds exactly those axes and values; an
+    unknown axis is one line naming the arm's axes (exit 2)."""
+    import json
+
+    assert main(["simulate", "--arm", "torso_coupled", "--points", "20", "--effects",
+                 "dh,compliance", "--compliance", "T2=4e-6,T4=1e-5,L2=6e-6,A15=8e-6",
+                 str(tmp_path / "c")]) == 0
+    truth = json.loads((tmp_path / "c" / "truth.json").read_text())
+    assert truth["effects"]["compliance_rad_per_nm"] == {"2": 4e-6, "4": 1e-5, "6": 6e-6,
+                                                          "15": 8e-6}
+    capsys.readouterr()
+    assert main(["simulate", "--arm", "torso_coupled", "--points", "20", "--compliance", "X9=1",
+                 str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'X9' is no axis of torso_coupled" in err[0] and "T4" in err[0]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -66,8 +67,11 @@ def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ..
         print(f"simulating {len(config.location_xy)} SPATs of {config.samples_per_location} "
               f"postures and {config.bar_placements} bar placements (seed {config.seed}; a few "
               "seconds) ...", flush=True)
+    arm = load_arm(args.arm)
+    if args.compliance is not None:
+        config = dataclasses.replace(config, compliance=_compliances(args.compliance, arm))
     phase("simulating")
-    sim = simulate_campaign(load_arm(args.arm), config)
+    sim = simulate_campaign(arm, config)
     phase(f"writing {args.out}")
     write_simulation(sim, args.out, force=args.force)
     spat = sim.campaign.spat
@@ -76,6 +80,29 @@ def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ..
     print(f"wrote {args.out}: {what}, effects {', '.join(effects)}; truth in "
           f"{Path(args.out) / 'truth.json'}")
     return 0
+
+
+def _compliances(text: str, arm: Arm) -> dict[int, float]:
+    """Parse ``--compliance A2=4e-6,T4=1e-5``: axis (``A<k>`` or joint name) -> rad per N m."""
+    out: dict[int, float] = {}
+    for item in (i.strip() for i in text.split(",") if i.strip()):
+        name, _, value = item.partition("=")
+        name = name.strip()
+        if name in arm.axis_names:
+            axis = arm.axis_names.index(name) + 1
+        elif name[:1] in "Aa" and name[1:].isdigit() and 1 <= int(name[1:]) <= arm.n_axes:
+            axis = int(name[1:])
+        else:
+            raise ValueError(f"--compliance {item}: {name!r} is no axis of {arm.name} (A1..A"
+                             f"{arm.n_axes} or a joint: {', '.join(arm.axis_names)})")
+        try:
+            k = float(value)
+        except ValueError:
+            raise ValueError(f"--compliance {item}: write AXIS=K, K in rad per N m") from None
+        if not (math.isfinite(k) and k >= 0):
+            raise ValueError(f"--compliance {item}: K must be a finite number >= 0 rad per N m")
+        out[axis] = k
+    return out
 
 
 def _predict(args: argparse.Namespace) -> int:
@@ -491,6 +518,10 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     p.add_argument("--points", type=positive(int, zero=True), default=0,
                    help="instead of SPATs and the bar: this many tool points of a tracker or "
                         "motion capture (every tool of a tree, alternately; 20 um noise)")
+    p.add_argument("--compliance", default=None, metavar="AXIS=K,...",
+                   help="the hidden joint compliances of the effect compliance, rad per N m, by "
+                        "axis (A2) or joint name (T4), e.g. T2=4e-6,T4=1e-5 (default A2=4e-6,"
+                        "A4=6e-6)")
     p.set_defaults(handler=_simulate)
 
     p = add_command(subparsers, "predict", "stylus centres (r-CS, mm) for encoder readouts",
