@@ -163,18 +163,19 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
 
-    left = [max_nfev]  # evaluations left to all the fits below together
+    left = max_nfev  # evaluations left to all the fits below together
 
     def fit(model: ModelSpec | None = None) -> Calibration:
+        nonlocal left
         model = model or spec
-        if left[0] <= 0:
+        if left <= 0:
             raise _CapReached
         cal = identify(campaign, arm, model="proposed" if model.map_axes else "dh",
                        use_rtest=model.use_rtest, map_axes=model.map_axes or None,
-                       extensions=model.terms, max_nfev=left[0],
+                       extensions=model.terms, max_nfev=left,
                        nests="estimate",  # one treatment for every model
                        sigma_location=noise.location)
-        left[0] -= cal.nfev
+        left -= cal.nfev
         if _capped(cal):  # the caller ends the loop
             raise _CapReached
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined

@@ -200,18 +200,13 @@ def max_nfev_option(discovery: bool = False) -> argparse.ArgumentParser:
     With ``discovery``: of all the discovery's fits together (default from ``--max-steps``).
     """
     p = _parent()
-    if discovery:
-        p.add_argument("--max-nfev", type=positive(int), default=None, metavar="N",
-                       help="most residual evaluations of all the discovery's fits together (the "
-                            "start, each step's refit, refits after a dropped term; default 200 x "
-                            "(--max-steps + 1)); a step's fit that reaches it ends the loop, the "
-                            "steps so far written, exit 1")
-        return p
-    p.add_argument("--max-nfev", type=positive(int), default=None, metavar="N",
-                   help="most residual evaluations of a fit, all its solves together (rounds, "
-                        "robust passes, the refit with fixed nests; a fit stops at its tolerance, "
-                        "the count used is printed and in report.json); default: no cap on the "
-                        "whole fit, each solve stops after 200")
+    p.add_argument("--max-nfev", type=positive(int), default=None, metavar="N", help=(
+        "most residual evaluations of all the discovery's fits together (the start, each step's "
+        "refit, refits after a dropped term; default 200 x (--max-steps + 1)); a step's fit that "
+        "reaches it ends the loop, the steps so far written, exit 1" if discovery else
+        "most residual evaluations of a fit, all its solves together (rounds, robust passes, the "
+        "refit with fixed nests; a fit stops at its tolerance, the count used is printed and in "
+        "report.json); default: no cap on the whole fit, each solve stops after 200"))
     return p
 
 

@@ -185,11 +185,11 @@ def _identify_into(args: argparse.Namespace) -> int:
     return 0 if cal.success else 1
 
 
-def _print_sizes(arm: Arm) -> None:
+def _print_sizes(arm: Arm, indent: str = "") -> None:
     """Print which plausible sizes the arm uses: its sizes file, or the built-in defaults."""
     from aacmm_pin.model.sizes import sizes_label
 
-    print(f"sizes: {sizes_label(arm.source)}")
+    print(f"{indent}sizes: {sizes_label(arm.source)}")
 
 
 def _print_calibration(cal: Calibration, out: Path) -> None:
@@ -293,8 +293,7 @@ def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: 
 def _print_discovery_start_sizes(start: str, arm: Arm, noise: str, *values: Any) -> None:
     """Print the start model's line (:func:`_print_discovery_start`), then the sizes used."""
     _print_discovery_start(start, noise, *values)
-    print("  ", end="")
-    _print_sizes(arm)
+    _print_sizes(arm, indent="  ")
 
 
 def _print_discovery_step(k: int, step: Step) -> None:
