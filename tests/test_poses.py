@@ -108,3 +108,38 @@ def test_import_points_writes_the_pose_column_for_several_markers(tmp_path):
     import_points([source("one.csv", 1)], tmp_path / "one", fmt)
     points = read_campaign(tmp_path / "one").points
     assert points is not None and "pose" not in points.columns
+
+
+def test_spat_and_points_fitted_together_keep_the_pose_column(tmp_path):
+    """SPAT and points in one campaign: the joined samples keep points.csv's pose column, so
+    discover's folds keep a pose whole when its rows are not consecutive (each pose measured twice,
+    the second pass after the first)."""
+    arm = ap.load_arm()
+    sim = ap.simulate_campaign(arm, ap.SimulationConfig(samples_per_location=20, bar_placements=0))
+    rng = np.random.default_rng(2)
+    lim = arm.joint_limits
+    q = rng.uniform(lim[:, 0], lim[:, 1], (N_POSES, arm.n_axes))
+    pose = np.tile(np.arange(N_POSES), 2)
+    point = (ap.stylus_positions(arm, sim.truth, q[pose], frame="mt")
+             + rng.normal(0.0, SIGMA, (len(pose), 3)))
+    c = sim.campaign
+    write_campaign(ap.Campaign(spat=c.spat, locations=c.locations, lengthbar=None, bar={},
+                               points=PointLog(group=np.ones(len(pose), dtype=np.int64),
+                                               q=q[pose], point=point,
+                                               columns={"pose": 7.0 + pose})), tmp_path)
+    campaign = read_campaign(tmp_path, arm=arm)
+    joined = measurements(campaign, arm, True).samples
+    n_spat = len(c.spat.q) if c.spat is not None else 0
+    assert joined.n == n_spat + len(pose) and "pose" in joined.columns
+    cal = ap.identify(campaign, arm, model="dh")
+    lin = LinearScorer(cal, joined)
+    point_groups = [g for g, centred in zip(lin.groups, lin.centred) if not centred]
+    assert len(point_groups) == FOLDS
+    rows = np.unique(np.concatenate(point_groups) // 3)  # samples in the folds, joined order
+    # each sample's true pose: the drawn readouts it was read back as (file digits), else its own
+    dist = np.linalg.norm(cal.q[rows][:, None] - q[None], axis=2)
+    truth = np.where(dist.min(axis=1) < 1e-6, dist.argmin(axis=1), -1 - rows)
+    assert np.sum(truth >= 0) == len(pose)
+    at = {int(r): k for k, r in enumerate(rows)}
+    local = [np.array([3 * at[int(r) // 3] + int(r) % 3 for r in g]) for g in point_groups]
+    assert _split_poses(local, truth) == []

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.data.logs import LengthBarLog, PointLog, SpatLog
+from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm
@@ -85,16 +86,20 @@ class Samples:
         """Return the samples of several parts (of one arm), rows stacked in order.
 
         A column is kept when every part has it; a missing displacement is zero, a missing tool
-        the first one; locations are dropped.
+        the first one; locations are dropped. The ``pose`` column is kept when any part has it:
+        each part's poses numbered apart from the others' (a part without the column: identical
+        readouts in consecutive rows are one pose, as :func:`~aacmm_pin.data.poses.pose_ids`).
         """
         names = [n for n in parts[0].columns if all(n in p.columns for p in parts)]
         disp = np.concatenate([np.zeros((x.n, 3)) if x.displacement is None else x.displacement
                                for x in parts])
         tool = None if all(x.tool is None for x in parts) else np.concatenate(
             [np.zeros(x.n, dtype=np.int64) if x.tool is None else x.tool for x in parts])
+        columns = {n: np.concatenate([p.columns[n] for p in parts]) for n in names}
+        if any(POSE_COLUMN in p.columns for p in parts):
+            columns[POSE_COLUMN] = _joined_poses(parts)
         return cls(parts[0].arm, np.concatenate([p.q for p in parts]), displacement=disp, tool=tool,
-                   columns={n: np.concatenate([p.columns[n] for p in parts]) for n in names},
-                   files=tuple(dict.fromkeys(f for p in parts for f in p.files)))
+                   columns=columns, files=tuple(dict.fromkeys(f for p in parts for f in p.files)))
 
     def select(self, rows: np.ndarray) -> Samples:
         """Return the samples of these rows (a boolean mask or indices), every column with them."""
@@ -237,3 +242,13 @@ def motion_direction(q: np.ndarray) -> np.ndarray:
         last = np.where(row != 0, row, last)
         out[i] = last
     return out
+
+
+def _joined_poses(parts: Sequence[Samples]) -> np.ndarray:
+    """Return the pose of every row of the joined parts, shape (N,): 0, 1, ... per part, apart."""
+    ids, start = [], 0
+    for part in parts:
+        part_ids = pose_ids(part.q, part.columns.get(POSE_COLUMN))
+        ids.append(part_ids + start)
+        start += int(part_ids.max()) + 1 if part_ids.size else 0
+    return np.concatenate(ids).astype(float) if ids else np.zeros(0)
