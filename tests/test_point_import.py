@@ -266,3 +266,24 @@ def test_a_zero_padded_range_keeps_its_padding_and_the_header_is_listed_once(tmp
                            "--joints", "b1..b6", "--point", "X,Y,Z", "--units", "m",
                            "--angles", "rad"])
     assert status == 2 and err.count("the header has:") == 1 and err.count("missing column") == 6
+
+
+def test_point_read_against_every_file_header(tmp_path: Path) -> None:
+    """--point X-D,...: a column named ``X-D`` in the second file only would be read as a difference
+    there by the first file's header; the second file is named (line 1) and nothing is written."""
+    q, p = _poses(3, 7)
+    header = [*(f"a{k}" for k in range(1, 7)), "X", "D", "Y", "Z"]
+    rows = [[*qi.tolist(), pi[0] + 0.5, 0.5, pi[1], pi[2]] for qi, pi in zip(q, p)]
+    a = _write(tmp_path / "a.csv", header, rows)
+    b = _write(tmp_path / "b.csv", [*header[:6], "X-D", "Y", "Z"],
+               [[*qi.tolist(), *pi.tolist()] for qi, pi in zip(q, p)])
+    options = ["--joints", "a1..a6", "--point", "X-D,Y,Z", "--units", "m", "--angles", "rad"]
+    out = tmp_path / "c"
+    status, err = run_cli(["import-points", str(a), str(b), "--out", str(out), *options])
+    assert status == 2 and f"{b}:1: --point 'X-D,Y,Z' reads as X-D, Y, Z here" in err, err
+    assert "X minus D, Y, Z" in err and not (out / "points.csv").exists()
+    status, err = run_cli(["import-points", str(a), "--out", str(out), *options])  # alone: fine
+    assert status == 0, err
+    points = read_campaign(out).points
+    assert points is not None
+    np.testing.assert_allclose(points.point, p, rtol=0, atol=ROUNDING_MM * 1e-3)

@@ -24,7 +24,6 @@ def _format(args: argparse.Namespace) -> Any:
         PRESETS,
         PointFormat,
         parse_columns,
-        parse_point,
         read_header,
     )
 
@@ -34,8 +33,8 @@ def _format(args: argparse.Namespace) -> Any:
     if by_columns:
         if args.joints is None or args.point is None:
             raise ValueError("--joints, --point: give both (e.g. --joints q1..q6 --point x,y,z)")
-        header = read_header(Path(args.sources[0])) or []
-        return PointFormat(parse_columns(args.joints), parse_point(args.point, header),
+        point = _point_columns(args.point, [Path(s) for s in args.sources])
+        return PointFormat(parse_columns(args.joints), point,
                            args.units or "mm", args.angles or "deg",
                            angles_stated=args.angles is not None)
     if args.units is not None or args.angles is not None:
@@ -49,6 +48,26 @@ def _format(args: argparse.Namespace) -> Any:
             raise ValueError(f"{source}:1: the header is not the {args.format} format "
                              f"({', '.join(header[:10])}...); give --joints and --point")
     return None
+
+
+def _point_columns(text: str, sources: list[Path]) -> tuple[tuple[str, str | None], ...]:
+    """Return ``--point``'s columns, read against every source's header.
+
+    ``A-B`` is a difference unless the header has a column ``A-B``; a source whose header reads
+    it otherwise than the first one's is named (line 1).
+    """
+    from aacmm_pin.data.point_import import parse_point, read_header
+
+    def show(cols: tuple[tuple[str, str | None], ...]) -> str:
+        return ", ".join(a if b is None else f"{a} minus {b}" for a, b in cols)
+
+    first = parse_point(text, read_header(sources[0]) or [])
+    for source in sources[1:]:
+        if (here := parse_point(text, read_header(source) or [])) != first:
+            raise ValueError(f"{source}:1: --point {text!r} reads as {show(here)} here but as "
+                             f"{show(first)} in {sources[0]} (a column named with '-' in one "
+                             "header only): import the files separately or rename the column")
+    return first
 
 
 def _import_points(args: argparse.Namespace) -> int:
