@@ -23,6 +23,7 @@ import pytest
 import aacmm_pin as ap
 from aacmm_pin.fit import chunked_jacobian as cj
 from aacmm_pin.fit import identifiability as ident
+from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit import unknowns as unk
 from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian
 from aacmm_pin.fit.identification import identify
@@ -232,3 +233,40 @@ def test_products_deferred_to_the_gauge_check_take_no_pass_of_their_own(
     assert cross is not None and grad is not None
     assert np.allclose(cross, whole.cross(nuis), rtol=0, atol=1e-12 * np.abs(cross).max())
     assert np.allclose(grad, whole.rmatmul(f), rtol=0, atol=1e-12 * np.abs(grad).max())
+
+
+def test_node_sensitivities_chunk_by_chunk_are_the_whole_blocks_bit_for_bit(
+        cal: ap.Calibration, monkeypatch: pytest.MonkeyPatch):
+    """``--robust``'s unseen-node check of a large campaign builds no whole Jacobian: the
+    per-sample node sensitivities summed chunk by chunk are the whole node block's numbers."""
+    monkeypatch.setattr(cj, "CHUNK_SAMPLES", 128)
+    x, q = cal.x[:cal.problem.n_arm], cal.problem.q
+    whole = rob.node_sensitivity(cal.unknowns.jacobian(x, q)[1].nodes, len(q))
+    chunked = cj.chunked_node_sensitivity(ChunkedJacobian(cal.unknowns, x, q))
+    assert chunked.shape == whole.shape
+    for a, b in ((chunked.row, whole.row), (chunked.col, whole.col), (chunked.data, whole.data)):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.slow  # two robust fits (8 s of CPU)
+def test_a_robust_fit_in_chunks_builds_no_whole_jacobian_and_equals_the_whole_route(
+        arm: ap.Arm, monkeypatch: pytest.MonkeyPatch):
+    sim = ap.simulate_campaign(arm, ap.SimulationConfig(seed=2, samples_per_location=100))
+    displacement = sim.campaign.spat.displacement.copy()
+    displacement[[7, 205]] += 60e-6  # two gross outliers (30 sigma)
+    camp = sim.campaign.with_spat(displacement=displacement)
+    whole = identify(camp, arm, robust=True)
+    built: list[int] = []
+    whole_jacobian = unk.Unknowns.jacobian
+
+    def spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray):  # type: ignore[no-untyped-def]
+        built.append(q.shape[0])
+        return whole_jacobian(self, x, q)
+
+    monkeypatch.setattr(unk.Unknowns, "jacobian", spy)
+    _chunked(monkeypatch, 96)
+    chunked = identify(camp, arm, robust=True)
+    assert chunked.problem.chunked and built == []
+    assert chunked.inlier is not None and whole.inlier is not None
+    assert np.array_equal(chunked.inlier, whole.inlier) and not chunked.inlier[[7, 205]].any()
+    _agree(whole, chunked)

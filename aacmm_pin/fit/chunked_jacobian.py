@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import scipy.sparse as sp
 
+from aacmm_pin.fit.robust import node_sensitivity
 from aacmm_pin.fit.unknowns import CHUNK, BlockJacobian, Unknowns, node_normal
 
 CHUNKED_BYTES = 2 ** 28
@@ -272,3 +273,27 @@ class ChunkedJacobian:
 
 DataJacobian = BlockJacobian | ChunkedJacobian
 """A data Jacobian as the fit holds it: whole (blocks) or chunk by chunk."""
+
+
+def chunked_node_sensitivity(jac: ChunkedJacobian) -> sp.coo_matrix:
+    """:func:`aacmm_pin.fit.robust.node_sensitivity` of ``jac``'s node block, chunk by chunk.
+
+    Each chunk's node block (:attr:`~aacmm_pin.fit.unknowns.BlockJacobian.nodes`) made and
+    reduced to its samples' sensitivities, the chunks' entries stacked: the same numbers, in the
+    same order, as from the whole Jacobian's node block, without it (24 bytes per sample and node
+    touched instead of the Jacobian's 1.1 kB per sample). Shape (N, n_nodes), m^2/rad^2.
+    """
+    rows, cols, vals = [], [], []
+    for a, b, part in jac.chunks():
+        per = node_sensitivity(part.nodes, (b - a) // 3)
+        rows.append(per.row.astype(np.int64) + a // 3)
+        cols.append(per.col)
+        vals.append(per.data)
+    u = jac.unknowns
+    n_nodes = jac.shape[1] - int(u.free[:u.n_dense].sum())
+    if not vals:
+        return sp.coo_matrix((jac.q.shape[0], n_nodes))
+    out = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                        shape=(jac.q.shape[0], n_nodes))
+    out.sum_duplicates()  # sorted already (by sample, then node): nothing summed
+    return out

@@ -19,7 +19,12 @@ from scipy.optimize import OptimizeResult
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
-from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian, is_chunked
+from aacmm_pin.fit.chunked_jacobian import (
+    ChunkedJacobian,
+    DataJacobian,
+    chunked_node_sensitivity,
+    is_chunked,
+)
 from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
 from aacmm_pin.fit.solver_values import BudgetSpent
 from aacmm_pin.fit.unknowns import Unknowns
@@ -273,11 +278,15 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
         nfev += now.nfev
         norms = norms_of(now)
     mask, refitted = np.zeros(n, bool), False  # refitted: ``now`` is the fit without ``mask``
-    _, first_jac = first.unknowns.jacobian(first.x[:first.problem.n_arm], first.problem.q)
+    x_arm, q = first.x[:first.problem.n_arm], first.problem.q
+    if first.problem.chunked:  # a large campaign's node sensitivities chunk by chunk
+        sensitivity = chunked_node_sensitivity(ChunkedJacobian(first.unknowns, x_arm, q))
+    else:
+        sensitivity = rob.node_sensitivity(first.unknowns.jacobian(x_arm, q)[1].nodes, n)
     node_size = float(first.unknowns.arm.sizes.map_node)
     for _ in range(rob.MAX_REJECT_ITERATIONS):
         scale = rob.robust_scale(norms, fraction(now, n - int(mask.sum())))
-        unseen = rob.unseen_variance(first_jac.nodes, ~mask, node_size) * base_w ** 2
+        unseen = rob.unseen_of_sensitivity(sensitivity, ~mask, node_size) * base_w ** 2
         out = rob.flag_unseen(norms, scale, unseen)
         if refitted and np.array_equal(out, mask):
             return ~mask, True, now._replace(nfev=nfev)
