@@ -286,14 +286,15 @@ def chunked_node_sensitivity(jac: ChunkedJacobian) -> sp.coo_matrix:
     rows, cols, vals = [], [], []
     for a, b, part in jac.chunks():
         per = node_sensitivity(part.nodes, (b - a) // 3)
-        rows.append(per.row.astype(np.int64) + a // 3)
-        cols.append(per.col)
+        rows.append((per.row + a // 3).astype(np.int32))  # N < 2^31
+        cols.append(per.col.astype(np.int32))
         vals.append(per.data)
     u = jac.unknowns
     n_nodes = jac.shape[1] - int(u.free[:u.n_dense].sum())
     if not vals:
         return sp.coo_matrix((jac.q.shape[0], n_nodes))
-    out = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                        shape=(jac.q.shape[0], n_nodes))
-    out.sum_duplicates()  # sorted already (by sample, then node): nothing summed
+    data, row, col = np.concatenate(vals), np.concatenate(rows), np.concatenate(cols)
+    del vals, rows, cols
+    out = sp.coo_matrix((data, (row, col)), shape=(jac.q.shape[0], n_nodes))
+    out.has_canonical_format = True  # each chunk's sorted (by sample, then node), none summed
     return out
