@@ -22,6 +22,8 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin.fit import chunked_jacobian as cj
+from aacmm_pin.fit import identifiability as ident
+from aacmm_pin.fit import robust as rob
 from aacmm_pin.fit import unknowns as unk
 from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian
 from aacmm_pin.fit.identification import identify
@@ -145,3 +147,126 @@ def test_the_threshold_is_the_jacobians_bytes(cal: ap.Calibration):
     held = whole.dense.nbytes + sum(a.col.nbytes + a.weight.nbytes + a.d.nbytes
                                     for a in whole.axes)
     assert cj.jacobian_bytes(cal.unknowns, n) == held
+
+
+def _passes_and_residuals(arm: ap.Arm, sim: ap.Simulation, monkeypatch: pytest.MonkeyPatch
+                          ) -> tuple[ap.Calibration, int, int]:
+    """Identify; return the calibration, the Jacobians built (whole, or passes over the chunks:
+    a chunk starting at sample 0) and the residual evaluations made apart from those passes."""
+    count = {"jacobians": 0, "positions": 0}
+    rows, whole, positions = (unk.Unknowns.jacobian_rows, unk.Unknowns.jacobian,
+                              unk.Unknowns.positions)
+
+    def rows_spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray, lo: int, hi: int
+                 ):  # type: ignore[no-untyped-def]
+        count["jacobians"] += lo == 0
+        return rows(self, x, q, lo, hi)
+
+    def whole_spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray):  # type: ignore[no-untyped-def]
+        count["jacobians"] += 1
+        return whole(self, x, q)
+
+    def positions_spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray
+                      ):  # type: ignore[no-untyped-def]
+        count["positions"] += 1
+        return positions(self, x, q)
+
+    with monkeypatch.context() as m:
+        m.setattr(unk.Unknowns, "jacobian_rows", rows_spy)
+        m.setattr(unk.Unknowns, "jacobian", whole_spy)
+        m.setattr(unk.Unknowns, "positions", positions_spy)
+        cal = identify(sim.campaign, arm)
+    return cal, count["jacobians"], count["positions"]
+
+
+def test_a_chunked_fit_takes_no_more_passes_than_the_whole_route_builds_jacobians(
+        arm: ap.Arm, sim: ap.Simulation, monkeypatch: pytest.MonkeyPatch):
+    """Issue 28: the large path's CPU per sample is the whole route's. Every pass over the chunks
+    rebuilds the Jacobian (most of a sample's CPU): the gauge check's pass also takes the first
+    problem's products, and a residual the solver (or the decision point) evaluates takes its
+    Jacobian's products in the same pass, so a chunked fit makes at most as many passes as the
+    whole route builds Jacobians, and evaluates positions apart from them only at the start (before
+    its first pass) and for the report."""
+    whole, built, evaluated = _passes_and_residuals(arm, sim, monkeypatch)
+    _chunked(monkeypatch, 96)
+    chunked, passes, alone = _passes_and_residuals(arm, sim, monkeypatch)
+    assert chunked.problem.chunked and not whole.problem.chunked
+    assert chunked.nfev == whole.nfev  # the same evaluations, counted the same way
+    assert passes <= built
+    assert alone == 2 < evaluated
+    _agree(whole, chunked)
+
+
+def test_a_residual_evaluated_in_a_pass_is_funs_and_keeps_its_products(
+        cal: ap.Calibration, monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setattr(cj, "CHUNKED_BYTES", 0)
+    monkeypatch.setattr(cj, "CHUNK_SAMPLES", 128)
+    prob = cal.problem
+    prob = type(prob).__new__(type(prob))
+    prob.__dict__.update(cal.problem.__dict__, chunked=True)
+    z = prob.z(cal.x) + 0.1
+    f, jac = prob.fun_with_products(z)
+    assert np.array_equal(f, prob.fun(z))  # the same numbers, bit for bit
+    x = prob.x(z)
+    nuis = prob.nuisance_jacobian(x)
+    fresh = ChunkedJacobian(cal.unknowns, x[:prob.n_arm], prob.q).products(nuis, f[:prob.n_data])
+    monkeypatch.setattr(jac, "chunks", lambda products=False: iter(()))  # kept: no pass
+    for kept, ref in zip(jac.products(nuis, f[:prob.n_data]), fresh):
+        assert kept is not None and ref is not None
+        assert np.array_equal(kept, ref)
+
+
+def test_products_deferred_to_the_gauge_check_take_no_pass_of_their_own(
+        cal: ap.Calibration, monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setattr(cj, "CHUNK_SAMPLES", 128)
+    prob = cal.problem
+    x = cal.x
+    chunked = ChunkedJacobian(cal.unknowns, x[:prob.n_arm], prob.q)
+    nuis = prob.nuisance_jacobian(x)
+    f = prob.fun(prob.z(x))[:prob.n_data]
+    chunked.defer(nuis, f)
+    ident.gauge_axes(cal.unknowns, chunked)
+    monkeypatch.setattr(chunked, "chunks", lambda products=False: iter(()))
+    normal, cross, grad = chunked.products(nuis, f)
+    _, whole = cal.unknowns.jacobian(x[:prob.n_arm], prob.q)
+    assert np.abs(normal - whole.normal()).max() < 1e-12 * np.abs(normal).max()
+    assert cross is not None and grad is not None
+    assert np.allclose(cross, whole.cross(nuis), rtol=0, atol=1e-12 * np.abs(cross).max())
+    assert np.allclose(grad, whole.rmatmul(f), rtol=0, atol=1e-12 * np.abs(grad).max())
+
+
+def test_node_sensitivities_chunk_by_chunk_are_the_whole_blocks_bit_for_bit(
+        cal: ap.Calibration, monkeypatch: pytest.MonkeyPatch):
+    """``--robust``'s unseen-node check of a large campaign builds no whole Jacobian: the
+    per-sample node sensitivities summed chunk by chunk are the whole node block's numbers."""
+    monkeypatch.setattr(cj, "CHUNK_SAMPLES", 128)
+    x, q = cal.x[:cal.problem.n_arm], cal.problem.q
+    whole = rob.node_sensitivity(cal.unknowns.jacobian(x, q)[1].nodes, len(q))
+    chunked = cj.chunked_node_sensitivity(ChunkedJacobian(cal.unknowns, x, q))
+    assert chunked.shape == whole.shape
+    for a, b in ((chunked.row, whole.row), (chunked.col, whole.col), (chunked.data, whole.data)):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.slow  # two robust fits (8 s of CPU)
+def test_a_robust_fit_in_chunks_builds_no_whole_jacobian_and_equals_the_whole_route(
+        arm: ap.Arm, monkeypatch: pytest.MonkeyPatch):
+    sim = ap.simulate_campaign(arm, ap.SimulationConfig(seed=2, samples_per_location=100))
+    displacement = sim.campaign.spat.displacement.copy()
+    displacement[[7, 205]] += 60e-6  # two gross outliers (30 sigma)
+    camp = sim.campaign.with_spat(displacement=displacement)
+    whole = identify(camp, arm, robust=True)
+    built: list[int] = []
+    whole_jacobian = unk.Unknowns.jacobian
+
+    def spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray):  # type: ignore[no-untyped-def]
+        built.append(q.shape[0])
+        return whole_jacobian(self, x, q)
+
+    monkeypatch.setattr(unk.Unknowns, "jacobian", spy)
+    _chunked(monkeypatch, 96)
+    chunked = identify(camp, arm, robust=True)
+    assert chunked.problem.chunked and built == []
+    assert chunked.inlier is not None and whole.inlier is not None
+    assert np.array_equal(chunked.inlier, whole.inlier) and not chunked.inlier[[7, 205]].any()
+    _agree(whole, chunked)

@@ -108,7 +108,8 @@ def test_held_directions_are_decided_where_a_gauss_newton_step_lands(arm, monkey
     assert len(solves) == 1
     # the rule before: decided at the start, checked at the solution, decided again there
     monkeypatch.setattr(fit_rounds, "decision_point",
-                        lambda problem, jac0, on_evaluation: (np.zeros(problem.p.shape[1]), None, 0))
+                        lambda problem, jac0, on_evaluation, *_: (np.zeros(problem.p.shape[1]),
+                                                                  None, 0))
     ref = identify(sim.campaign, arm, sigma=noise)
     assert len(solves) == 1 + 2  # the start holds what the solution determines
     assert cal.constraints.shape[0] == ref.constraints.shape[0]

@@ -19,7 +19,12 @@ from scipy.optimize import OptimizeResult
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
-from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian, is_chunked
+from aacmm_pin.fit.chunked_jacobian import (
+    ChunkedJacobian,
+    DataJacobian,
+    chunked_node_sensitivity,
+    is_chunked,
+)
 from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
 from aacmm_pin.fit.solver_values import BudgetSpent
 from aacmm_pin.fit.unknowns import Unknowns
@@ -77,6 +82,14 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     # without row weights the solver's data Jacobian is this one: computed once per point
     same = rows is None and weight is None
     jac_now = jacobian(x_start)
+    f_start: np.ndarray | None = None  # the residual at the start, when the fit has it
+    if same and isinstance(jac_now, ChunkedJacobian):
+        # the first problem's products at the start (J^T of the nuisance columns and of the
+        # residual) taken in the gauge check's pass: a pass over the chunks less
+        nuis_start, f_start = Problem.data_rows_at(unknowns, q, measured, nuisance, sigma_class,
+                                                   weight, x_start)
+        jac_now.defer(nuis_start, f_start[:3 * len(q)])
+        del nuis_start
     gauges = ident.gauge_axes(unknowns, jac_now)
     gauge = ident.gauge_rows(unknowns, gauges)
 
@@ -86,7 +99,8 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
         constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
         return _Decision(obs, constraints, Problem(unknowns, q, measured, nuisance, constraints,
                                                    obs.scale, x_start, x, sigma_class, weight,
-                                                   jac_x if same else None))
+                                                   jac_x if same else None,
+                                                   f_start if x is x_start else None))
 
     def check(jac_x: DataJacobian, x: np.ndarray, now: _Decision) -> _Decision | None:
         """The decision taken again at x if x holds another number of directions, else None."""
@@ -97,10 +111,15 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     now = decide(jac_now, x_start)
     n_kept = len(q) if keep is None else int(keep.sum())
     plausible = plausibility.plausible_rms(unknowns, jac_now, now.obs.scale, 3 * n_kept)
-    z_now, f_at, nfev = decision_point(now.problem, jac_now if same else None, on_evaluation)
+    landed: list[DataJacobian] = []  # a chunked Jacobian where the step lands, with its products
+    z_now, f_at, nfev = decision_point(now.problem, jac_now if same else None, on_evaluation,
+                                       f_start, landed if same and chunked else None)
+    f_start = None
     f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
     x_now = now.problem.x(z_now)
-    residual = now.problem.data_residuals(x_now)
+    residual = (f_at[:now.problem.n_data].reshape(-1, 3)  # the same numbers
+                if f_at is not None and now.problem.row_weight is None
+                else now.problem.data_residuals(x_now))
     # inputs that are not this arm's, or in other units, end here (2 evaluations); the scale is
     # the median's, so that a few outliers (the robust loop's business) do not count
     scale = _median_scale(residual, keep)
@@ -112,15 +131,17 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
                                  sizes_label(unknowns.arm.source))
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
-        jac_now = jacobian(x_now)
+        jac_now = landed.pop() if landed else jacobian(x_now)
         if same and isinstance(jac_now, ChunkedJacobian):  # one pass serves the check and the
-            # solve's first step: J^T J, J^T (nuisance columns) and J^T f there
+            # solve's first step: J^T J, J^T (nuisance columns) and J^T f there (the residual's
+            # own pass where the step landed: no pass here)
             jac_now.products(now.problem.nuisance_jacobian(x_now), f_at[:now.problem.n_data])
         again = check(jac_now, x_now, now)
         if again is not None:
             # the solve starts at x_now put on the new constraints (held at the start's values),
             # a held component away from it: x_now's Jacobian still serves the first step
             now, z_now, f_now = again, again.problem.z(x_now), None
+    landed.clear()  # a step not taken: its Jacobian is not used
     last: DataJacobian | None = None  # the solver's last, taken at its solution: jacobian(x_now)
     at_solution: DataJacobian | None = None  # the data Jacobian at the final x, for the covariance
     for _round in range(3):  # checked at the solution
@@ -167,7 +188,8 @@ class _Decision(NamedTuple):
 
 
 def decision_point(problem: Problem, jacobian: DataJacobian | None,
-                    on_evaluation: Callable[[float], None]
+                    on_evaluation: Callable[[float], None], f_start: np.ndarray | None = None,
+                    landed: list[DataJacobian] | None = None
                     ) -> tuple[np.ndarray, np.ndarray, int]:
     """Return where the held directions are checked before the solve, its residual, evaluations.
 
@@ -185,6 +207,11 @@ def decision_point(problem: Problem, jacobian: DataJacobian | None,
         jacobian: :meth:`Problem.data_jacobian` at the start when the caller has it,
             shape (3N, n_arm), m per unit.
         on_evaluation: progress, called with the RMS of each of the two residuals (m).
+        f_start: :meth:`Problem.fun` at the start when the caller has it (counted and reported
+            as an evaluation, not computed again).
+        landed: for a chunked problem, a list that receives the data Jacobian where the step
+            lands, its products taken in the residual's pass there
+            (:meth:`Problem.fun_with_products`); None: the residual alone.
 
     Returns:
         The reduced coordinates after the step, shape (n_z,), if the step lowered the sum of
@@ -192,11 +219,20 @@ def decision_point(problem: Problem, jacobian: DataJacobian | None,
         that point does not evaluate it again); and the residual evaluations taken (2).
     """
     z0 = np.zeros(problem.p.shape[1])
-    f0 = problem.fun_reported(z0, on_evaluation)
+    f0 = problem.fun_reported(z0, on_evaluation, f_start)
     z1 = problem.newton_step(z0, f0, jacobian)
     del jacobian
+
+
+    def with_products(z: np.ndarray) -> np.ndarray:
+        f, jac_z = problem.fun_with_products(z)
+        if landed is not None:
+            landed.append(jac_z)
+        return f
+
     try:
-        f1 = problem.fun_reported(z1, on_evaluation)
+        f1 = problem.fun_reported(z1, on_evaluation,
+                                  evaluate=with_products if landed is not None else None)
     except BudgetSpent:  # the fit's evaluations are spent: its start stands
         return z0, f0, 1
     # the plain sum of squares even for a robust loss: the point only decides the held directions
@@ -242,11 +278,15 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
         nfev += now.nfev
         norms = norms_of(now)
     mask, refitted = np.zeros(n, bool), False  # refitted: ``now`` is the fit without ``mask``
-    _, first_jac = first.unknowns.jacobian(first.x[:first.problem.n_arm], first.problem.q)
+    x_arm, q = first.x[:first.problem.n_arm], first.problem.q
+    if first.problem.chunked:  # a large campaign's node sensitivities chunk by chunk
+        sensitivity = chunked_node_sensitivity(ChunkedJacobian(first.unknowns, x_arm, q))
+    else:
+        sensitivity = rob.node_sensitivity(first.unknowns.jacobian(x_arm, q)[1].nodes, n)
     node_size = float(first.unknowns.arm.sizes.map_node)
     for _ in range(rob.MAX_REJECT_ITERATIONS):
         scale = rob.robust_scale(norms, fraction(now, n - int(mask.sum())))
-        unseen = rob.unseen_variance(first_jac.nodes, ~mask, node_size) * base_w ** 2
+        unseen = rob.unseen_of_sensitivity(sensitivity, ~mask, node_size) * base_w ** 2
         out = rob.flag_unseen(norms, scale, unseen)
         if refitted and np.array_equal(out, mask):
             return ~mask, True, now._replace(nfev=nfev)

@@ -123,15 +123,12 @@ def gauge_axes(unknowns: Unknowns, jac: DataJacobian) -> list[int]:
 def _qr_blocks(jac: DataJacobian, col_sets: list[np.ndarray]) -> Iterator[np.ndarray]:
     """Yield R of ``[dense block | sums of the columns of each set]`` per block of QR_ROWS rows.
 
-    A :class:`ChunkedJacobian` chunk by chunk (its J^T J kept from the same pass: the
-    observability analysis asks for it next).
+    A :class:`ChunkedJacobian` chunk by chunk (its J^T J and the products deferred by the fit
+    kept from the same pass: the observability analysis and the first problem ask for them next).
     """
     if isinstance(jac, ChunkedJacobian):
-        normal = np.zeros((jac.shape[1], jac.shape[1]))
-        for _, _, part in jac.chunks():
-            normal += part.normal()
+        for _, _, part in jac.chunks(products=True):
             yield from _qr_blocks(part, col_sets)
-        jac.keep_normal(normal)
         return
     dense = jac.dense
     constants = [jac.columns_sum(cols) for cols in col_sets]

@@ -137,13 +137,27 @@ def unseen_variance(nodes: sp.spmatrix, kept: np.ndarray, node_size: float) -> n
         kept: the samples kept, shape (N,), bool.
         node_size: plausible size of a node, rad.
     """
-    n = kept.size
+    return unseen_of_sensitivity(node_sensitivity(nodes, kept.size), kept, node_size)
+
+
+def node_sensitivity(nodes: sp.spmatrix, n: int) -> sp.coo_matrix:
+    """Return every sample's squared sensitivity to every node it touches, (N, n_nodes) m^2/rad^2.
+
+    The squares of ``nodes`` (d(positions)/d(map nodes), shape (3N, n_nodes)) summed over each
+    sample's three coordinates, duplicates summed (entries sorted by sample, then node).
+    """
     coo = sp.coo_matrix(nodes)
     per = sp.coo_matrix((coo.data ** 2, (coo.row // 3, coo.col)), shape=(n, nodes.shape[1]))
     per.sum_duplicates()
+    return per
+
+
+def unseen_of_sensitivity(per: sp.coo_matrix, kept: np.ndarray, node_size: float) -> np.ndarray:
+    """:func:`unseen_variance` from :func:`node_sensitivity` (duplicates summed), shape (N,), m^2."""
+    n = kept.size
     touches = per.data > 0
     counts = np.bincount(per.col[touches], weights=kept[per.row[touches]].astype(float),
-                         minlength=nodes.shape[1])
+                         minlength=per.shape[1])
     others = counts[per.col] - kept[per.row]
     sole = touches & (others < 0.5)
     out: np.ndarray = np.bincount(per.row, weights=per.data * sole, minlength=n) * node_size ** 2

@@ -159,6 +159,7 @@ class Problem:
         weight: per sample, ``sigma / (its stated noise)``, shape (N,); None: all 1 (generalised
             least squares with per-sample noise: the data rows are multiplied by it).
         jac_lin: :meth:`data_jacobian` at x_lin when the caller has it (not computed again).
+        f_ref: :meth:`residual_at` x_ref when the caller has it (:meth:`data_rows_at`).
 
     A campaign whose data Jacobian would exceed
     :data:`~aacmm_pin.fit.chunked_jacobian.CHUNKED_BYTES` is :attr:`chunked`: its data Jacobian is
@@ -208,11 +209,44 @@ class Problem:
     def __init__(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
                  nuisance: Nuisance, constraints: sp.csr_matrix, scale: np.ndarray,
                  x_ref: np.ndarray, x_lin: np.ndarray, sigma: float,
-                 weight: np.ndarray | None = None, jac_lin: DataJacobian | None = None):
+                 weight: np.ndarray | None = None, jac_lin: DataJacobian | None = None,
+                 f_ref: np.ndarray | None = None):
+        self._data_rows(unknowns, q, measured, nuisance, sigma, weight)
+        self.x_ref = x_ref
+        self.chunked = is_chunked(unknowns, len(q))
+        cons = constraints.toarray() * scale[None, :]
+        null = np.eye(self.n_arm)
+        self.held = np.zeros((self.n_arm, 0))
+        if cons.shape[0]:
+            _, sv, vt = np.linalg.svd(cons, full_matrices=True)
+            rank = int(np.sum(sv > sv.max() * RANK_TOL))
+            null = vt[rank:].T
+            self.held = (vt[:rank] * scale[None, :]).T
+        n_null, n_nuis = null.shape[1], self.n_loc + self.n_frame
+        t = np.zeros((self.n_arm + n_nuis, n_null + n_nuis))
+        t[:self.n_arm, :n_null] = scale[:, None] * null
+        frame_scale = np.tile([FRAME_ANGLE, FRAME_ANGLE, FRAME_ANGLE, FRAME_LENGTH, FRAME_LENGTH,
+                               FRAME_LENGTH], nuisance.n_frames)
+        t[self.n_arm:, n_null:] = np.diag(np.concatenate([self.nest_sigma, frame_scale]))
+        if isinstance(jac_lin, ChunkedJacobian) and np.array_equal(x_lin, x_ref):
+            # at z = 0 (a fit's start): one pass gives the preconditioner's J^T (nuisance
+            # columns) and the first Gauss-Newton step's J^T f (fun(0) is this residual; none
+            # if the caller deferred them to an earlier pass, :meth:`data_rows_at`)
+            jac_lin.products(self.nuisance_jacobian(x_lin),
+                             (self.residual_at(x_lin) if f_ref is None else f_ref)[:self.n_data])
+        # any nearby point preconditions well
+        info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t
+        chol = np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info) * np.eye(len(info)))
+        self.basis = t
+        self.r_inv = np.linalg.inv(chol.T)
+        self.p = t @ self.r_inv
+
+    def _data_rows(self, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
+                   nuisance: Nuisance, sigma: float, weight: np.ndarray | None) -> None:
+        """Set what the data, prior and length rows need (no constraints, no preconditioner)."""
         self.unknowns, self.q, self.measured = unknowns, q, measured
         self.nuisance = nuisance
         n = len(q)
-        self.chunked = is_chunked(unknowns, n)
         self.n_arm = int(unknowns.free.sum())
         self.n_loc = 3 * nuisance.n_nests
         self.n_frame = 6 * nuisance.n_frames
@@ -231,33 +265,23 @@ class Problem:
         self.sigma_class = sigma
         self.nest_sigma = np.repeat(np.asarray(nuisance.nest_sigma, dtype=float), 3)
         self.prior = sigma / self.nest_sigma
-        self.x_ref = x_ref
         self._length_ref = self._nest_reference()
-        cons = constraints.toarray() * scale[None, :]
-        null = np.eye(self.n_arm)
-        self.held = np.zeros((self.n_arm, 0))
-        if cons.shape[0]:
-            _, sv, vt = np.linalg.svd(cons, full_matrices=True)
-            rank = int(np.sum(sv > sv.max() * RANK_TOL))
-            null = vt[rank:].T
-            self.held = (vt[:rank] * scale[None, :]).T
-        n_null, n_nuis = null.shape[1], self.n_loc + self.n_frame
-        t = np.zeros((self.n_arm + n_nuis, n_null + n_nuis))
-        t[:self.n_arm, :n_null] = scale[:, None] * null
-        frame_scale = np.tile([FRAME_ANGLE, FRAME_ANGLE, FRAME_ANGLE, FRAME_LENGTH, FRAME_LENGTH,
-                               FRAME_LENGTH], nuisance.n_frames)
-        t[self.n_arm:, n_null:] = np.diag(np.concatenate([self.nest_sigma, frame_scale]))
-        if isinstance(jac_lin, ChunkedJacobian) and np.array_equal(x_lin, x_ref):
-            # at z = 0 (a fit's start): one pass gives the preconditioner's J^T (nuisance
-            # columns) and the first Gauss-Newton step's J^T f (fun(0) is this residual)
-            jac_lin.products(self.nuisance_jacobian(x_lin),
-                             self.residual_at(x_lin)[:self.n_data])
-        # any nearby point preconditions well
-        info = t.T @ self.normal_matrix(x_lin, jac_lin) @ t
-        chol = np.linalg.cholesky(info + 1e-12 * np.trace(info) / len(info) * np.eye(len(info)))
-        self.basis = t
-        self.r_inv = np.linalg.inv(chol.T)
-        self.p = t @ self.r_inv
+
+    @classmethod
+    def data_rows_at(cls, unknowns: Unknowns, q: np.ndarray, measured: np.ndarray,
+                     nuisance: Nuisance, sigma: float, weight: np.ndarray | None, x: np.ndarray
+                     ) -> tuple[sp.csr_matrix, np.ndarray]:
+        """Return :meth:`nuisance_jacobian` and :meth:`residual_at` at the full vector x.
+
+        Neither depends on the constraints or the preconditioner: a fit has them before it
+        decides what the data determine, and defers the products of its start's chunked
+        Jacobian with them to the gauge check's pass
+        (:meth:`~aacmm_pin.fit.chunked_jacobian.ChunkedJacobian.defer`); the residual is then
+        the problem's ``f_ref``. Arguments as the constructor's.
+        """
+        rows = cls.__new__(cls)
+        rows._data_rows(unknowns, q, measured, nuisance, sigma, weight)
+        return rows.nuisance_jacobian(x), rows.residual_at(x)
 
     def _nest_reference(self) -> np.ndarray:
         """Return every nest's reference position (the mean measured point of its samples), (n, 3)."""
@@ -395,18 +419,48 @@ class Problem:
         data = data + self.nest @ x_loc
         return np.concatenate([data, self.prior * x_loc, self.length_residuals(x)])
 
-    def fun_reported(self, z: np.ndarray, on_evaluation: Callable[[float], None] | None
-                     ) -> np.ndarray:
+    def fun_with_products(self, z: np.ndarray) -> tuple[np.ndarray, ChunkedJacobian]:
+        """Return :meth:`fun` at z and the data Jacobian there, its products taken in the same pass.
+
+        For a :attr:`chunked` problem: the chain gives every chunk's positions with its Jacobian
+        rows, so one pass over the chunks makes the residual (the same numbers as :meth:`fun`) and
+        J^T J, J^T (nuisance columns) and J^T f at its point
+        (:meth:`~aacmm_pin.fit.chunked_jacobian.ChunkedJacobian.evaluate`): a step the solver
+        accepts needs no pass of its own for its Jacobian's products.
+        """
+        x = self.x(z)
+        jac = self.data_jacobian(x[:self.n_arm])
+        assert isinstance(jac, ChunkedJacobian)
+        measured = self.main_measured(x).reshape(-1)
+        x_loc = x[self.n_arm:self.n_arm + self.n_loc]
+        nest = self.nest @ x_loc
+        weight = self.row_weight
+
+        def rows(a: int, b: int, positions: np.ndarray) -> np.ndarray:
+            data: np.ndarray = positions.reshape(-1) - measured[a:b]  # as residual_at's rows
+            if weight is not None:
+                data = data * weight[a:b]
+            out: np.ndarray = data + nest[a:b]
+            return out
+
+        data = jac.evaluate(self.nuisance_jacobian(x), rows)
+        return np.concatenate([data, self.prior * x_loc, self.length_residuals(x)]), jac
+
+    def fun_reported(self, z: np.ndarray, on_evaluation: Callable[[float], None] | None,
+                     given: np.ndarray | None = None,
+                     evaluate: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
         """Return :meth:`fun` at z (shape (n_rows,), m) and report its RMS to ``on_evaluation``.
 
         The RMS is in m (in units of the solve's sigma for weighted rows); ``on_evaluation`` is
         called once per evaluation when given (progress). A :class:`~aacmm_pin.fit.solver_values.Counted`
         callback takes the evaluation from its budget first (raising
-        :class:`~aacmm_pin.fit.solver_values.BudgetSpent` when none is left).
+        :class:`~aacmm_pin.fit.solver_values.BudgetSpent` when none is left). ``given``: the
+        residual at z when the caller has it (counted and reported, not computed again);
+        ``evaluate``: what computes it instead of :meth:`fun` (the same numbers).
         """
         if isinstance(on_evaluation, Counted):
             on_evaluation.budget.take()
-        out = self.fun(z)
+        out = (self.fun if evaluate is None else evaluate)(z) if given is None else given
         if on_evaluation is not None:
             on_evaluation(float(np.sqrt(np.mean(out ** 2))))
         return out
@@ -630,10 +684,18 @@ class Problem:
         best: list[tuple[float, np.ndarray, np.ndarray]] = []  # (cost, z, f) of the lowest cost
         latest: list[tuple[np.ndarray, np.ndarray]] = []  # (z, f) of the last evaluation
 
+        fused: list[tuple[np.ndarray, ChunkedJacobian]] = []  # (z, its Jacobian) of fun's pass
+
+        def with_products(z: np.ndarray) -> np.ndarray:
+            f, jac_z = self.fun_with_products(z)
+            fused[:] = [(np.array(z, dtype=float), jac_z)]
+            return f
+
         def fun(z: np.ndarray) -> np.ndarray:
             given = handover.residual(z)
             if given is None:
-                given = self.fun_reported(z, on_evaluation)
+                given = self.fun_reported(z, on_evaluation,
+                                          evaluate=with_products if fuse else None)
                 evaluations[0] += 1
             cost = 0.5 * float(given @ given)
             latest[:] = [(np.array(z, dtype=float), given)]
@@ -653,12 +715,16 @@ class Problem:
             while previous:
                 previous.pop().clear()
             given = handover.jacobian(z)
+            from_caller = given is not None
+            if fused and np.array_equal(fused[0][0], z):  # fun's pass at z: exactly here
+                given, from_caller = fused.pop()[1], False
+            fused.clear()
             if normal_equations:  # scipy evaluated the residual at z just before
                 f = latest[0][1] if latest and np.array_equal(latest[0][0], z) else self.fun(z)
                 op, held = self.compressed(z, f, given)
             else:
                 op, held = self._operator(z, given)
-            used_given[0] = given is not None
+            used_given[0] = from_caller
             del given
             previous.append(held)
             at[:] = [np.array(z, dtype=float)]
@@ -667,6 +733,7 @@ class Problem:
         # a chunked problem's steps from its normal equations (a linear loss: a robust loss
         # reweights the rows, which the normal equations do not keep)
         normal_equations = self.chunked and settings.loss == "linear"
+        fuse = normal_equations and jac == "analytic"  # residuals with their products
         if jac == "analytic":
             jac_fun = self.jac if dense else operator
         try:
@@ -685,6 +752,7 @@ class Problem:
                 cost = 0.5 * float(f_best @ f_best)
             out = OptimizeResult(x=z_best, fun=f_best, cost=cost, status=0, success=False,
                                  message=BUDGET_MESSAGE, njev=0, optimality=np.nan)
+        fused.clear()
         out.nfev = evaluations[0]
         last: DataJacobian | None = None
         if previous:  # the last operator's Jacobian, if taken at the solution

@@ -496,20 +496,7 @@ class BlockJacobian:
         cross = self.node_rmatmul(self.dense)
         out[nd:, :nd] = cross
         out[:nd, nd:] = cross.T
-        for i, a in enumerate(self.axes):
-            for b in self.axes[i:]:
-                g = np.einsum("ik,ik->i", a.d, b.d)
-                flat = np.zeros(a.size * b.size)
-                for s in range(2):
-                    for t in range(2):
-                        flat += np.bincount(a.col[:, s] * b.size + b.col[:, t],
-                                             a.weight[:, s] * b.weight[:, t] * g,
-                                             minlength=a.size * b.size)
-                block = flat.reshape(a.size, b.size)
-                ra, rb = nd + a.offset, nd + b.offset
-                out[ra:ra + a.size, rb:rb + b.size] = block
-                if b is not a:
-                    out[rb:rb + b.size, ra:ra + a.size] = block.T
+        out[nd:, nd:] = node_normal(self)
         self._normal.append(out)
         fresh: np.ndarray = out.copy()
         return fresh
@@ -562,3 +549,25 @@ class BlockJacobian:
             sel[node_cols] = 1.0
             out = out + self.matmul(np.concatenate([np.zeros(nd), sel]))
         return out
+
+
+def node_normal(jac: BlockJacobian) -> np.ndarray:
+    """Return the node-node block of J^T J, shape (n_nodes, n_nodes), from the per-sample structure.
+
+    Samples touch two nodes per axis: entry (a's node, b's node) sums ``w_a w_b (d_a . d_b)``.
+    """
+    out = np.zeros((jac.n_nodes, jac.n_nodes))
+    for i, a in enumerate(jac.axes):
+        for b in jac.axes[i:]:
+            g = np.einsum("ik,ik->i", a.d, b.d)
+            flat = np.zeros(a.size * b.size)
+            for s in range(2):
+                for t in range(2):
+                    flat += np.bincount(a.col[:, s] * b.size + b.col[:, t],
+                                         a.weight[:, s] * b.weight[:, t] * g,
+                                         minlength=a.size * b.size)
+            block = flat.reshape(a.size, b.size)
+            out[a.offset:a.offset + a.size, b.offset:b.offset + b.size] = block
+            if b is not a:
+                out[b.offset:b.offset + b.size, a.offset:a.offset + a.size] = block.T
+    return out
