@@ -1,11 +1,14 @@
 """What the figures cost in ``aacmm-pin discover`` on the paper campaign: CPU of the whole process
 and of its figures, split in the same run.
 
-Run: ``python benchmarks/figures.py`` (about a minute; writes its section of BENCHMARKS.md).
+Run: ``python benchmarks/figures.py [--before DIR]`` (about a minute; writes its section of
+BENCHMARKS.md). ``--before DIR``: a checkout of the code before a change (``git worktree add DIR
+REF``), measured in the same runs, interleaved with this one's: on a loaded machine the CPU of
+both grows, and only runs side by side compare.
 Campaigns: the sample campaign (``../shared/sample-campaign``: 4 R-Test locations x 200 SPAT
 samples and 7 length-bar placements; skipped where it is absent) and the simulated paper campaign
 (``aacmm-pin simulate``, seed 0, the same sizes). Each run is a whole
-process (``python benchmarks/figures.py --child CAMPAIGN OUT``) that runs the CLI's ``main``
+process (``python benchmarks/figures.py --child CAMPAIGN OUT ROOT``) that runs the CLI's ``main``
 (``aacmm-pin discover CAMPAIGN --out OUT``) with the discovery's figure functions wrapped in a
 CPU clock: the figures' share includes importing matplotlib (only the figures need it). CPU is
 user + system of the process (``RUSAGE_SELF``, interpreter start included). Median and range of
@@ -21,6 +24,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +33,14 @@ ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT.parent / "shared" / "sample-campaign"
 REPEAT = 5
 FIGURES = ("gap_figure", "step_figure", "unexplained_figure")
-"""The figure functions ``write_discovery`` calls (module attributes of discovery_figures)."""
+"""The figure functions ``write_discovery`` calls (module attributes of discovery_figures), inside
+``figure_batch`` (clocked too: it imports matplotlib)."""
 
 
-def child(campaign: str, out: str) -> None:
-    """Run ``aacmm-pin discover`` in this process; print its CPU and its figures' as JSON."""
-    sys.path.insert(0, str(ROOT))
+def child(campaign: str, out: str, root: str) -> None:
+    """Run ``aacmm-pin discover`` of the package in ``root`` in this process; print its CPU and its
+    figures' as JSON."""
+    sys.path.insert(0, root)
     import aacmm_pin.outputs.discovery_figures as figures
     from aacmm_pin.cli import main as cli
 
@@ -51,6 +57,20 @@ def child(campaign: str, out: str) -> None:
 
     for name in FIGURES:
         setattr(figures, name, clocked(getattr(figures, name)))
+    batch = getattr(figures, "figure_batch", None)
+
+    @contextmanager
+    def clocked_batch():
+        """figure_batch with its entry (it imports matplotlib) and exit clocked."""
+        tic = time.process_time()
+        with batch():
+            spent[0] += time.process_time() - tic
+            yield
+            tic = time.process_time()
+        spent[0] += time.process_time() - tic
+
+    if hasattr(figures, "figure_batch"):  # a checkout before it has none
+        figures.figure_batch = clocked_batch
     with open(os.devnull, "w") as sink:
         stdout, sys.stdout = sys.stdout, sink
         try:
@@ -63,15 +83,17 @@ def child(campaign: str, out: str) -> None:
                       "pngs": pngs}))
 
 
-def run_once(campaign: Path, out: Path) -> dict:
-    """One whole process; its measurements."""
-    text = subprocess.run([sys.executable, __file__, "--child", str(campaign), str(out)],
+def run_once(campaign: Path, out: Path, root: Path = ROOT) -> dict:
+    """One whole process running the package in ``root``; its measurements."""
+    text = subprocess.run([sys.executable, __file__, "--child", str(campaign), str(out), str(root)],
                           check=True, capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT))).stdout
+                          env=dict(os.environ, PYTHONPATH=str(root))).stdout
     return dict(json.loads(text.strip().splitlines()[-1]))
 
 
-def main() -> None:
+def main(before: Path | None = None) -> None:
+    """Measure both campaigns and write the section; ``before``: a checkout of the package before
+    a change, measured in the same runs (interleaved)."""
     sys.path.insert(0, str(ROOT))
     from benchmarks._report import compile_package, machine, write_section
 
@@ -88,23 +110,37 @@ def main() -> None:
         for label, campaign in cases:
             if not (campaign / "spat.csv").exists():
                 continue
-            runs = [run_once(campaign, Path(tmp) / f"d{len(rows)}{k}") for k in range(REPEAT)]
-            assert all(r["status"] == 0 for r in runs), runs
-            cpu = np.array([r["cpu"] for r in runs])
-            fig = np.array([r["figures"] for r in runs])
-            rows.append(f"| {label} | {stat(cpu, '.2f')} | {stat(fig, '.2f')} | "
-                        f"{stat(100 * fig / cpu, '.0f')} | {', '.join(runs[0]['pngs'])} |")
+            trees = [("", ROOT)] + ([(" (before, `--before`)", before)] if before else [])
+            runs: dict[Path, list[dict]] = {root: [] for _, root in trees}
+            for k in range(REPEAT):  # interleaved: both trees see the same load
+                for i, (_, root) in enumerate(trees):
+                    runs[root].append(run_once(campaign, Path(tmp) / f"d{len(rows)}{k}{i}", root))
+            for name, root in trees:
+                assert all(r["status"] == 0 for r in runs[root]), runs[root]
+                cpu = np.array([r["cpu"] for r in runs[root]])
+                fig = np.array([r["figures"] for r in runs[root]])
+                rows.append(f"| {label}{name} | {stat(cpu, '.2f')} | {stat(fig, '.2f')} | "
+                            f"{stat(100 * fig / cpu, '.0f')} | {', '.join(runs[root][0]['pngs'])} |")
     table = "\n".join(rows)
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg())  # 1, 5 and 15 min
+    rows_before = (" The rows marked \"before\" are the code before these changes, run in the "
+                   "same runs, interleaved with this code's (`--before DIR`)." if before else "")
     body = f"""## Figures of `discover` (`python benchmarks/figures.py`)
 
 {machine()}. `aacmm-pin discover CAMPAIGN --out DIR`, whole processes (interpreter start included),
 CPU = user + system; the figures' CPU is measured in the same process around the figure functions
-`write_discovery` calls (importing matplotlib included, about 0.4 s: only the figures need it).
-The figures are drawn after the results are printed, with fixed margins (no constrained layout)
-and one legend per step figure. Median (range) of {REPEAT} runs per campaign; issue 28's target:
-figures <= 25 % of the command's CPU. Before issue 28 (constrained layout, a legend per panel;
-the same runs on that code): 36 - 37 % on the sample campaign (3 runs, load 0.8; 37 - 42 % in 5
-runs at load 1.5), 27 % on the simulated one (2 runs, load 5).
+`write_discovery` calls and the entry and exit of their `figure_batch` (importing matplotlib
+included, about 0.4 s: only the figures need it). The figures are drawn after the results are
+printed, with fixed margins (no constrained layout) and one legend per step figure, by
+`outputs.figure_files`: text unhinted (`text.hinting` "none"), PNG through matplotlib's own Pillow
+writer at zlib level 3 (Pillow's default 6 took 1.6x its CPU for 6 % smaller files), no tick built
+outside the view (`outputs.in_view_ticks`: the same pixels), and the objects the process holds, then
+matplotlib's, frozen (`gc.freeze`) while the figures are written. Median (range) of {REPEAT} runs
+per campaign; issue 28's target: figures <= 25 % of the command's CPU. Before these changes (this
+script's previous run): the sample campaign 30 % (24 - 30; command 2.92 s, figures 0.85 s),
+the simulated one 21 % (19 - 23; 4.06 s, 0.86 s). Before issue 28 (constrained layout, a legend
+per panel): 36 - 37 % on the sample campaign, 27 % on the simulated one.{rows_before} The load
+average (1, 5 and 15 min) when this table was written: {load}: CPU times grow with the load.
 
 | campaign | command CPU (s) | figures CPU (s) | figures' share (%) | PNGs written |
 |---|---|---|---|---|
@@ -119,7 +155,9 @@ def stat(v: np.ndarray, fmt: str) -> str:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "--child":
-        child(sys.argv[2], sys.argv[3])
+    if len(sys.argv) == 5 and sys.argv[1] == "--child":
+        child(sys.argv[2], sys.argv[3], sys.argv[4])
+    elif len(sys.argv) == 3 and sys.argv[1] == "--before":
+        main(Path(sys.argv[2]).resolve())
     else:
         main()

@@ -46,6 +46,7 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0, force: bool = Fa
 
 def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
     """Write the demo's files into ``tmp`` (which becomes ``out``: the paths printed)."""
+    from aacmm_pin.outputs.figure_files import figure_batch
     from aacmm_pin.outputs.plots import plot_encoder_maps, plot_length_errors, plot_rtest_displacement
     from aacmm_pin.progress import phase
 
@@ -76,14 +77,15 @@ def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
               f"-> {out / folder}")
     print("  writing figures 5, 6 and 9 ...", flush=True)
     phase("writing figures")
-    plot_rtest_displacement(campaign, tmp / "fig5_rtest_displacement.png")
     best = calibrations["proposed_rtest"]
-    plot_encoder_maps({a: best.parameters.map(a).values for a in best.node_identifiable},
-                      tmp / "fig6_encoder_maps.png", identifiable=best.node_identifiable,
-                      std={a: best.node_std(a) for a in best.node_identifiable},
-                      truth=best.maps_in_gauge(sim.truth), reached=best.node_reached)
-    plot_length_errors({labels[k]: v for k, v in results.items()},
-                       tmp / "fig9_length_errors.png")
+    with figure_batch():
+        plot_rtest_displacement(campaign, tmp / "fig5_rtest_displacement.png")
+        plot_encoder_maps({a: best.parameters.map(a).values for a in best.node_identifiable},
+                          tmp / "fig6_encoder_maps.png", identifiable=best.node_identifiable,
+                          std={a: best.node_std(a) for a in best.node_identifiable},
+                          truth=best.maps_in_gauge(sim.truth), reached=best.node_reached)
+        plot_length_errors({labels[k]: v for k, v in results.items()},
+                           tmp / "fig9_length_errors.png")
     return results
 
 

@@ -19,7 +19,8 @@ from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.outputs.export import write_calibration_files
-from aacmm_pin.outputs.plots import DPI, MODEL_COLOURS, _fixed_figure
+from aacmm_pin.outputs.figure_files import figure_batch, fixed_figure, write_png
+from aacmm_pin.outputs.plots import MODEL_COLOURS
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -41,7 +42,7 @@ def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, n
 
 def step_figure(step: Step, k: int, path: str | Path) -> None:
     """Write the residuals against each named term's variable, before and after step ``k``."""
-    _step_figure(step, k).savefig(path, dpi=DPI)
+    write_png(_step_figure(step, k), path)
 
 
 def _step_figure(step: Step, k: int) -> Figure:
@@ -50,7 +51,7 @@ def _step_figure(step: Step, k: int) -> Figure:
     ncols = min(max(len(views), 1), 3)
     nrows = max(1, -(-len(views) // ncols))
     # at least 8.4 in wide: the title (left) and the legend (right) share the top margin
-    fig, grid = _fixed_figure(max(4.2 * ncols, 8.4), 0.6 + 3.0 * nrows, nrows, ncols,
+    fig, grid = fixed_figure(max(4.2 * ncols, 8.4), 0.6 + 3.0 * nrows, nrows, ncols,
                               margins=(1.0, 0.15, 0.55, 0.6), gaps=(1.1, 0.8))
     axes = grid.ravel()
     for ax in axes[len(views):]:
@@ -99,14 +100,14 @@ def group_text(inputs: tuple[str, ...]) -> str:
 
 def gap_figure(result: Discovery, path: str | Path) -> None:
     """Write the held-out RMS, fit RMS and length-bar errors of the start model and every step."""
-    _gap_figure(result).savefig(path, dpi=DPI)
+    write_png(_gap_figure(result), path)
 
 
 def _gap_figure(result: Discovery) -> Figure:
     """Build the figure of :func:`gap_figure`."""
     title = "gap per step (stopped: " + "\n".join(textwrap.wrap(result.stopped_because, 90)) + ")"
     # the title's lines at 7 pt (0.12 in each), the rotated labels below
-    fig, grid = _fixed_figure(6.4, 3.6, margins=(0.6, 0.6, 0.75, 0.15 + 0.12 * (title.count("\n") + 1)))
+    fig, grid = fixed_figure(6.4, 3.6, margins=(0.6, 0.6, 0.75, 0.15 + 0.12 * (title.count("\n") + 1)))
     ax = grid[0, 0]
     labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
                                             for s in result.steps]
@@ -147,7 +148,7 @@ def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = (
     ``inputs``: the calibration's data kinds (its ``inputs``), which name what the mean is over
     (:func:`group_text`: an R-Test location, an instrument group of points).
     """
-    _unexplained_figure(scan, inputs).savefig(path, dpi=DPI)
+    write_png(_unexplained_figure(scan, inputs), path)
 
 
 def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
@@ -155,7 +156,7 @@ def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
     top = (scan.structure or scan.variables)[0]
     hint = "\n".join(textwrap.wrap(scan.hint(), 130))
     # the suptitle's lines at 8 pt (0.14 in each) above the panels' titles
-    fig, grid = _fixed_figure(11.0, 3.4, 1, 3, margins=(0.75, 0.15, 0.55,
+    fig, grid = fixed_figure(11.0, 3.4, 1, 3, margins=(0.75, 0.15, 0.55,
                                                         0.4 + 0.14 * (hint.count("\n") + 1)),
                               gaps=(0.3, 0.0), sharey=True)
     x = np.asarray(top.values, dtype=float)
@@ -191,10 +192,11 @@ def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool
     with output_folder(folder, force) as tmp:
         write_calibration_files(result.calibration, arm, tmp)
         (tmp / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
-        gap_figure(result, tmp / "discovery_gap.png")
-        for k, step in enumerate(result.steps, start=1):
-            step_figure(step, k, tmp / f"discovery_step{k}.png")
-        if result.scan is not None and result.scan.unexplained and result.scan.variables:
-            unexplained_figure(result.scan, tmp / "discovery_unexplained.png",
-                               result.calibration.inputs)
+        with figure_batch():
+            gap_figure(result, tmp / "discovery_gap.png")
+            for k, step in enumerate(result.steps, start=1):
+                step_figure(step, k, tmp / f"discovery_step{k}.png")
+            if result.scan is not None and result.scan.unexplained and result.scan.variables:
+                unexplained_figure(result.scan, tmp / "discovery_unexplained.png",
+                                   result.calibration.inputs)
     return Path(folder)

@@ -10,72 +10,27 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from aacmm_pin.analyses.validation import ValidationResult
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.model.encoder_map import node_count
+from aacmm_pin.outputs.figure_files import new_figure, write_png
 from aacmm_pin.units import ARCSEC
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 UM_PER_M = 1e6
-DPI = 150
 # Colour-blind-safe model colours (grey, then Okabe-Ito orange, vermillion, blue, green, purple, sky).
 MODEL_COLOURS = ("#8c8c8c", "#e69f00", "#d55e00", "#0072b2", "#009e73", "#cc79a7", "#56b4e9")
 
 
-def _new_figure(width_in: float, height_in: float,
-                layout: Literal["constrained"] | None = "constrained") -> Figure:
-    """Return an empty Figure on its own Agg canvas (no pyplot), constrained layout by default."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width_in, height_in), layout=layout)
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _fixed_figure(width_in: float, height_in: float, nrows: int = 1, ncols: int = 1,
-                  margins: tuple[float, float, float, float] = (0.75, 0.2, 0.6, 0.5),
-                  gaps: tuple[float, float] = (0.75, 0.85), **subplots: Any
-                  ) -> tuple[Figure, np.ndarray]:
-    """Return a Figure on its own Agg canvas with fixed margins, no layout engine, and its panels.
-
-    Constrained layout measures every tick label and title at each draw (on a discovery step's
-    six panels, 40 % of drawing the figure); fixed margins cost nothing at draw time.
-
-    Args:
-        width_in: figure width, in.
-        height_in: figure height, in.
-        nrows: rows of panels.
-        ncols: columns of panels.
-        margins: left, right, bottom and top margins, in (room for labels and titles).
-        gaps: width and height of the gaps between panels, in.
-        subplots: passed to ``Figure.subplots`` (``sharey``, ...).
-
-    Returns:
-        The figure and its panels, shape (nrows, ncols).
-    """
-    left, right, bottom, top = margins
-    panel_w = (width_in - left - right - (ncols - 1) * gaps[0]) / ncols
-    panel_h = (height_in - bottom - top - (nrows - 1) * gaps[1]) / nrows
-    fig = _new_figure(width_in, height_in, layout=None)
-    axes = fig.subplots(nrows, ncols, squeeze=False, gridspec_kw={
-        "left": left / width_in, "right": 1.0 - right / width_in, "bottom": bottom / height_in,
-        "top": 1.0 - top / height_in, "wspace": gaps[0] / panel_w, "hspace": gaps[1] / panel_h},
-        **subplots)
-    return fig, axes
-
-
 def _save(fig: Figure, path: str | Path) -> Path:
     """Write ``fig`` as PNG to ``path`` (parent folders created), release it, return the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, format="png", dpi=DPI)
+    path = write_png(fig, path)
     fig.clear()
     return path
 
@@ -127,7 +82,7 @@ def _rtest_figure(d_um: np.ndarray, location: int) -> Figure:
     n = len(d_um)
     sample = np.arange(1, n + 1)
     norm, cmap = Normalize(1, max(n, 2)), "viridis"
-    fig = _new_figure(10.0, 4.8)
+    fig = new_figure(10.0, 4.8)
     ax_xy, ax_z = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.0, 1.15]})
     fig.suptitle(f"R-Test sphere displacement during the SPAT at location #{location}")
 
@@ -273,7 +228,7 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     x_deg = -180.0 + step_deg * np.arange(n)
     ncols = 1 if len(shown) == 1 else 2
     nrows = math.ceil(len(shown) / ncols)
-    fig = _new_figure(5.0 * ncols, 1.0 + 2.5 * nrows)
+    fig = new_figure(5.0 * ncols, 1.0 + 2.5 * nrows)
     grid = np.atleast_1d(fig.subplots(nrows, ncols, sharex=True, squeeze=False)).ravel()
     for ax in grid[len(shown):]:
         ax.remove()
@@ -381,7 +336,7 @@ def plot_length_errors(results: Mapping[str, ValidationResult], path: str | Path
     n_models = len(errors)
     ncols = min(len(pairs), 2)
     nrows = math.ceil(len(pairs) / ncols)
-    fig = _new_figure(ncols * max(4.5, 0.2 * len(placements) * (n_models + 1)), 1.5 + 2.9 * nrows)
+    fig = new_figure(ncols * max(4.5, 0.2 * len(placements) * (n_models + 1)), 1.5 + 2.9 * nrows)
     grid = np.atleast_1d(fig.subplots(nrows, ncols, sharey=True, squeeze=False)).ravel()
     for ax in grid[len(pairs):]:
         ax.remove()
