@@ -114,3 +114,21 @@ def test_discovery_figures_fixed_layout_keeps_every_text_inside(build):
                 continue
             inter = boxes[i].intersection(boxes[i], boxes[j])
             assert inter is None or inter.width <= 0.5 or inter.height <= 0.5, (i, j)
+
+
+def test_step_panel_scale_follows_the_central_residuals_and_counts_the_rest():
+    """A few ill-conditioned samples (angle residuals 1000x the rest: an axis nearly through the
+    stylus) do not flatten a step panel: its y range is the central residuals' and the samples
+    beyond are counted in a note; a panel without them keeps matplotlib's own range and no note."""
+    step = _step(2)
+    wild = step.views[0]
+    wild["before"] = np.random.default_rng(2).normal(0.0, 5.0, 400)
+    wild["before"][:3] = [-2e4, 1.5e4, 9e3]
+    step.views[1]["before"] = np.random.default_rng(3).normal(0.0, 5.0, 400)
+    fig = _step_figure(step, 1)
+    ax_wild, ax_plain = fig.axes[:2]
+    lo, hi = ax_wild.get_ylim()
+    assert -100.0 < lo < -10.0 and 10.0 < hi < 100.0  # 5-sigma of the rest, padded: not 1e4
+    notes = [t.get_text() for t in ax_wild.texts]
+    assert notes == ["3 off scale (triangles at the edge)"]
+    assert len(ax_plain.texts) == 0 and ax_plain.get_ylim()[1] - ax_plain.get_ylim()[0] < 100.0

@@ -27,17 +27,60 @@ if TYPE_CHECKING:
 
 
 def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, np.ndarray]:
-    """Return bin centres and bin means of y over x (bins with >= 3 samples)."""
+    """Return bin centres and bin means of y over x.
+
+    A bin with fewer than 3 samples has mean NaN: a gap in the line drawn through the means, not a
+    segment across a range no sample visited.
+    """
     values = np.unique(x)
     if values.size <= 3:  # a discrete variable (e.g. a direction of motion)
         return values, np.array([y[x == v].mean() for v in values])
     edges = np.linspace(x.min(), x.max(), bins + 1)
     which = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
-    keep = [b for b in range(bins) if np.sum(which == b) >= 3]
-    if not keep:
-        return np.zeros(0), np.zeros(0)
-    return (0.5 * (edges[np.array(keep, dtype=int)] + edges[np.array(keep, dtype=int) + 1]),
-            np.array([y[which == b].mean() for b in keep]))
+    count = np.bincount(which, minlength=bins)
+    total = np.bincount(which, weights=y, minlength=bins)
+    means = np.where(count >= 3, total / np.maximum(count, 1), np.nan)
+    return 0.5 * (edges[:-1] + edges[1:]), means
+
+
+SCALE_QUANTILE = 0.005
+"""Share of a panel's residuals, at each end, that may lie off its scale: the y range is that of
+the rest (and every bin mean), so that a few samples whose angle residual is ill-conditioned (an
+axis nearly through the stylus: a small lever turns microns into degrees) do not flatten the
+others; the samples off scale are drawn at the edge and counted."""
+
+
+def _robust_ylim(ax: Any, ys: list[np.ndarray]) -> None:
+    """Limit ``ax``'s y axis to the central residuals; note how many samples lie beyond.
+
+    The range is the :data:`SCALE_QUANTILE` to 1 - :data:`SCALE_QUANTILE` quantiles of all the
+    panel's residuals ``ys`` (each (n,)), with zero, widened by 10 % of the span; it is applied
+    only when the full range is more than twice that span (else matplotlib's own). A bin mean
+    that a few such samples drag beyond leaves the panel at its edge.
+    """
+    y = np.concatenate(ys)
+    y = y[np.isfinite(y)]
+    if y.size < 20:
+        return
+    lo, hi = np.quantile(y, [SCALE_QUANTILE, 1.0 - SCALE_QUANTILE])
+    lo, hi = min(lo, 0.0), max(hi, 0.0)
+    pad = 0.1 * (hi - lo) if hi > lo else 1.0
+    lo, hi = lo - pad, hi + pad
+    if y.max() - y.min() <= 2.0 * (hi - lo):
+        return
+    ax.set_ylim(lo, hi)
+    off = int(np.sum((y < lo) | (y > hi)))
+    ax.annotate(f"{off} off scale (triangles at the edge)", (0.99, 0.02),
+                xycoords="axes fraction", ha="right", va="bottom", fontsize=7, color="0.3")
+
+
+def _off_scale(ax: Any, x: np.ndarray, y: np.ndarray, colour: str) -> None:
+    """Draw the samples of (x, y) beyond ``ax``'s y limits as triangles at the edge."""
+    lo, hi = ax.get_ylim()
+    for beyond, edge, marker in ((y > hi, hi, "^"), (y < lo, lo, "v")):
+        if beyond.any():
+            ax.plot(x[beyond], np.full(int(beyond.sum()), edge), marker, ms=4, color=colour,
+                    clip_on=False, ls="none")
 
 
 def step_figure(step: Step, k: int, path: str | Path) -> None:
@@ -58,13 +101,18 @@ def _step_figure(step: Step, k: int) -> Figure:
         ax.remove()
     for ax, view in zip(axes, views):  # every named term, one panel each
         x = np.asarray(view["x"], dtype=float)
+        drawn = []
         for key, colour, label in (("before", MODEL_COLOURS[0], "before"),
                                    ("after", MODEL_COLOURS[3], "after")):
             y = np.asarray(view[key], dtype=float)
             ax.plot(x, y, ".", ms=2, alpha=0.35, color=colour)
             bx, by = _binned(x, y)
             ax.plot(bx, by, "-o", ms=3, color=colour, label=f"{label} (bin means)")
+            drawn.append((y, colour))
         ax.axhline(0.0, color="k", lw=0.6)
+        _robust_ylim(ax, [y for y, _ in drawn])
+        for y, colour in drawn:
+            _off_scale(ax, x, y, colour)
         ax.set_xlabel(view["variable"])
         ax.set_ylabel(view["residual"])
         ax.set_title(view["term"], fontsize=9, y=1.0)  # at the top (no search for room)
