@@ -1,7 +1,7 @@
 """CPU time of starting the command line: `aacmm-pin --help`, `--version`, a command's help.
 
 Each is run as a whole process (as a user starts it); CPU from RUSAGE_CHILDREN, median (range) of
-7 interleaved rounds (each round runs every command once), beside `python -c pass` and `python -c
+9 interleaved rounds (each round runs every command once), beside `python -c pass` and `python -c
 "import numpy"` in the same rounds; ratios to the bare interpreter per round (noisy machines).
 A start-up cost: the baselines are the interpreter and its imports, not another implementation.
 """
@@ -18,7 +18,7 @@ from _report import compile_package, machine, write_section
 
 from aacmm_pin.cli import BLAS_THREAD_VARIABLES
 
-RUNS = 7
+RUNS = 9
 """Interleaved rounds; each runs every case once."""
 ONE = {"OPENBLAS_NUM_THREADS": "1"}
 CASES: list[tuple[str, list[str], dict[str, str]]] = [
@@ -50,7 +50,9 @@ def cpu_of(cmd: list[str], extra: dict[str, str]) -> float:
 
 def main() -> None:
     compile_package()
+    load = [os.getloadavg()[0]]
     runs = np.array([[cpu_of(cmd, extra) for _, cmd, extra in CASES] for _ in range(RUNS)])
+    load.append(os.getloadavg()[0])
     med = np.median(runs, axis=0)
     ratios = runs / runs[:, :1]  # per round, against that round's bare interpreter
     table = "\n".join(
@@ -62,7 +64,9 @@ def main() -> None:
 {machine()}. Whole processes, CPU seconds (user + system), median (range) of {RUNS} interleaved
 rounds (each runs every command once); ratios of the medians, their range over the rounds (each
 round's command over its bare interpreter); a start-up cost, so the baselines are the interpreter
-and its imports, not another implementation. Issue targets:
+and its imports, not another implementation. Load average (1 min) before / after: {load[0]:.1f} /
+{load[1]:.1f}: a start's CPU grows with the machine's load, and not by the same factor for every
+row, so a run at another load can fall outside these ranges. Issue targets:
 `--help` <= 0.3 s CPU. The CLI imports only argparse-level modules until a command runs. The
 package's bytecode is written first, as `pip install` does. Before a command imports numpy,
 `aacmm-pin` starts OpenBLAS with one thread (unless the user set a BLAS thread variable: every

@@ -3,7 +3,7 @@
 Run: ``python benchmarks/discover.py`` (a minute or two; writes its section of BENCHMARKS.md).
 Paper-sized campaigns (4 locations x 200 SPAT samples, 7 bar placements, seed 0): the proposed
 start on a campaign with gravity compliance added to the default effects, the DH start on the
-default effects (DH, encoder, R-Test). Median and range of 5 rounds (CPU), each round one
+default effects (DH, encoder, R-Test). Median and range of 7 rounds (CPU), each round one
 discover and the mean of 3 identifies (the identify from DH takes 0.1 s: one call alone is as
 noisy as the machine), identify and discover alternating; the ratio's range is over the rounds.
 The baseline is a unit of cost (one identify of the start model, same process, same campaign),
@@ -23,7 +23,7 @@ from aacmm_pin import discover, identify, load_arm, simulate_campaign  # noqa: E
 from aacmm_pin.analyses.simulate import DEFAULT_EFFECTS, SimulationConfig  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 
-REPEAT = 5
+REPEAT = 7
 """Rounds: each one discover and IDENTIFY_CALLS identifies."""
 IDENTIFY_CALLS = 3
 """Identifies per round, their mean the round's identify time."""

@@ -3,7 +3,7 @@ hand-written numpy + scipy identification of the same model (``benchmarks/handwr
 whole process), against scipy's finite differences on aacmm_pin's own problem, and the growth with
 the number of SPAT samples (1.6k, 16k, 160k): CPU time and peak memory of each.
 
-Run: ``python benchmarks/identify.py`` (about 5 minutes; writes its section of BENCHMARKS.md);
+Run: ``python benchmarks/identify.py`` (about 7 minutes of CPU; writes its section of BENCHMARKS.md);
 ``python benchmarks/identify.py --large``: the 160k and 1.6M-sample points with their peak memory
 (on request: several minutes of CPU, 2-3 GB; its own section).
 The larger campaigns repeat the paper-sized campaign's postures with fresh R-Test noise; each runs
@@ -82,10 +82,10 @@ HAND_RUNS = {"lm": ["--method", "lm"], "trf": ["--method", "trf"],
              "fd": ["--method", "trf", "--jac", "2-point"]}
 """The hand-written script's variants: analytic Jacobian with MINPACK's lm and with trf (exact),
 and finite differences with trf."""
-ROUNDS = 5
+ROUNDS = 7
 """Interleaved rounds of the whole-process comparison: each runs the CLI, the hand-written
 script's analytic variants and ``identify`` in-process (the mean of 3 calls) once."""
-FD_ROUNDS = 3
+FD_ROUNDS = 5
 """The first rounds that also run the hand-written script with finite differences (~30 s each)."""
 
 
@@ -163,9 +163,9 @@ def run_case(k: int, seed: int = 1) -> dict:
 
 GROWTH = (1, 10, 100)
 """Copies of the paper-sized campaign in the growth table: 1,600, 16,000 and 160,000 samples."""
-DRAWS = (1, 2, 3)
+DRAWS = (1, 2, 3, 4, 5)
 """Noise draws (seeds of the tiled R-Test noise) per size in the growth table."""
-FD_RUNS = 3
+FD_RUNS = 7
 """Rounds of the in-process comparison with scipy's finite differences (each: the analytic
 Jacobian, the mean of 3 calls, then finite differences once)."""
 

@@ -24,7 +24,7 @@ from benchmarks import handwritten_identify as hand  # noqa: E402
 from benchmarks._report import machine, write_section  # noqa: E402
 from tests.helpers import paper_stylus  # noqa: E402
 
-REPEAT = 7
+REPEAT = 9
 """Interleaved rounds: each measures every method once; ratios' ranges are over the rounds."""
 PLAIN = 500
 """Samples of the plain per-sample numpy loop in each round (about 50 ms)."""

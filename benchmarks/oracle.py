@@ -354,7 +354,7 @@ def main() -> None:
         "false alarms). Counts from fixed seeds (campaigns: seeds 0-19 at the 0.9 size, 0-9 at "
         f"the others; null campaigns: seeds {NULL_SEEDS.start}-{NULL_SEEDS.stop - 1}): a rerun of "
         "the same code gives the same table, only the CPU time differs; "
-        "`--quick` (4 seeds at the 0.9 size, 5 null seeds) prints a check in a few minutes.", "",
+        "`--quick` (4 seeds at the 0.9 size, 5 null seeds) prints a check (about 2 min of CPU).", "",
         "| effect | size | oracle power (predicted) | oracle (counted) | oracle searching m "
         "candidates (predicted; m) | discovery | absorbed |",
         "|---|---|---|---|---|---|---|", *rows, "",

@@ -39,9 +39,9 @@ from aacmm_pin._blas import single_threaded_blas  # noqa: E402
 from aacmm_pin.fit.unknowns import Unknowns  # noqa: E402
 from benchmarks._report import compile_package, cpu_runs, machine, spread, write_section  # noqa: E402
 
-REPEAT = 5
+REPEAT = 9
 """Rounds: each runs the CLI, the careful fit and the in-process identify once."""
-REPEAT_WEAK = 3
+REPEAT_WEAK = 5
 """Rounds that also run the weak baseline (about 10 s each)."""
 HAND = ROOT / "benchmarks" / "ur5_handwritten.py"
 IMPORTS = ("import numpy, scipy.optimize, pinocchio, lxml.etree, aacmm_pin.fit.identification, "
