@@ -76,9 +76,12 @@ def plain_rank(u: Unknowns, start: ap.Parameters, q: np.ndarray) -> int:
     return int(np.sum(sv > RANK_TOL * sv[0]))
 
 
-def inproc_mean(f, calls: int = 3) -> float:
-    """Mean CPU seconds of ``calls`` calls of ``f`` in this process (one call is ~0.05 s: as noisy
-    as the machine)."""
+INPROC_CALLS = 10
+"""Calls of the in-process ``identify`` per round (one call is ~0.05 s: as noisy as the machine)."""
+
+
+def inproc_mean(f, calls: int = INPROC_CALLS) -> float:
+    """Mean CPU seconds of ``calls`` calls of ``f`` in this process."""
     return float(np.mean(cpu_runs(f, calls)[0]))
 
 
@@ -156,8 +159,8 @@ Jacobian, `least_squares(method="lm")`, one BLAS thread, whole process ({hand['n
 evaluations) | {spread(runs['hand'])} | {ratio('hand', 'cli')} | \
 {hand['fit_rms_mm'] * 1e3:.1f} | {hand['test_mean_mm']:.4f} |"""
     weak = f"""| aacmm_pin `identify(model="dh")` in-process, analytic Jacobian, undetermined directions \
-held ({cal.nfev} evaluations; each round: the mean of 3 calls) | {spread(runs['ours'], '.3f')} | \
-1x | {cal.fit_rms * 1e6:.1f} | \
+held ({cal.nfev} evaluations; each round: the mean of {INPROC_CALLS} calls) | \
+{spread(runs['ours'], '.3f')} | 1x | {cal.fit_rms * 1e6:.1f} | \
 {test_error(cal.parameters):.4f} |
 | careful hand-written fit alone (`benchmarks/ur5_handwritten.py` after its imports, reading the \
 files included) | {spread(runs['hand_fit'], '.3f')} | {ratio('hand_fit', 'ours')} | \
