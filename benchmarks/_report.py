@@ -37,6 +37,12 @@ def cpu_runs(f, repeat: int):
     return times, out
 
 
+def spread(values, fmt: str = ".2f") -> str:
+    """Median (min - max) of ``values``, each formatted with ``fmt``."""
+    v = np.asarray(values)
+    return f"{np.median(v):{fmt}} ({v.min():{fmt}} - {v.max():{fmt}})"
+
+
 def compile_package() -> None:
     """Write aacmm_pin's bytecode (``__pycache__``), as ``pip install`` does, so that whole-process
     timings do not include compiling the package's sources (this machine sets

@@ -3,7 +3,7 @@ hand-written numpy + scipy identification of the same model (``benchmarks/handwr
 whole process), against scipy's finite differences on aacmm_pin's own problem, and the growth with
 the number of SPAT samples (1.6k, 16k, 160k): CPU time and peak memory of each.
 
-Run: ``python benchmarks/identify.py`` (about 5 minutes; writes its section of BENCHMARKS.md);
+Run: ``python benchmarks/identify.py`` (about 7 minutes of CPU; writes its section of BENCHMARKS.md);
 ``python benchmarks/identify.py --large``: the 160k and 1.6M-sample points with their peak memory
 (on request: several minutes of CPU, 2-3 GB; its own section).
 The larger campaigns repeat the paper-sized campaign's postures with fresh R-Test noise; each runs
@@ -39,7 +39,7 @@ from aacmm_pin import (  # noqa: E402
 )
 from aacmm_pin.analyses.simulate import SimulationConfig  # noqa: E402
 from aacmm_pin.fit.identification import identify  # noqa: E402
-from benchmarks._report import compile_package, cpu_runs, machine, write_section  # noqa: E402
+from benchmarks._report import compile_package, cpu_runs, machine, spread, write_section  # noqa: E402
 
 
 def tiled(sim, k: int, rng: np.random.Generator) -> Campaign:
@@ -82,13 +82,22 @@ HAND_RUNS = {"lm": ["--method", "lm"], "trf": ["--method", "trf"],
              "fd": ["--method", "trf", "--jac", "2-point"]}
 """The hand-written script's variants: analytic Jacobian with MINPACK's lm and with trf (exact),
 and finite differences with trf."""
+ROUNDS = 7
+"""Interleaved rounds of the whole-process comparison: each runs the CLI, the hand-written
+script's analytic variants and ``identify`` in-process (the mean of 3 calls) once."""
+FD_ROUNDS = 5
+"""The first rounds that also run the hand-written script with finite differences (~30 s each)."""
 
 
-def cli_vs_handwritten(repeat: int = 3) -> dict:
-    """CPU of the CLI (whole process, median of ``repeat``), of ``identify`` in-process (median of 5)
-    and of the hand-written script's variants (whole processes, one BLAS thread; median of
-    ``repeat`` with the analytic Jacobian, once with finite differences: it takes minutes), on
-    one campaign."""
+def per_round(num: list[float], den: list[float]) -> np.ndarray:
+    """Ratios per round (the first len(num) rounds)."""
+    return np.asarray(num) / np.asarray(den[:len(num)])
+
+
+def cli_vs_handwritten() -> dict:
+    """CPU of the CLI (whole process), of ``identify`` in-process (the mean of 3 calls) and of the
+    hand-written script's variants (whole processes, one BLAS thread), in ``ROUNDS`` interleaved
+    rounds on one campaign (finite differences in the first ``FD_ROUNDS``)."""
     arm = load_arm()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "campaign"
@@ -98,33 +107,33 @@ def cli_vs_handwritten(repeat: int = 3) -> dict:
         check = json.loads(subprocess.run([sys.executable, str(HAND), "--check", str(folder)],
                                           check=True, capture_output=True, text=True).stdout)
         compile_package()
+        identify(camp, arm)  # warm-up (imports)
         cli: list[float] = []
+        inproc: list[float] = []
         hand: dict[str, list[float]] = {k: [] for k in HAND_RUNS}
-        for i in range(repeat):  # interleaved: a busy spell of the machine hits every variant
+        fits: dict[str, list[float]] = {k: [] for k in HAND_RUNS}
+        cal = None
+        for i in range(ROUNDS):  # interleaved: a busy spell of the machine hits every variant
             cli.append(child_cpu([sys.executable, "-m", "aacmm_pin", "identify", str(folder),
                                   "--model", "proposed", "--out", str(Path(tmp) / f"cal{i}")]))
             for key, args in HAND_RUNS.items():
-                if key != "fd" or i == 0:
-                    hand[key].append(child_cpu([sys.executable, str(HAND), str(folder),
-                                                str(Path(tmp) / f"{key}.json"), *args],
+                if key != "fd" or i < FD_ROUNDS:
+                    out = Path(tmp) / f"{key}.json"
+                    hand[key].append(child_cpu([sys.executable, str(HAND), str(folder), str(out),
+                                                *args],
                                                OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1"))
-        identify(camp, arm)  # warm-up (imports)
-        runs, cal = [], None
-        for _ in range(5):
-            tic = time.process_time()
-            cal = identify(camp, arm)
-            runs.append(time.process_time() - tic)
-        inproc = float(np.median(runs))
-        out = {"cli": float(np.median(cli)), "cli_all": cli, "inproc": inproc,
-               "inproc_range": f"{min(runs):.2f} - {max(runs):.2f}",
+                    fits[key].append(json.loads(out.read_text())["fit_cpu"])
+            runs, cal = cpu_runs(lambda: identify(camp, arm), 3)
+            inproc.append(float(np.mean(runs)))
+        assert cal is not None
+        out = {"cli": cli, "inproc": inproc,
                "rms": cal.fit_rms, "nfev": cal.nfev, "n_x": len(cal.x),
                "bar": validate(arm, cal.parameters, camp).rms,
                "bar_cli": validate(arm, read_parameters(Path(tmp) / "cal0"), camp).rms,
                "n": len(camp.spat.location), "jac_error": check["jacobian_error"]}
         for key in HAND_RUNS:
             params, h = hand_parameters(arm, Path(tmp) / f"{key}.json")
-            out[key] = {"cpu": float(np.median(hand[key])), "all": hand[key],
-                        "fit": h["fit_cpu"], "nfev": h["nfev"], "njev": h["njev"],
+            out[key] = {"all": hand[key], "fit": fits[key], "nfev": h["nfev"], "njev": h["njev"],
                         "unknowns": h["unknowns"], "rms": h["fit_rms"],
                         "bar": validate(arm, params, camp).rms}
         return out
@@ -138,8 +147,8 @@ def case(k: int, seed: int = 1) -> dict:
 
 
 def run_case(k: int, seed: int = 1) -> dict:
-    """Identify the paper-sized campaign repeated k times (noise draw ``seed``); CPU, wall, peak
-    memory (this process)."""
+    """Identify the paper-sized campaign repeated k times (R-Test noise drawn with ``seed``); CPU,
+    wall, peak memory (this process)."""
     arm = load_arm()
     sim = simulate_campaign(arm, SimulationConfig(seed=0, samples_per_location=400))
     big = tiled(sim, k, np.random.default_rng(seed))
@@ -153,34 +162,66 @@ def run_case(k: int, seed: int = 1) -> dict:
             "seed": seed, "chunked": bool(cal.problem.chunked)}
 
 
+GROWTH = (1, 10, 100)
+"""Copies of the paper-sized campaign in the growth table: 1,600, 16,000 and 160,000 samples."""
+DRAWS = (1, 2, 3, 4, 5)
+"""Noise draws (seeds of the tiled R-Test noise) per size in the growth table."""
+FD_RUNS = 7
+"""Rounds of the in-process comparison with scipy's finite differences (each: the analytic
+Jacobian, the mean of 3 calls, then finite differences once)."""
+
+
+def ratio(num: list[float], den: list[float], fmt: str = ".3f") -> str:
+    """The ratio of the medians and its range over the rounds (per round: num over den)."""
+    r = per_round(num, den)
+    return f"{np.median(num) / np.median(den):{fmt}}x ({r.min():{fmt}} - {r.max():{fmt}})"
+
+
 def main() -> None:
     arm = load_arm()
     sim = simulate_campaign(arm, SimulationConfig(seed=0, samples_per_location=400))
     camp = sim.campaign
     fast = identify(camp, arm)  # warm-up
-    fast_runs, fast = cpu_runs(lambda: identify(camp, arm), 5)
-    slow_runs, slow = cpu_runs(lambda: identify(camp, arm, jac="2-point"), 3)
-    t_fast, t_slow = float(np.median(fast_runs)), float(np.median(slow_runs))
+    fast_runs: list[float] = []
+    slow_runs: list[float] = []
+    slow = fast
+    for _ in range(FD_RUNS):  # interleaved rounds
+        runs, fast = cpu_runs(lambda: identify(camp, arm), 3)
+        fast_runs.append(float(np.mean(runs)))
+        runs, slow = cpu_runs(lambda: identify(camp, arm, jac="2-point"), 1)
+        slow_runs.append(runs[0])
     same = abs(fast.fit_rms - slow.fit_rms) / fast.fit_rms
     c = cli_vs_handwritten()
-    lm, trf = c["lm"]["cpu"], c["trf"]["cpu"]
+    lm, trf = c["lm"]["all"], c["trf"]["all"]
     label = {"lm": "analytic Jacobian, `least_squares(method=\"lm\")`",
              "trf": "analytic Jacobian, `least_squares(method=\"trf\")` (exact: an SVD per step)",
              "fd": "`jac=\"2-point\"` (finite differences), `trf`"}
     hand_rows = "\n".join(
         f"| hand-written script, {label[k]}, whole process ({h['nfev']} evaluations, "
-        f"{h['njev']} Jacobians; " + (f"median of {len(h['all'])}: "
-                                      + ", ".join(f"{v:.2f}" for v in h["all"]) if len(h["all"]) > 1
-                                      else "once") +
-        f") | {h['cpu']:.2f} | {h['cpu'] / lm:.2f}x | {h['cpu'] / trf:.2f}x | {h['rms'] * 1e6:.3f} | "
-        f"{h['bar'] * 1e6:.2f} |" for k, h in ((k, c[k]) for k in HAND_RUNS))
-    rows = [case(k) for k in (1, 10, 100)]
-    first = rows[0]
-    scaling = "\n".join(
-        f"| {r['n']:,} | {r['wall']:.1f} | {r['cpu']:.1f} | {r['cpu'] / first['cpu']:.0f}x | "
-        f"{r['n'] / first['n']:.0f}x | {r['peak_mb']:,.0f} | {r['peak_mb'] - r['base_mb']:,.0f} | "
-        f"{r['nfev']} | {r['rms'] * 1e6:.2f} | {r['success']} |" for r in rows)
-    growth = (rows[2]['cpu'] / rows[1]['cpu']) / (rows[2]['n'] / rows[1]['n'])
+        f"{h['njev']} Jacobians; {len(h['all'])} rounds) | {spread(h['all'])} | "
+        f"{ratio(h['all'], lm, '.2f')} | {ratio(h['all'], trf, '.2f')} | "
+        f"{h['rms'] * 1e6:.3f} | {h['bar'] * 1e6:.2f} |" for k, h in ((k, c[k]) for k in HAND_RUNS))
+    draws = {k: [case(k, seed) for seed in DRAWS] for k in GROWTH}
+    first = [r["cpu"] for r in draws[GROWTH[0]]]
+
+    def growth_row(k: int) -> str:
+        rows = draws[k]
+        cpu = [r["cpu"] for r in rows]
+        cpu_ratio = "1x" if k == GROWTH[0] else ratio(cpu, first, ".0f")
+        return (f"| {rows[0]['n']:,} | {spread([r['wall'] for r in rows], '.1f')} | "
+                f"{spread(cpu, '.1f')} | {cpu_ratio} | {k} | "
+                f"{max(r['peak_mb'] for r in rows):,.0f} | "
+                f"{max(r['peak_mb'] - r['base_mb'] for r in rows):,.0f} | "
+                f"{', '.join(str(r['nfev']) for r in rows)} | "
+                f"{', '.join(format(r['rms'] * 1e6, '.2f') for r in rows)} | "
+                f"{all(r['success'] for r in rows)} |")
+
+    scaling = "\n".join(growth_row(k) for k in GROWTH)
+    mid, big = GROWTH[1], GROWTH[2]
+    growth = (np.array([r["cpu"] for r in draws[big]]) / np.array([r["cpu"] for r in draws[mid]])
+              / (big / mid))
+    growth_eval = growth * np.array([r["nfev"] for r in draws[mid]]) \
+        / np.array([r["nfev"] for r in draws[big]])
     body = f"""## Identification (`python benchmarks/identify.py`)
 
 {machine()}. Proposed model with the R-Test on a simulated paper-sized campaign (4 locations x 400
@@ -188,98 +229,77 @@ samples = 1,600 samples; {len(fast.x)} unknowns: {len(fast.unknowns.names)} arm 
 translation, 22 DH, tool, visited map nodes) + 12 nest offsets, {fast.n_determined} arm directions
 determined).
 
-Against a hand-written identification of the same model (`benchmarks/handwritten_identify.py`,
-an independent transcription that imports neither aacmm_pin nor Pinocchio: plain numpy forward
-kinematics of Eq. 1-4 vectorised over the samples, an analytic dense Jacobian vectorised the same
-way (rotation steps a x (p - o), translation steps a, map nodes by their interpolation weights;
-largest difference from central differences {c['jac_error']:.1e} of its column's largest entry),
-`scipy.optimize.least_squares` with its defaults for a dense Jacobian, the nests' offsets
-estimated with the 3 um prior, unvisited map nodes left out, zero-mean map rows and a 100 urad
-prior on every node (without it the directions the SPATs do not see wander and the length bar is
-off by 10 um to 1 mm), tolerances 1e-12 as aacmm_pin; {c['lm']['unknowns']} unknowns), on the same
-campaign written to disk ({c['n']:,} samples), CPU time (user + system) of whole processes in one
-run, the runs interleaved. The hand-written script runs with one BLAS thread
-(`OPENBLAS_NUM_THREADS=1`; with the default threads its dense SVDs spin on this busy 2-core
-machine and it takes several times longer); aacmm_pin limits its BLAS threads itself.
-Ratios against the fastest hand-written variant (MINPACK's `lm`) and against `trf`:
+Against the strongest baseline, a hand-written identification of the same model
+(`benchmarks/handwritten_identify.py`, an independent transcription that imports neither aacmm_pin
+nor Pinocchio: plain numpy forward kinematics of Eq. 1-4 vectorised over the samples, an analytic
+dense Jacobian vectorised the same way (rotation steps a x (p - o), translation steps a, map nodes
+by their interpolation weights; largest difference from central differences {c['jac_error']:.1e}
+of its column's largest entry), `scipy.optimize.least_squares` with its defaults for a dense
+Jacobian, the nests' offsets estimated with the 3 um prior, unvisited map nodes left out, zero-mean
+map rows and a 100 urad prior on every node (as its docstring explains), tolerances 1e-12 as
+aacmm_pin; {c['lm']['unknowns']} unknowns; one BLAS thread, `OPENBLAS_NUM_THREADS=1`, as aacmm_pin
+limits its own), on the same campaign written to disk ({c['n']:,} samples). CPU time (user + system),
+median (range) of {ROUNDS} interleaved rounds (each: the CLI, the hand-written script's analytic
+variants, `identify` in-process as the mean of 3 calls between them; finite differences in the
+first {FD_ROUNDS}); ratios of the medians against the fastest hand-written variant (MINPACK's `lm`) and
+against `trf`, their range over the rounds (per round):
 
 | run | CPU (s) | vs hand-written `lm` | vs hand-written `trf` | fit RMS (um) | length-bar error RMS (um) |
 |---|---|---|---|---|---|
 {hand_rows}
-| `aacmm-pin identify CAMPAIGN --model proposed --out DIR`, whole process (median of \
-{len(c['cli_all'])}: {', '.join(f'{v:.2f}' for v in c['cli_all'])}) | {c['cli']:.2f} | \
-{c['cli'] / lm:.3f}x | {c['cli'] / trf:.3f}x | {c['rms'] * 1e6:.3f} | {c['bar_cli'] * 1e6:.2f} |
-| `identify(campaign, arm)` in-process (median of 5: {c['inproc_range']}, {c['nfev']} evaluations) \
-| {c['inproc']:.2f} | \
-{c['inproc'] / lm:.3f}x | {c['inproc'] / trf:.3f}x | {c['rms'] * 1e6:.3f} | {c['bar'] * 1e6:.2f} |
+| `aacmm-pin identify CAMPAIGN --model proposed --out DIR`, whole process | {spread(c['cli'])} | \
+{ratio(c['cli'], lm)} | {ratio(c['cli'], trf)} | {c['rms'] * 1e6:.3f} | {c['bar_cli'] * 1e6:.2f} |
+| `identify(campaign, arm)` in-process ({c['nfev']} evaluations) | {spread(c['inproc'])} | \
+{ratio(c['inproc'], lm)} | {ratio(c['inproc'], trf)} | {c['rms'] * 1e6:.3f} | \
+{c['bar'] * 1e6:.2f} |
 
 The hand-written fit alone (after its imports; reading the files included) took
-{c['lm']['fit']:.2f} s of CPU with `lm`, {c['trf']['fit']:.2f} s with `trf`; against the former the
-in-process `identify` is {c['inproc'] / c['lm']['fit']:.3f}x. The CLI's time includes starting
-Python, importing the package (its bytecode written beforehand, as `pip install` does), reading and
-checking the campaign and writing the calibration folder (figures excluded: `identify` writes
-none); it runs as `python -m aacmm_pin identify ...`, the entry point of the `aacmm-pin` script.
+{spread(c['lm']['fit'])} s of CPU with `lm`, {spread(c['trf']['fit'])} s with `trf`; against the
+former the in-process `identify` is {ratio(c['inproc'], c['lm']['fit'])}. The CLI's time includes
+starting Python, importing the package (its bytecode written beforehand, as `pip install` does),
+reading and checking the campaign and writing the calibration folder (figures excluded: `identify`
+writes none); it runs as `python -m aacmm_pin identify ...`, the entry point of the `aacmm-pin`
+script.
 
-aacmm_pin's own problem solved by scipy with finite differences instead of the analytic Jacobian,
-CPU time in-process, median (range) of 5 (analytic) and of 3 (finite differences) runs:
+A weak baseline, kept for comparison: aacmm_pin's own problem solved by scipy with finite
+differences instead of the analytic Jacobian, CPU time in-process on the simulated campaign (in
+memory), median (range) of {FD_RUNS} interleaved rounds (each: the analytic Jacobian as the mean of
+3 calls, then finite differences once):
 
 | Jacobian | time (s) | ratio | fit RMS (um) |
 |---|---|---|---|
-| aacmm_pin: analytic (Pinocchio), sparse in the map nodes | {t_fast:.2f} \
-({min(fast_runs):.2f} - {max(fast_runs):.2f}) | 1x | \
+| aacmm_pin: analytic (Pinocchio), sparse in the map nodes | {spread(fast_runs)} | 1x | \
 {fast.fit_rms * 1e6:.3f} |
-| plain `scipy.optimize.least_squares`, same problem, `jac="2-point"` | {t_slow:.2f} \
-({min(slow_runs):.2f} - {max(slow_runs):.2f}) | \
-{t_slow / t_fast:.0f}x slower | {slow.fit_rms * 1e6:.3f} |
+| plain `scipy.optimize.least_squares`, same problem, `jac="2-point"` | {spread(slow_runs)} | \
+{ratio(slow_runs, fast_runs, '.0f')} slower | {slow.fit_rms * 1e6:.3f} |
 
 The two reach the same fit (relative difference {same:.1e}).
 
-Growth with the number of SPAT samples (the same postures repeated with fresh noise), one process
-per campaign size: wall and CPU time of `identify` (one BLAS thread), and the process' peak resident
-memory (`ru_maxrss`, a high-water mark; "identify" is how much `identify` raised it above the
-set-up's, i.e. simulating the campaign and building the tiled copies: 0 where the set-up's own
-peak was higher):
+Growth with the number of SPAT samples (the same postures repeated with fresh R-Test noise), one
+process per campaign size and noise draw ({len(DRAWS)} draws per size): wall and CPU time of
+`identify` (one BLAS thread), median (range) over the draws, and the process' peak resident memory
+(`ru_maxrss`, a high-water mark, the largest of the draws; "identify" is how much `identify` raised
+it above the set-up's, i.e. simulating the campaign and building the tiled copies: 0 where the
+set-up's own peak was higher). CPU ratio: of the medians, its range over the draws (each draw's
+CPU over the same draw's at {GROWTH[0] * 1600:,} samples). Evaluations and RMS: one per draw.
 
 | samples | wall (s) | CPU (s) | CPU ratio | size ratio | peak (MB) | identify (MB) | evaluations \
 | RMS (um) | converged |
 |---|---|---|---|---|---|---|---|---|---|
 {scaling}
 
-From 16,000 to 160,000 samples the CPU time per sample changes by a factor {growth:.2f}. One
-evaluation (residuals and Jacobian) costs less than linearly more; the rest comes from the number
-of evaluations (they include the two residuals of the Gauss-Newton step below). A solve ends at an
-accepted point when no reduced coordinate's Gauss-Newton step from it exceeds 1e-4 standard
-deviations (`solver.STEP_TOL` as scipy's `gtol`; as strict as its `ftol` of 1e-12 here, which it
-replaced as the ending: below such a step the cost's change is its rounding, and the trust region
-rejected steps at random until the step's tolerance stopped it, 5 to 13 evaluations at every size
-depending on the noise draw). The residual at the step's point is handed to the solve that starts there.
-`identify` decides which directions the data determine (singular value of a plausible change >= 2
-sigma, an absolute threshold) at the start values, takes one Gauss-Newton step of that constrained
-problem and checks the decision where it lands, before the solve, then again at the solution; a
-check that holds a different number of directions decides them again at its point (at the solution
-that costs another solve). The residual is nearly linear in the errors, so the step lands near the
-solution, and how many directions are held does not depend on the start values: two directions, one
-mixing dth60 with dx76 and one a76 with dy76, have singular values below 0.5 sigma at the start
-values (the nominal tool sits on the A7 axis, and only a stylus off the axis tells them apart) but
-3.2 and 3.3 sigma with 160,000 samples where the step lands and at the solution (the identified
-tool is 75 um off the axis): they are determined from the first solve on, one solve (which takes
-one step more than at 16,000 samples: the freed directions start where the first decision held
-them, and the residual is less linear in them). Over six noise draws at each size: 1,600 samples
-3 evaluations, 16,000 4, 160,000 5 to 7 (median CPU 0.57 and 7.25 s: a factor 1.27 per sample).
-Decided at the start values and checked only at the solution, they were held in a first solve and
-freed in a second. With 16,000 samples they are at 1.0 sigma (held either way). The singular values grow as
-the square root of the number of samples, so this is the data determining more, not a numerical
-effect. The step's Jacobian is the decision's at the start, the one where the step lands serves the
-check there and the solve's first step, the solver's last one (at the solution) the check there and
-the covariance: no Jacobian is computed twice. Which map constants are gauges is decided by a
-blocked QR of the dense block and the map constants (R only) instead of an SVD of the tall dense
-block."""
+From {GROWTH[1] * 1600:,} to {GROWTH[2] * 1600:,} samples the CPU time per sample changes by a
+factor {np.median(growth):.2f} ({growth.min():.2f} - {growth.max():.2f} over the draws, each draw's
+{GROWTH[2] * 1600:,} against its {GROWTH[1] * 1600:,}); per sample and evaluation
+{np.median(growth_eval):.2f} ({growth_eval.min():.2f} - {growth_eval.max():.2f}). How many
+evaluations a solve takes depends on the noise draw (the evaluations include the two residuals of
+the Gauss-Newton step that checks which directions the data determine; docs/identification.md)."""
     write_section("identify", body)
 
 
 LARGE = (100, 1000)
 """Copies of the paper-sized campaign in the on-request scaling run: 160,000 and 1,600,000 samples."""
-DRAWS = (1, 2, 3, 4, 5, 6)
+LARGE_DRAWS = (1, 2, 3, 4, 5, 6)
 """The 160k run's noise draws (seeds): its evaluations vary with the draw (5 to 7)."""
 PEAK_LIMIT_MB = 2048
 """Issue 28's target for 1.6M samples."""
@@ -295,10 +315,10 @@ def large() -> None:
     of CPU and about 2 GB of memory: run it alone on the machine. Writes the section
     ``identify-large`` of BENCHMARKS.md.
     """
-    half = len(DRAWS) // 2
-    small = [case(LARGE[0], s) for s in DRAWS[:half]]
-    big = case(LARGE[1], DRAWS[0])
-    small += [case(LARGE[0], s) for s in DRAWS[half:]]
+    half = len(LARGE_DRAWS) // 2
+    small = [case(LARGE[0], s) for s in LARGE_DRAWS[:half]]
+    big = case(LARGE[1], LARGE_DRAWS[0])
+    small += [case(LARGE[0], s) for s in LARGE_DRAWS[half:]]
     per = np.array([r["cpu"] / r["n"] * 1e6 for r in small])
     per_eval = np.array([r["cpu"] / r["n"] / r["nfev"] * 1e6 for r in small])
     ref, ref_eval = float(np.median(per)), float(np.median(per_eval))
@@ -348,7 +368,7 @@ reproduces it."""
 
 if __name__ == "__main__":
     if len(sys.argv) in (3, 4) and sys.argv[1] == "--case":
-        print(json.dumps(run_case(*(int(a) for a in sys.argv[2:]))))
+        print(json.dumps(run_case(*map(int, sys.argv[2:]))))
     elif sys.argv[1:] == ["--large"]:
         large()
     else:

@@ -118,8 +118,9 @@ def main() -> None:
 processes in a temporary folder (output piped), one after the other, CPU = user + system of the
 process and its children, wall to the exit, first line = wall to its first output line; the load
 average (1 min) before / after each command says how busy the 2 cores were (other jobs included).
-Within 1.5x: the CPU within 1.5x of the stated time (issue 26). Not measured: the test runs and
-`.ci/run` (minutes; the README gives its own fresh-clone measurements) and `pip install`
+Within 1.5x: the CPU within 1.5x of the stated time (issue 26; the stated time is the baseline,
+one run each). Not measured: the test runs and `.ci/run` (minutes; the README gives its own
+fresh-clone measurements) and `pip install`
 (a fresh environment downloads ~1 GB).
 
 | command | stated | CPU (s) | wall (s) | first line (s) | load before / after | within 1.5x |

@@ -136,11 +136,13 @@ def main() -> None:
     write_section("viewer", f"""## Viewer on a 10k-sample campaign (`python benchmarks/viewer.py`)
 
 {machine()}.
-Headless Debian Chromium at 1280 x 800, WebGL in software (SwiftShader; a GPU draws far faster).
+Headless Debian Chromium at 1280 x 800, WebGL in software (SwiftShader, on the CPU).
 {n:,} SPAT samples (4 locations x {SAMPLES_PER_LOCATION}) and {len(sim.campaign.lengthbar.q):,} bar \
 readouts; two models (DH shown, proposed hidden),
 each drawn as 5 batched objects (predicted points, measured points, arrow shafts, arrow heads,
-bars): {n_objects} `set_object` commands in all, whatever the number of samples. Best of 3.
+bars): {n_objects} `set_object` commands in all, whatever the number of samples. Best of 3 (wall time: the
+browser's drawing; the best run is the least disturbed by other jobs). Load times with no baseline:
+there is no other viewer of these scenes to compare with.
 
 | step | time |
 |---|---|
