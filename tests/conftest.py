@@ -29,6 +29,17 @@ if not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
 import aacmm_pin as ap  # noqa: E402
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """``-s`` (show what tests print) runs in this process, as pytest-xdist does for ``--pdb``.
+
+    pyproject's addopts run the tests on ``-n auto`` worker processes, whose prints ``-s`` cannot
+    show; an explicit ``-n N`` is kept.
+    """
+    if config.getoption("capture", None) == "no" and config.getoption("numprocesses", None) == "auto":
+        config.option.numprocesses = 0
+
+
 @pytest.fixture(autouse=True)
 def _no_heartbeat(monkeypatch: pytest.MonkeyPatch) -> None:
     import aacmm_pin.progress as progress
