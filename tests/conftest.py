@@ -29,6 +29,17 @@ if not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
 import aacmm_pin as ap  # noqa: E402
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """``-s`` (show what tests print) runs in this process, as pytest-xdist does for ``--pdb``.
+
+    pyproject's addopts run the tests on ``-n auto`` worker processes, whose prints ``-s`` cannot
+    show; an explicit ``-n N`` is kept.
+    """
+    if config.getoption("capture", None) == "no" and config.getoption("numprocesses", None) == "auto":
+        config.option.numprocesses = 0
+
+
 @pytest.fixture(autouse=True)
 def _no_heartbeat(monkeypatch: pytest.MonkeyPatch) -> None:
     import aacmm_pin.progress as progress
@@ -74,3 +85,27 @@ def process_sim(arm: ap.Arm) -> ap.Simulation:
 def small_cal(arm: ap.Arm, small_sim: ap.Simulation) -> ap.Calibration:
     """The proposed model identified on the small campaign."""
     return ap.identify(small_sim.campaign, arm, model="proposed")
+
+
+@pytest.fixture(scope="session")
+def paper_sim(arm: ap.Arm) -> ap.Simulation:
+    """Seed 0's paper-sized campaign (default configuration: DH and encoder errors)."""
+    return ap.simulate_campaign(arm, ap.SimulationConfig(seed=0))
+
+
+@pytest.fixture(scope="session")
+def paper_cal(arm: ap.Arm, paper_sim: ap.Simulation) -> ap.Calibration:
+    """The proposed model (R-Test displacements used) identified on :func:`paper_sim`."""
+    return ap.identify(paper_sim.campaign, arm, model="proposed")
+
+
+@pytest.fixture(scope="session")
+def sim_400(arm: ap.Arm) -> ap.Simulation:
+    """400 SPAT samples (seed 2, 4 x 100), DH and encoder errors."""
+    return ap.simulate_campaign(arm, ap.SimulationConfig(seed=2, samples_per_location=100))
+
+
+@pytest.fixture(scope="session")
+def cal_400(arm: ap.Arm, sim_400: ap.Simulation) -> ap.Calibration:
+    """The proposed model identified on :func:`sim_400`."""
+    return ap.identify(sim_400.campaign, arm)

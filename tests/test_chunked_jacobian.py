@@ -30,15 +30,15 @@ from aacmm_pin.fit.identification import identify
 
 
 @pytest.fixture(scope="module")
-def sim(arm: ap.Arm) -> ap.Simulation:
+def sim(sim_400: ap.Simulation) -> ap.Simulation:
     """400 SPAT samples (4 locations), DH and encoder errors: a layout from the chain alone."""
-    return ap.simulate_campaign(arm, ap.SimulationConfig(seed=2, samples_per_location=100))
+    return sim_400
 
 
 @pytest.fixture(scope="module")
-def cal(arm: ap.Arm, sim: ap.Simulation) -> ap.Calibration:
+def cal(cal_400: ap.Calibration) -> ap.Calibration:
     """The campaign identified the usual way (the whole Jacobian held)."""
-    return identify(sim.campaign, arm)
+    return cal_400
 
 
 def _chunked(monkeypatch: pytest.MonkeyPatch, samples: int) -> None:

@@ -38,10 +38,9 @@ def _svd_gauge_ratios(unknowns, jac) -> dict[int, float]:
 
 
 @pytest.fixture(scope="module")
-def layout(arm):
+def layout(sim_400, cal_400):
     """The proposed model's layout and data Jacobian at the start of a paper-sized campaign."""
-    sim = simulate_campaign(arm, SimulationConfig(seed=2, samples_per_location=100))
-    cal = identify(sim.campaign, arm)
+    sim, cal = sim_400, cal_400
     unknowns = cal.unknowns
     _, jac = unknowns.jacobian(unknowns.vector(cal.parameters), cal.q)
     return sim, cal, unknowns, jac

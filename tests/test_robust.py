@@ -42,16 +42,9 @@ def corrupt(campaign: Campaign, kind: str, seed: int) -> tuple[Campaign, np.ndar
 
 
 @pytest.fixture(scope="module")
-def arm() -> ap.Arm:
-    return ap.load_arm()
-
-
-@pytest.fixture(scope="module")
-def clean(arm: ap.Arm) -> tuple[Campaign, float]:
+def clean(arm: ap.Arm, paper_sim: ap.Simulation, paper_cal: ap.Calibration) -> tuple[Campaign, float]:
     """Seed 0's paper campaign and the length-bar RMS of its least-squares calibration."""
-    campaign = simulate_campaign(arm, SimulationConfig(seed=0)).campaign
-    cal = ap.identify(campaign, arm, "proposed")
-    return campaign, ap.validate(arm, cal.parameters, campaign).rms
+    return paper_sim.campaign, ap.validate(arm, paper_cal.parameters, paper_sim.campaign).rms
 
 
 def check_outlier_case(arm: ap.Arm, campaign: Campaign, clean_bar: float, kind: str,
@@ -89,9 +82,9 @@ def test_robust_fit_over_seeds(arm: ap.Arm, kind: str, seed: int) -> None:
 
 
 def test_robust_fit_of_a_clean_campaign_is_the_least_squares_fit(
-        arm: ap.Arm, clean: tuple[Campaign, float]) -> None:
+        arm: ap.Arm, clean: tuple[Campaign, float], paper_cal: ap.Calibration) -> None:
     """Without outliers the robust fit rejects nothing and returns the least-squares solution."""
-    plain = ap.identify(clean[0], arm, "proposed")
+    plain = paper_cal  # ap.identify(clean[0], arm, "proposed"), shared
     cal = ap.identify(clean[0], arm, "proposed", robust=True)
     assert cal.success and cal.outliers == () and plain.suspects == ()
     np.testing.assert_array_equal(cal.x, plain.x)
