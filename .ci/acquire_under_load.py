@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(busy)} busy loops on {cores} cores; tests: {' '.join(TESTS)}", flush=True)
         for run in range(1, args.runs + 1):
             tic = time.monotonic()
-            result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p",
+            result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-n0", "-p",
                                      "no:cacheprovider", *TESTS, *pytest_args], cwd=ROOT,
                                     capture_output=True, text=True)
             tail = (result.stdout.strip().splitlines() or ["(no output)"])[-1]

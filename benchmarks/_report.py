@@ -43,6 +43,19 @@ def spread(values, fmt: str = ".2f") -> str:
     return f"{np.median(v):{fmt}} ({v.min():{fmt}} - {v.max():{fmt}})"
 
 
+def ratio(num, den, fmt: str | None = None) -> str:
+    """The ratio of the medians and its range over the rounds: ``num`` over ``den``, paired by
+    round (interleaved runs; ``den``'s first ``len(num)`` rounds when ``num`` ran in fewer).
+
+    ``fmt``: the numbers' format (default: two decimals below 10, none above).
+    """
+    n = np.asarray(num, dtype=float)
+    d = np.asarray(den, dtype=float)[:len(n)]
+    per = n / d
+    fmt = fmt or (".2f" if per.max() < 10 else ".0f")
+    return f"{np.median(n) / np.median(d):{fmt}}x ({per.min():{fmt}} - {per.max():{fmt}})"
+
+
 def compile_package() -> None:
     """Write aacmm_pin's bytecode (``__pycache__``), as ``pip install`` does, so that whole-process
     timings do not include compiling the package's sources (this machine sets

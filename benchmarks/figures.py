@@ -95,10 +95,11 @@ def main(before: Path | None = None) -> None:
     """Measure both campaigns and write the section; ``before``: a checkout of the package before
     a change, measured in the same runs (interleaved)."""
     sys.path.insert(0, str(ROOT))
-    from benchmarks._report import compile_package, machine, write_section
+    from benchmarks._report import compile_package, machine, ratio, spread, write_section
 
     compile_package()
-    rows = []
+    rows: list[str] = []
+    paired: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         simulated = Path(tmp) / "c"
         subprocess.run([sys.executable, "-m", "aacmm_pin", "simulate", str(simulated)],
@@ -119,39 +120,37 @@ def main(before: Path | None = None) -> None:
                 assert all(r["status"] == 0 for r in runs[root]), runs[root]
                 cpu = np.array([r["cpu"] for r in runs[root]])
                 fig = np.array([r["figures"] for r in runs[root]])
-                rows.append(f"| {label}{name} | {stat(cpu, '.2f')} | {stat(fig, '.2f')} | "
-                            f"{stat(100 * fig / cpu, '.0f')} | {', '.join(runs[root][0]['pngs'])} |")
+                rows.append(f"| {label}{name} | {spread(cpu)} | {spread(fig)} | "
+                            f"{spread(100 * fig / cpu, '.0f')} | {', '.join(runs[root][0]['pngs'])} |")
+            if before:  # the figures' CPU of this code over the code before, paired by round
+                ours, old = ([r["figures"] for r in runs[root]] for root in (ROOT, before))
+                paired.append(f"{label.split(' (')[0]}: {ratio(ours, old)}")
     table = "\n".join(rows)
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())  # 1, 5 and 15 min
     rows_before = (" The rows marked \"before\" are the code before these changes, run in the "
-                   "same runs, interleaved with this code's (`--before DIR`)." if before else "")
+                   "same runs, interleaved with this code's (`--before DIR`); the figures' CPU of "
+                   "this code over the code before's, per round (median, range): "
+                   + "; ".join(paired) + " (a range that holds 1: within the runs' noise)."
+                   if before else "")
     body = f"""## Figures of `discover` (`python benchmarks/figures.py`)
 
 {machine()}. `aacmm-pin discover CAMPAIGN --out DIR`, whole processes (interpreter start included),
 CPU = user + system; the figures' CPU is measured in the same process around the figure functions
 `write_discovery` calls and the entry and exit of their `figure_batch` (importing matplotlib
-included, about 0.4 s: only the figures need it). The figures are drawn after the results are
+included: only the figures need it). The figures are drawn after the results are
 printed, with fixed margins (no constrained layout) and one legend per step figure, by
 `outputs.figure_files`: text unhinted (`text.hinting` "none"), PNG through matplotlib's own Pillow
-writer at zlib level 3 (Pillow's default 6 took 1.6x its CPU for 6 % smaller files), no tick built
-outside the view (`outputs.in_view_ticks`: the same pixels), and the objects the process holds, then
-matplotlib's, frozen (`gc.freeze`) while the figures are written. Median (range) of {REPEAT} runs
-per campaign; issue 28's target: figures <= 25 % of the command's CPU. Before these changes (this
-script's previous run): the sample campaign 30 % (24 - 30; command 2.92 s, figures 0.85 s),
-the simulated one 21 % (19 - 23; 4.06 s, 0.86 s). Before issue 28 (constrained layout, a legend
-per panel): 36 - 37 % on the sample campaign, 27 % on the simulated one.{rows_before} The load
-average (1, 5 and 15 min) when this table was written: {load}: CPU times grow with the load.
+writer at zlib level 3, no tick built outside the view (`outputs.in_view_ticks`: the same pixels),
+and the objects the process holds, then matplotlib's, frozen (`gc.freeze`) while the figures are
+written. Median (range) of {REPEAT} runs per campaign; issue 28's target: figures <= 25 % of the
+command's CPU.{rows_before} The load average (1, 5 and 15 min) when this table was written: {load}:
+CPU times grow with the load.
 
 | campaign | command CPU (s) | figures CPU (s) | figures' share (%) | PNGs written |
 |---|---|---|---|---|
 {table}
 """
     write_section("figures", body)
-
-
-def stat(v: np.ndarray, fmt: str) -> str:
-    """Median (min - max) of v."""
-    return f"{np.median(v):{fmt}} ({v.min():{fmt}} - {v.max():{fmt}})"
 
 
 if __name__ == "__main__":

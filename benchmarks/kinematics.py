@@ -21,7 +21,7 @@ from aacmm_pin import Parameters, load_arm, stylus_jacobians, stylus_positions  
 from aacmm_pin._blas import single_threaded_blas  # noqa: E402
 from aacmm_pin.model.kinematics import identification_configuration  # noqa: E402
 from benchmarks import handwritten_identify as hand  # noqa: E402
-from benchmarks._report import machine, write_section  # noqa: E402
+from benchmarks._report import machine, ratio, write_section  # noqa: E402
 from tests.helpers import paper_stylus  # noqa: E402
 
 REPEAT = 9
@@ -43,12 +43,6 @@ def cpu(f, repeat: int = REPEAT) -> np.ndarray:
 def us(t: np.ndarray) -> str:
     """Median (min - max) of per-sample times t (s), in us."""
     return f"{np.median(t) * 1e6:.2f} ({t.min() * 1e6:.2f} - {t.max() * 1e6:.2f})"
-
-
-def ratio(slow: np.ndarray, fast: np.ndarray) -> str:
-    """The ratio of the medians and its range over the runs (paired in order: interleaved)."""
-    r = slow / fast
-    return f"{np.median(slow) / np.median(fast):.1f}x ({r.min():.1f} - {r.max():.1f})"
 
 
 def hand_positions(q: np.ndarray, params: Parameters) -> np.ndarray:
@@ -125,7 +119,7 @@ def main() -> None:
     same_hand_jac = np.abs(mine - hand_j).max()
 
     def row(what: str, fast: str, ref: str) -> str:
-        return (f"| {what} | {us(t[fast])} | {us(t[ref])} | {ratio(t[ref], t[fast])} |")
+        return (f"| {what} | {us(t[fast])} | {us(t[ref])} | {ratio(t[ref], t[fast], '.1f')} |")
 
     body = f"""## Kinematics cost per sample (`python benchmarks/kinematics.py`)
 

@@ -63,6 +63,9 @@ ORACLE_LEVEL = 0.01
 0.005 for the noise and 0.005 for structure), rounded."""
 NULL_SEEDS = range(1000, 1020)
 SEEDS = {0.5: range(10), 1.0: range(20), 1.5: range(10)}
+QUICK_SEEDS = {1.0: range(4)}
+"""``--quick``: the 0.9 size only, these seeds, and the first :data:`QUICK_NULLS` null seeds."""
+QUICK_NULLS = 5
 """Factor of the size where the oracle's power is 0.9 -> seeds of the campaigns at that size."""
 BIG = 1e3
 """The oracle's columns are the term's scaled by this: its prior (the plausible size x BIG) is nil."""
@@ -299,6 +302,12 @@ def size_at_power(case: Case, arm: ap.Arm, power: float = 0.9, seed: int = 0) ->
     return case.reference * float(np.exp(log_factor)), ref.absorbed
 
 
+def _seed_text(seeds: dict[float, range], show) -> str:
+    """The campaigns' seeds per size factor in words, e.g. ``10 at 0.5 x, 20 at 1 x the 0.9
+    size`` (``show``: a range's words)."""
+    return ", ".join(f"{show(r)} at {f:g} x" for f, r in seeds.items()) + " the 0.9 size"
+
+
 def false_alarms(case: Case, arm: ap.Arm, seeds: range = NULL_SEEDS) -> tuple[int, int]:
     """Return (false alarms, campaigns) of discovery on the case's null campaigns."""
     hits = sum(false_alarm(run(case, arm, s, 0.0)[0]) for s in seeds)
@@ -311,8 +320,8 @@ def main() -> None:
                         help="4 seeds at the 0.9 size only, 5 null seeds; print, do not write")
     args = parser.parse_args()
     arm = ap.load_arm()
-    seeds = {1.0: range(4)} if args.quick else SEEDS
-    nulls = NULL_SEEDS[:5] if args.quick else NULL_SEEDS
+    seeds = QUICK_SEEDS if args.quick else SEEDS
+    nulls = NULL_SEEDS[:QUICK_NULLS] if args.quick else NULL_SEEDS
     tic = time.process_time()
     rows, null_rows, done = [], [], set()
     for case in CASES:
@@ -341,7 +350,7 @@ def main() -> None:
         "## Discovery against the oracle (`python benchmarks/oracle.py`)", "",
         f"{machine()}; {cpu / 60:.1f} min of CPU. Campaigns of 4 x {N_PER_LOCATION} SPAT samples, "
         f"{DT_S:g} s apart, no bar, the simulator's noise (2 um R-Test, 3 um nests); "
-        "20 seeds at the 0.9 size, 10 at the others. The oracle: F test of the start model plus the effect's "
+        f"seeds: {_seed_text(seeds, len)}. The oracle: F test of the start model plus the effect's "
         f"exact columns, level {ORACLE_LEVEL}; its power predicted from the noncentrality (mean "
         "over the campaigns) and counted. Discovery: the final model adds exactly the hidden "
         "term, or (out of the library) names nothing and reports \"unexplained\" with the right "
@@ -351,10 +360,12 @@ def main() -> None:
         f"{ORACLE_LEVEL} / m, m the candidates discovery's first step scores (Bonferroni): the "
         "power of a search over m candidates with a union bound at that family-wise rate "
         "(discovery's steps name at 1e-3 / m, and the residual scan spends 0.005 + 0.005 of its "
-        "false alarms). Counts from fixed seeds (campaigns: seeds 0-19 at the 0.9 size, 0-9 at "
-        f"the others; null campaigns: seeds {NULL_SEEDS.start}-{NULL_SEEDS.stop - 1}): a rerun of "
+        "false alarms). Counts from fixed seeds (campaigns: "
+        f"{_seed_text(seeds, lambda r: f'seeds {r.start}-{r.stop - 1}')}; null campaigns: seeds "
+        f"{nulls.start}-{nulls.stop - 1}): a rerun of "
         "the same code gives the same table, only the CPU time differs; "
-        "`--quick` (4 seeds at the 0.9 size, 5 null seeds) prints a check (about 2 min of CPU).", "",
+        f"`--quick` ({len(QUICK_SEEDS[1.0])} seeds at the 0.9 size, {QUICK_NULLS} null seeds) "
+        "prints a check (about 2 min of CPU).", "",
         "| effect | size | oracle power (predicted) | oracle (counted) | oracle searching m "
         "candidates (predicted; m) | discovery | absorbed |",
         "|---|---|---|---|---|---|---|", *rows, "",

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 import aacmm_pin as ap  # noqa: E402
 from aacmm_pin._blas import single_threaded_blas  # noqa: E402
 from aacmm_pin.fit.unknowns import Unknowns  # noqa: E402
-from benchmarks._report import compile_package, cpu_runs, machine, spread, write_section  # noqa: E402
+from benchmarks._report import compile_package, cpu_runs, machine, ratio, spread, write_section  # noqa: E402
 
 REPEAT = 9
 """Rounds: each runs the CLI, the careful fit and the in-process identify once."""
@@ -49,7 +49,7 @@ IMPORTS = ("import numpy, scipy.optimize, pinocchio, lxml.etree, aacmm_pin.fit.i
 """What ``aacmm-pin identify`` imports before it reads a file: timed alone as a whole process."""
 RANK_TOL = 1e-8
 """Singular values of the plain problem's Jacobian below this fraction of the largest are nil (the
-gap on this problem: 3e-3 to 2e-12)."""
+section prints the gap on either side of the cut)."""
 spec = importlib.util.spec_from_file_location("example03",
                                               ROOT / "examples" / "03_laser_tracker_ur5_wam.py")
 assert spec is not None and spec.loader is not None
@@ -67,13 +67,15 @@ def child(cmd: list[str], **env: str) -> tuple[float, str]:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), out
 
 
-def plain_rank(u: Unknowns, start: ap.Parameters, q: np.ndarray) -> int:
-    """Rank of the plain problem's Jacobian at the start (central differences, step 1e-6)."""
+def plain_rank(u: Unknowns, start: ap.Parameters, q: np.ndarray) -> tuple[int, float, float]:
+    """Rank of the plain problem's Jacobian at the start (central differences, step 1e-6), and its
+    smallest kept and largest dropped singular values, each over the largest."""
     x0 = u.vector(start)
     cols = [(u.positions(x0 + e, q) - u.positions(x0 - e, q)).ravel() / 2e-6
             for e in np.eye(len(x0)) * 1e-6]
     sv = np.linalg.svd(np.column_stack(cols), compute_uv=False)
-    return int(np.sum(sv > RANK_TOL * sv[0]))
+    rank = int(np.sum(sv > RANK_TOL * sv[0]))
+    return rank, float(sv[rank - 1] / sv[0]), float(sv[rank] / sv[0]) if rank < len(sv) else 0.0
 
 
 INPROC_CALLS = 10
@@ -103,7 +105,7 @@ def main() -> None:
         grid, test = ap.read_campaign(tmp / "g"), ap.read_campaign(tmp / "r")
         assert grid.points is not None and test.points is not None
         q, measured = grid.points.q, grid.points.point
-        rank = plain_rank(u, start, q)
+        rank, kept, dropped = plain_rank(u, start, q)
 
         def ours() -> ap.Calibration:
             return ap.identify(grid, arm, model="dh")
@@ -142,13 +144,6 @@ def main() -> None:
         pred = ap.stylus_positions(arm, params, test.points.q, frame="mt")
         return float(np.mean(np.linalg.norm(pred - test.points.point, axis=1)) * 1e3)
 
-    def ratio(base: str, of: str) -> str:
-        """Ratio of the medians and its range over the rounds (per round: base over of)."""
-        b, o = np.asarray(runs[base]), np.asarray(runs[of][:len(runs[base])])
-        r = b / o
-        return (f"{np.median(b) / np.median(o):.{2 if r.max() < 10 else 0}f}x "
-                f"({r.min():.{2 if r.max() < 10 else 0}f} - {r.max():.{2 if r.max() < 10 else 0}f})")
-
     fit_plain = float(np.sqrt(np.mean((u.positions(x_plain, q) - measured) ** 2)))
     hand = result
     careful = f"""| `aacmm-pin identify GRID --arm ur5 --model dh --out DIR`, whole process \
@@ -156,18 +151,18 @@ def main() -> None:
 {ours_test:.4f} |
 | careful hand-written fit (`benchmarks/ur5_handwritten.py`): 24 independent DH columns, analytic \
 Jacobian, `least_squares(method="lm")`, one BLAS thread, whole process ({hand['nfev']} \
-evaluations) | {spread(runs['hand'])} | {ratio('hand', 'cli')} | \
+evaluations) | {spread(runs['hand'])} | {ratio(runs['hand'], runs['cli'])} | \
 {hand['fit_rms_mm'] * 1e3:.1f} | {hand['test_mean_mm']:.4f} |"""
     weak = f"""| aacmm_pin `identify(model="dh")` in-process, analytic Jacobian, undetermined directions \
 held ({cal.nfev} evaluations; each round: the mean of {INPROC_CALLS} calls) | \
 {spread(runs['ours'], '.3f')} | 1x | {cal.fit_rms * 1e6:.1f} | \
 {test_error(cal.parameters):.4f} |
 | careful hand-written fit alone (`benchmarks/ur5_handwritten.py` after its imports, reading the \
-files included) | {spread(runs['hand_fit'], '.3f')} | {ratio('hand_fit', 'ours')} | \
+files included) | {spread(runs['hand_fit'], '.3f')} | {ratio(runs['hand_fit'], runs['ours'])} | \
 {hand['fit_rms_mm'] * 1e3:.1f} | {hand['test_mean_mm']:.4f} |
 | weak baseline: plain `scipy.optimize.least_squares`, `jac="2-point"`, every entry free (rank \
 {rank} of {len(u.names)}), in-process ({plain_res.nfev} evaluations) | {spread(runs['plain'])} | \
-{ratio('plain', 'ours')} | \
+{ratio(runs['plain'], runs['ours'])} | \
 {fit_plain * 1e6:.1f} | {test_error(u.parameters(x_plain)):.4f} |"""
     body = f"""## UR5 from laser-tracker points (`python benchmarks/robots.py`)
 
@@ -199,7 +194,8 @@ where the hand-written one needs them chosen.
 In-process, against the careful fit's own CPU after its imports and against a weak baseline (no
 care: finite differences, every entry free, so the solver wanders in the {len(u.names) - rank}
 undetermined directions; rank: singular values of its central-difference Jacobian at the start above
-{RANK_TOL:g} of the largest); the plain fit starts at the nominal DH values and the identity tracker
+{RANK_TOL:g} of the largest, the gap: {kept:.1e} kept, {dropped:.1e} dropped); the plain fit \
+starts at the nominal DH values and the identity tracker
 frame (the data are registered to the base), aacmm_pin at the nominal DH values and a Kabsch fit of the frame:
 
 | fit | CPU (s) | baseline / aacmm_pin | fit RMS (um) | random poses, mean error (mm) |

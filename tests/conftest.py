@@ -34,7 +34,7 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
     """``-s`` (show what tests print) runs in this process, as pytest-xdist does for ``--pdb``.
 
     pyproject's addopts run the tests on ``-n auto`` worker processes, whose prints ``-s`` cannot
-    show; an explicit ``-n N`` is kept.
+    show; an explicit ``-n N`` (a number) is kept, ``-n auto`` with ``-s`` runs in one process.
     """
     if config.getoption("capture", None) == "no" and config.getoption("numprocesses", None) == "auto":
         config.option.numprocesses = 0

@@ -214,9 +214,11 @@ class ChunkedJacobian:
             known_grad = self._grad[1].copy()
         if (self._normal is None or (rows is not None and known is None)
                 or (f is not None and known_grad is None)):
-            self._deferred = (rows if known is None else None,
-                              None if f is None or known_grad is not None
-                              else np.array(f, dtype=float))
+            ask_rows = rows if known is None else None
+            ask_f = None if f is None or known_grad is not None else np.array(f, dtype=float)
+            pending_rows, pending_f = self._deferred  # a deferred ask rides on this pass too
+            self._deferred = (pending_rows if ask_rows is None else ask_rows,
+                              pending_f if ask_f is None else ask_f)
             for _ in self.chunks(products=True):
                 pass
             if known is None and rows is not None:

@@ -277,7 +277,12 @@ class Problem:
         decides what the data determine, and defers the products of its start's chunked
         Jacobian with them to the gauge check's pass
         (:meth:`~aacmm_pin.fit.chunked_jacobian.ChunkedJacobian.defer`); the residual is then
-        the problem's ``f_ref``. Arguments as the constructor's.
+        the problem's ``f_ref``. Arguments as the constructor's; ``x``: the full vector, shape
+        (n_arm + n_nuisance,).
+
+        Returns:
+            The nuisance Jacobian, shape (3N, n_nuisance), and the data residual, shape (3N,)
+            (whitened, unitless).
         """
         rows = cls.__new__(cls)
         rows._data_rows(unknowns, q, measured, nuisance, sigma, weight)

@@ -45,7 +45,7 @@ def _binned(x: np.ndarray, y: np.ndarray, bins: int = 24) -> tuple[np.ndarray, n
 
 SCALE_QUANTILE = 0.005
 """Share of a panel's residuals, at each end, that may lie off its scale: the y range is that of
-the rest (and every bin mean), so that a few samples whose angle residual is ill-conditioned (an
+the rest (with zero), so that a few samples whose angle residual is ill-conditioned (an
 axis nearly through the stylus: a small lever turns microns into degrees) do not flatten the
 others; the samples off scale are drawn at the edge and counted."""
 
@@ -75,7 +75,10 @@ def _robust_ylim(ax: Any, ys: list[np.ndarray]) -> None:
 
 
 def _off_scale(ax: Any, x: np.ndarray, y: np.ndarray, colour: str) -> None:
-    """Draw the samples of (x, y) beyond ``ax``'s y limits as triangles at the edge."""
+    """Draw the samples beyond ``ax``'s y limits as triangles at the edge.
+
+    ``x``, ``y``: the panel's samples, each shape (n,), in its units.
+    """
     lo, hi = ax.get_ylim()
     for beyond, edge, marker in ((y > hi, hi, "^"), (y < lo, lo, "v")):
         if beyond.any():

@@ -35,7 +35,8 @@ class InViewLocator(AutoLocator):
 def ticks_in_view(fig: Figure) -> None:
     """Give every axis of ``fig`` that has matplotlib's default locator an :class:`InViewLocator`.
 
-    Axes with other locators (fixed ticks, a colour bar's, log scales) are left as they are.
+    Axes with other locators (fixed ticks, log scales) are left as they are; a linear colour
+    bar's axis has the default locator and gets one too (the same ticks drawn).
     """
     for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
