@@ -9,6 +9,8 @@ Run: ``python benchmarks/kinematics.py`` (writes its section of BENCHMARKS.md).
 
 from __future__ import annotations
 
+import json
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -25,7 +27,10 @@ from benchmarks._report import machine, ratio, write_section  # noqa: E402
 from tests.helpers import paper_stylus  # noqa: E402
 
 REPEAT = 9
-"""Interleaved rounds: each measures every method once; ratios' ranges are over the rounds."""
+"""Rounds, each a fresh process that measures every method once; ratios' ranges are over the
+rounds."""
+N = 20_000
+"""Random readouts of the default arm that each batched method evaluates."""
 PLAIN = 500
 """Samples of the plain per-sample numpy loop in each round (about 50 ms)."""
 
@@ -89,26 +94,42 @@ def loop_jacobians(model: pin.Model, q: np.ndarray, fid: int) -> tuple[np.ndarra
     return pos, jac
 
 
-def main() -> None:
+def _setup():
+    """The default arm, nominal parameters, the readouts and what the Pinocchio loop needs."""
     arm = load_arm()
-    ident = arm.identification
     params = Parameters.nominal(arm)
-    n = 20_000
-    q = np.random.default_rng(0).uniform(-3, 3, (n, 7))
+    q = np.random.default_rng(0).uniform(-3, 3, (N, 7))
     qi = identification_configuration(arm, params, q, "mt")
-    fid = ident.stylus_frame
-    keys = ("pos", "jac", "hand_pos", "hand_jac", "loop_pos", "loop_jac", "plain")
+    return arm, params, q, qi, arm.identification, arm.identification.stylus_frame
+
+
+def one_round() -> dict[str, float]:
+    """Time every method once in this process (after one untimed call of each), CPU s per sample."""
+    arm, params, q, qi, ident, fid = _setup()
+    methods = {
+        "pos": (lambda: stylus_positions(arm, params, q), N),
+        "jac": (lambda: stylus_jacobians(arm, params, q), N),
+        "hand_pos": (lambda: hand_positions(q, params), N),
+        "hand_jac": (lambda: hand_jacobians(q, params), N),
+        "loop_pos": (lambda: loop_positions(ident.model, qi, fid), N),
+        "loop_jac": (lambda: loop_jacobians(ident.model, qi, fid), N),
+        "plain": (lambda: [paper_stylus(qk, params.dh, params.tool) for qk in q[:PLAIN]], PLAIN),
+    }
     with single_threaded_blas():
-        runs: dict[str, list[float]] = {k: [] for k in keys}
-        for _ in range(REPEAT):  # interleaved: each round measures every method once
-            runs["pos"].append(cpu(lambda: stylus_positions(arm, params, q), 1)[0] / n)
-            runs["jac"].append(cpu(lambda: stylus_jacobians(arm, params, q), 1)[0] / n)
-            runs["hand_pos"].append(cpu(lambda: hand_positions(q, params), 1)[0] / n)
-            runs["hand_jac"].append(cpu(lambda: hand_jacobians(q, params), 1)[0] / n)
-            runs["loop_pos"].append(cpu(lambda: loop_positions(ident.model, qi, fid), 1)[0] / n)
-            runs["loop_jac"].append(cpu(lambda: loop_jacobians(ident.model, qi, fid), 1)[0] / n)
-            runs["plain"].append(cpu(lambda: [paper_stylus(qk, params.dh, params.tool)
-                                              for qk in q[:PLAIN]], 1)[0] / PLAIN)
+        for f, _ in methods.values():  # warm-up: lazy caches, first allocations
+            f()
+        return {k: float(cpu(f, 1)[0] / count) for k, (f, count) in methods.items()}
+
+
+def main() -> None:
+    # each round a fresh process: the spread then holds what differs between processes (memory
+    # layout, caches) as well as within one, so that a rerun falls within it
+    rounds = [json.loads(subprocess.run([sys.executable, __file__, "--round"], check=True,
+                                        capture_output=True, text=True).stdout.splitlines()[-1])
+              for _ in range(REPEAT)]
+    runs = {k: [r[k] for r in rounds] for k in rounds[0]}
+    arm, params, q, qi, ident, fid = _setup()
+    n = N
     t = {k: np.array(v) for k, v in runs.items()}
     ours = stylus_jacobians(arm, params, q)
     same = np.abs(ours.position - loop_jacobians(ident.model, qi, fid)[0])
@@ -123,9 +144,10 @@ def main() -> None:
 
     body = f"""## Kinematics cost per sample (`python benchmarks/kinematics.py`)
 
-{machine()}; {n} random readouts of the default arm, CPU time in this process, one BLAS thread;
-median (range) of {REPEAT} interleaved rounds (each round times every method once; the plain
-numpy loop on {PLAIN} samples), ratios of the medians (range: the ratio within each round).
+{machine()}; {n} random readouts of the default arm, CPU time, one BLAS thread;
+median (range) of {REPEAT} rounds, each a fresh process that times every method once after an
+untimed call of each (the plain numpy loop on {PLAIN} samples), ratios of the medians (range: the
+ratio within each round).
 `stylus_positions` / `stylus_jacobians` evaluate all samples at once (`aacmm_pin.model._chain`: the
 joint placements and axes are read from Pinocchio's identification model once, the products along
 the chain and the Jacobian columns are vectorised over samples). The batched times include building
@@ -159,4 +181,7 @@ arms, a tree included. Map-node columns follow from the axis columns by the inte
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["--round"]:
+        print(json.dumps(one_round()))
+    else:
+        main()
