@@ -119,9 +119,8 @@ def _agree(a: ap.Calibration, b: ap.Calibration) -> None:
     assert abs(a.fit_rms - b.fit_rms) < 1e-9 * a.fit_rms
 
 
-def test_a_fit_in_small_chunks_equals_one_in_a_single_chunk_and_the_whole(
-        arm: ap.Arm, sim: ap.Simulation, cal: ap.Calibration, monkeypatch: pytest.MonkeyPatch):
-    """The chunked route, never holding the whole Jacobian, lands where the usual one does."""
+def _count_whole_jacobians(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Record the samples of every whole Jacobian built from now on (``Unknowns.jacobian``)."""
     built: list[int] = []
     whole_jacobian = unk.Unknowns.jacobian
 
@@ -130,6 +129,13 @@ def test_a_fit_in_small_chunks_equals_one_in_a_single_chunk_and_the_whole(
         return whole_jacobian(self, x, q)
 
     monkeypatch.setattr(unk.Unknowns, "jacobian", spy)
+    return built
+
+
+def test_a_fit_in_small_chunks_equals_one_in_a_single_chunk_and_the_whole(
+        arm: ap.Arm, sim: ap.Simulation, cal: ap.Calibration, monkeypatch: pytest.MonkeyPatch):
+    """The chunked route, never holding the whole Jacobian, lands where the usual one does."""
+    built = _count_whole_jacobians(monkeypatch)
     _chunked(monkeypatch, 10 ** 9)
     one = identify(sim.campaign, arm)
     _chunked(monkeypatch, 96)
@@ -260,14 +266,7 @@ def test_a_robust_fit_in_chunks_builds_no_whole_jacobian_and_equals_the_whole_ro
     displacement[[7, 205]] += 60e-6  # two gross outliers (30 sigma)
     camp = sim.campaign.with_spat(displacement=displacement)
     whole = identify(camp, arm, robust=True)
-    built: list[int] = []
-    whole_jacobian = unk.Unknowns.jacobian
-
-    def spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray):  # type: ignore[no-untyped-def]
-        built.append(q.shape[0])
-        return whole_jacobian(self, x, q)
-
-    monkeypatch.setattr(unk.Unknowns, "jacobian", spy)
+    built = _count_whole_jacobians(monkeypatch)
     _chunked(monkeypatch, 96)
     chunked = identify(camp, arm, robust=True)
     assert chunked.problem.chunked and built == []
