@@ -223,7 +223,6 @@ def decision_point(problem: Problem, jacobian: DataJacobian | None,
     z1 = problem.newton_step(z0, f0, jacobian)
     del jacobian
 
-
     def with_products(z: np.ndarray) -> np.ndarray:
         f, jac_z = problem.fun_with_products(z)
         if landed is not None:
