@@ -14,11 +14,11 @@ import subprocess
 import sys
 
 import numpy as np
-from _report import compile_package, machine, write_section
+from _report import compile_package, machine, ratio, write_section
 
 from aacmm_pin.cli import BLAS_THREAD_VARIABLES
 
-RUNS = 9
+RUNS = 25
 """Interleaved rounds; each runs every case once."""
 ONE = {"OPENBLAS_NUM_THREADS": "1"}
 CASES: list[tuple[str, list[str], dict[str, str]]] = [
@@ -54,16 +54,16 @@ def main() -> None:
     runs = np.array([[cpu_of(cmd, extra) for _, cmd, extra in CASES] for _ in range(RUNS)])
     load.append(os.getloadavg()[0])
     med = np.median(runs, axis=0)
-    ratios = runs / runs[:, :1]  # per round, against that round's bare interpreter
     table = "\n".join(
         f"| {label} | {med[k]:.3f} ({runs[:, k].min():.3f} - {runs[:, k].max():.3f}) | "
-        f"{med[k] / med[0]:.1f}x ({ratios[:, k].min():.1f} - {ratios[:, k].max():.1f}) |"
+        f"{'1x' if k == 0 else ratio(runs[:, k], runs[:, 0], '.1f', name=label)} |"
         for k, (label, _, _) in enumerate(CASES))
     write_section("cli", f"""## Command-line start (`python benchmarks/cli.py`)
 
 {machine()}. Whole processes, CPU seconds (user + system), median (range) of {RUNS} interleaved
-rounds (each runs every command once); ratios of the medians, their range over the rounds (each
-round's command over its bare interpreter); a start-up cost, so the baselines are the interpreter
+rounds (each runs every command once); ratios of the medians, their range over
+the rounds of this run and of the earlier runs named below (each round's command over its bare
+interpreter); a start-up cost, so the baselines are the interpreter
 and its imports, not another implementation. Load average (1 min) before / after: {load[0]:.1f} /
 {load[1]:.1f}: a start's CPU grows with the machine's load, and not by the same factor for every
 row, so a run at another load can fall outside these ranges. Issue targets:

@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import discover, identify, load_arm, simulate_campaign  # noqa: E402
 from aacmm_pin.analyses.simulate import DEFAULT_EFFECTS, SimulationConfig  # noqa: E402
-from benchmarks._report import machine, write_section  # noqa: E402
+from benchmarks._report import machine, ratio, write_section  # noqa: E402
 
 REPEAT = 7
 """Rounds: each one discover and IDENTIFY_CALLS identifies."""
@@ -67,10 +67,9 @@ def main() -> None:
         named = ", ".join(f"{s.effect} ({', '.join(f'A{a}' for a in s.axes) or 'arm-wide'})"
                           for s in result.steps) or "nothing"
         med_id, med_disc = float(np.median(t_id)), float(np.median(t_disc))
-        ratio = np.array(t_disc) / np.array(t_id)  # per round: identify, then discover
         rows.append(f"| `{start}` | {label} | {med_id:.2f} ({min(t_id):.2f} - {max(t_id):.2f}) | "
                     f"{med_disc:.2f} ({min(t_disc):.2f} - {max(t_disc):.2f}) | "
-                    f"{med_disc / med_id:.1f}x ({ratio.min():.1f} - {ratio.max():.1f}) | "
+                    f"{ratio(t_disc, t_id, '.1f', name=f'discover / identify, {start}')} | "
                     f"{len(result.steps)} | "
                     f"{sum(result.n_candidates)} ({' + '.join(map(str, result.n_candidates))}) | "
                     f"{named} | {result.heldout_rms[0] * 1e6:.2f} -> "
@@ -88,7 +87,8 @@ candidate term of the effect library on held-out data (left-out locations and th
 refits with each named effect and stops when nothing is significant (times include the length-bar
 linearisation of every model). CPU time (the 2 cores are shared), median (range) of {REPEAT}
 rounds, each one `discover` and the mean of {IDENTIFY_CALLS} `identify` calls, alternating; the
-ratio's range is over the rounds. The baseline is a unit of cost, not another way to discover: the
+ratio's range is over the rounds of this run and of the earlier runs named below. The baseline
+is a unit of cost, not another way to discover: the
 ratio says how many identifies of the start model a discovery costs.
 Last column: the length-bar error
 normalised by its predicted covariance (final model's), start -> final.

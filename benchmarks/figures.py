@@ -95,7 +95,7 @@ def main(before: Path | None = None) -> None:
     """Measure both campaigns and write the section; ``before``: a checkout of the package before
     a change, measured in the same runs (interleaved)."""
     sys.path.insert(0, str(ROOT))
-    from benchmarks._report import compile_package, machine, ratio, spread, write_section
+    from benchmarks._report import compile_package, machine, pooled, ratio, spread, write_section
 
     compile_package()
     rows: list[str] = []
@@ -120,16 +120,19 @@ def main(before: Path | None = None) -> None:
                 assert all(r["status"] == 0 for r in runs[root]), runs[root]
                 cpu = np.array([r["cpu"] for r in runs[root]])
                 fig = np.array([r["figures"] for r in runs[root]])
+                share = 100 * fig / cpu  # per round, %
                 rows.append(f"| {label}{name} | {spread(cpu)} | {spread(fig)} | "
-                            f"{spread(100 * fig / cpu, '.0f')} | {', '.join(runs[root][0]['pngs'])} |")
+                            f"{pooled(float(np.median(share)), share, '.0f', '', name=label + name)} | "
+                            f"{', '.join(runs[root][0]['pngs'])} |")
             if before:  # the figures' CPU of this code over the code before, paired by round
                 ours, old = ([r["figures"] for r in runs[root]] for root in (ROOT, before))
-                paired.append(f"{label.split(' (')[0]}: {ratio(ours, old)}")
+                paired.append(f"{label.split(' (')[0]}: {ratio(ours, old, name=label + ' against before')}")
     table = "\n".join(rows)
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())  # 1, 5 and 15 min
     rows_before = (" The rows marked \"before\" are the code before these changes, run in the "
                    "same runs, interleaved with this code's (`--before DIR`); the figures' CPU of "
-                   "this code over the code before's, per round (median, range): "
+                   "this code over the code before's, per round (median, range over the rounds "
+                   "of this run and of the earlier runs named below): "
                    + "; ".join(paired) + " (a range that holds 1: within the runs' noise)."
                    if before else "")
     body = f"""## Figures of `discover` (`python benchmarks/figures.py`)
@@ -142,7 +145,8 @@ printed, with fixed margins (no constrained layout) and one legend per step figu
 `outputs.figure_files`: text unhinted (`text.hinting` "none"), PNG through matplotlib's own Pillow
 writer at zlib level 3, no tick built outside the view (`outputs.in_view_ticks`: the same pixels),
 and the objects the process holds, then matplotlib's, frozen (`gc.freeze`) while the figures are
-written. Median (range) of {REPEAT} runs per campaign; issue 28's target: figures <= 25 % of the
+written. Median (range) of {REPEAT} runs per campaign (the figures' share: its range over the runs
+of this benchmark's run and of the earlier ones named below); issue 28's target: figures <= 25 % of the
 command's CPU.{rows_before} The load average (1, 5 and 15 min) when this table was written: {load}:
 CPU times grow with the load.
 

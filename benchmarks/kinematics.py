@@ -26,7 +26,7 @@ from benchmarks import handwritten_identify as hand  # noqa: E402
 from benchmarks._report import machine, ratio, write_section  # noqa: E402
 from tests.helpers import paper_stylus  # noqa: E402
 
-REPEAT = 9
+REPEAT = 15
 """Rounds, each a fresh process that measures every method once; ratios' ranges are over the
 rounds."""
 N = 20_000
@@ -140,14 +140,14 @@ def main() -> None:
     same_hand_jac = np.abs(mine - hand_j).max()
 
     def row(what: str, fast: str, ref: str) -> str:
-        return (f"| {what} | {us(t[fast])} | {us(t[ref])} | {ratio(t[ref], t[fast], '.1f')} |")
+        return (f"| {what} | {us(t[fast])} | {us(t[ref])} | {ratio(t[ref], t[fast], '.1f', name=what)} |")
 
     body = f"""## Kinematics cost per sample (`python benchmarks/kinematics.py`)
 
 {machine()}; {n} random readouts of the default arm, CPU time, one BLAS thread;
 median (range) of {REPEAT} rounds, each a fresh process that times every method once after an
 untimed call of each (the plain numpy loop on {PLAIN} samples), ratios of the medians (range: the
-ratio within each round).
+ratio within each round, over the rounds of this run and of the earlier runs named below).
 `stylus_positions` / `stylus_jacobians` evaluate all samples at once (`aacmm_pin.model._chain`: the
 joint placements and axes are read from Pinocchio's identification model once, the products along
 the chain and the Jacobian columns are vectorised over samples). The batched times include building

@@ -146,23 +146,26 @@ def main() -> None:
 
     fit_plain = float(np.sqrt(np.mean((u.positions(x_plain, q) - measured) ** 2)))
     hand = result
+    vs = {"hand": ratio(runs["hand"], runs["cli"], name="careful / CLI, whole processes"),
+          "hand_fit": ratio(runs["hand_fit"], runs["ours"], name="careful fit / identify"),
+          "plain": ratio(runs["plain"], runs["ours"], name="weak / identify")}
     careful = f"""| `aacmm-pin identify GRID --arm ur5 --model dh --out DIR`, whole process \
 ({rep['nfev']} evaluations) | {spread(runs['cli'])} | 1x | {rep['fit_rms_um']:.1f} | \
 {ours_test:.4f} |
 | careful hand-written fit (`benchmarks/ur5_handwritten.py`): 24 independent DH columns, analytic \
 Jacobian, `least_squares(method="lm")`, one BLAS thread, whole process ({hand['nfev']} \
-evaluations) | {spread(runs['hand'])} | {ratio(runs['hand'], runs['cli'])} | \
+evaluations) | {spread(runs['hand'])} | {vs['hand']} | \
 {hand['fit_rms_mm'] * 1e3:.1f} | {hand['test_mean_mm']:.4f} |"""
     weak = f"""| aacmm_pin `identify(model="dh")` in-process, analytic Jacobian, undetermined directions \
 held ({cal.nfev} evaluations; each round: the mean of {INPROC_CALLS} calls) | \
 {spread(runs['ours'], '.3f')} | 1x | {cal.fit_rms * 1e6:.1f} | \
 {test_error(cal.parameters):.4f} |
 | careful hand-written fit alone (`benchmarks/ur5_handwritten.py` after its imports, reading the \
-files included) | {spread(runs['hand_fit'], '.3f')} | {ratio(runs['hand_fit'], runs['ours'])} | \
+files included) | {spread(runs['hand_fit'], '.3f')} | {vs['hand_fit']} | \
 {hand['fit_rms_mm'] * 1e3:.1f} | {hand['test_mean_mm']:.4f} |
 | weak baseline: plain `scipy.optimize.least_squares`, `jac="2-point"`, every entry free (rank \
 {rank} of {len(u.names)}), in-process ({plain_res.nfev} evaluations) | {spread(runs['plain'])} | \
-{ratio(runs['plain'], runs['ours'])} | \
+{vs['plain']} | \
 {fit_plain * 1e6:.1f} | {test_error(u.parameters(x_plain)):.4f} |"""
     body = f"""## UR5 from laser-tracker points (`python benchmarks/robots.py`)
 
@@ -172,7 +175,7 @@ files included) | {spread(runs['hand_fit'], '.3f')} | {ratio(runs['hand_fit'], r
 random poses, never used in the fit. CPU = user + system, median (range) of {REPEAT} interleaved
 rounds (each round: the CLI, the careful hand-written fit, `identify` in-process, and in the first
 {REPEAT_WEAK} the weak baseline); ratios are the baseline's CPU over aacmm_pin's, of the medians,
-their range over the rounds (per round).
+their range over the rounds of this run and of the earlier runs named below (per round).
 
 Against the strongest baseline: a careful hand-written fit (`benchmarks/ur5_handwritten.py`, numpy
 + scipy, imports neither aacmm_pin nor Pinocchio: classic DH with UR's table, the {hand['free']}

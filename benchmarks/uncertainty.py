@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aacmm_pin import identify, load_arm, simulate_campaign  # noqa: E402
 from aacmm_pin.analyses.simulate import SimulationConfig  # noqa: E402
 from aacmm_pin.analyses.uncertainty import monte_carlo  # noqa: E402
-from benchmarks._report import machine, spread, write_section  # noqa: E402
+from benchmarks._report import machine, ratio, spread, write_section  # noqa: E402
 
 TRIALS = 100
 ROUNDS = 5
@@ -46,10 +46,9 @@ def main() -> None:
     rows = []
     for workers in (1, 2):
         w = np.array(walls[workers])
-        speed = serial / w  # per round
         rows.append(f"| {workers} | {TRIALS} | {spread(w, '.1f')} | {spread(TRIALS / w, '.1f')} | "
-                    f"{np.median(serial) / np.median(w):.2f}x ({speed.min():.2f} - "
-                    f"{speed.max():.2f}) | {min(converged[workers])} |")
+                    f"{'1x' if workers == 1 else ratio(serial, w, '.2f', name=f'{workers} workers')} | "
+                    f"{min(converged[workers])} |")
     table = "\n".join(rows)
     write_section("uncertainty", f"""## Monte Carlo throughput (`python benchmarks/uncertainty.py`)
 
@@ -59,8 +58,9 @@ the validation of every trial on the length bar (7 placements x 3 sockets x 40 p
 2 workers, starting the processes and shipping the problem to them. A throughput with no
 independent implementation to compare with: the baseline is the same trials in one process.
 Wall time (a speed-up from 2 processes shows only there), median (range) of {ROUNDS} interleaved
-rounds (serial, then 2 workers); the speed-up's range is over the rounds (per round: serial wall
-over 2 workers' wall). The load average (1 min) went {min(loads):.1f} - {max(loads):.1f}
+rounds (serial, then 2 workers); the speed-up's range is over the rounds of this run and of the
+earlier runs named below (per round: serial
+wall over 2 workers' wall). The load average (1 min) went {min(loads):.1f} - {max(loads):.1f}
 during the rounds: with other jobs on the 2 cores the second worker gains less.
 
 | workers | trials | wall (s) | trials/s | vs serial | converged (fewest of the rounds) |
