@@ -51,3 +51,31 @@ def test_ctrl_c_ends_with_one_line_and_130(command: str, campaign: Path, tmp_pat
     assert not out.exists()
     assert not lock.exists()
     assert [p.name for p in tmp_path.iterdir()] == []  # no temporary folder beside it either
+
+
+def test_ctrl_c_turned_into_another_error_is_still_an_interrupt(monkeypatch, capsys) -> None:
+    """Ctrl-C inside an import of a C extension can surface as another error (numpy raises an
+    ImportError about a bad install): the command still says "interrupted" and exits 130. An
+    error without Ctrl-C is not taken for one."""
+    from aacmm_pin import cli
+
+    def interrupted_import(args, name, beat):  # noqa: ANN001, ANN202
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1)  # the signal is handled at the next bytecode
+        except KeyboardInterrupt as exc:
+            raise ImportError("Importing the numpy C-extensions failed.") from exc
+        raise AssertionError("SIGINT did not raise KeyboardInterrupt")
+
+    monkeypatch.setattr(cli, "_run", interrupted_import)
+    before = signal.getsignal(signal.SIGINT)
+    assert cli.main(["axes"]) == 130
+    assert capsys.readouterr().err == "aacmm-pin axes: interrupted\n"
+    assert signal.getsignal(signal.SIGINT) is before  # restored
+
+    def plain_error(args, name, beat):  # noqa: ANN001, ANN202
+        raise ImportError("a real one")
+
+    monkeypatch.setattr(cli, "_run", plain_error)
+    with pytest.raises(ImportError, match="a real one"):
+        cli.main(["axes"])

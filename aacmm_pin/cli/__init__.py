@@ -16,10 +16,13 @@ handlers import what they need, so ``aacmm-pin --help`` and ``--version`` answer
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
+import threading
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
@@ -99,6 +102,33 @@ def one_blas_thread_at_start() -> bool:
 INTERRUPTED = 128 + 2
 """Exit status after Ctrl-C (SIGINT): 128 + the signal's number, as the shells report it."""
 
+@contextlib.contextmanager
+def sigint_noted() -> Iterator[list[bool]]:
+    """Within: Ctrl-C raises ``KeyboardInterrupt`` and is noted in the yielded one-element list.
+
+    SIGINT is handled as Python's default handler does, plus the note (in the main thread;
+    elsewhere nothing changes).
+
+    An interrupt that lands inside an import of a C extension can surface as another error
+    (numpy turns it into an ``ImportError`` about a bad install); the note tells the caller it
+    was Ctrl-C.
+    """
+    noted = [False]
+    if threading.current_thread() is not threading.main_thread():
+        yield noted
+        return
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        noted[0] = True
+        signal.default_int_handler(signum, frame)
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield noted
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 QUIET_COMMANDS = ("acquire", "fake-devices")
 """Commands without a heartbeat: they run until stopped and print their own status."""
 
@@ -122,8 +152,6 @@ def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
-    from aacmm_pin.progress import Heartbeat
-
     try:
         args = parse_arguments(argv)
     except KeyboardInterrupt:  # Ctrl-C while the parser loads (a slow disk)
@@ -133,6 +161,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
     beat = args.command not in QUIET_COMMANDS
     name = args.command_parser.prog  # "aacmm-pin iso10360 euni": the whole command
+    with sigint_noted() as interrupted:
+        try:
+            return _run(args, name, beat)
+        except Exception:
+            if interrupted[0]:  # Ctrl-C turned into another error (inside an import)
+                print(f"{name}: interrupted", file=sys.stderr)
+                return INTERRUPTED
+            raise
+
+
+def _run(args: argparse.Namespace, name: str, beat: bool) -> int:
+    """Run the command's handler; errors are printed as one line with the exit status."""
+    from aacmm_pin.progress import Heartbeat
+
     try:
         handler: Handler = args.handler
         check_input_paths(args.command_parser, args)  # a wrong path: before the heavy imports
