@@ -98,6 +98,10 @@ def main(before: Path | None = None) -> None:
     from benchmarks._report import compile_package, machine, pooled, ratio, spread, write_section
 
     compile_package()
+    if before is not None:  # its bytecode too: else each of its runs compiles the whole package
+        import compileall
+
+        compileall.compile_dir(str(before / "aacmm_pin"), quiet=1)
     rows: list[str] = []
     paired: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -130,7 +134,8 @@ def main(before: Path | None = None) -> None:
     table = "\n".join(rows)
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())  # 1, 5 and 15 min
     rows_before = (" The rows marked \"before\" are the code before these changes, run in the "
-                   "same runs, interleaved with this code's (`--before DIR`); the figures' CPU of "
+                   "same runs, interleaved with this code's (`--before DIR`; its bytecode written "
+                   "first, as this code's); the figures' CPU of "
                    "this code over the code before's, per round (median, range over the rounds "
                    "of this run and of the earlier runs named below): "
                    + "; ".join(paired) + " (a range that holds 1: within the runs' noise)."
