@@ -244,13 +244,15 @@ def _record() -> str:
                f"range, not: " + "; ".join(outside) + " (the ranges above include them)."))
 
 
-def compile_package() -> None:
+def compile_package(root: Path | None = None) -> None:
     """Write aacmm_pin's bytecode (``__pycache__``), as ``pip install`` does, so that whole-process
     timings do not include compiling the package's sources (this machine sets
-    ``PYTHONDONTWRITEBYTECODE``: without it every process compiles them again)."""
+    ``PYTHONDONTWRITEBYTECODE``: without it every process compiles them again).
+
+    ``root``: the checkout whose package to compile (default: this one)."""
     import compileall
 
-    compileall.compile_dir(str(BENCH.parent / "aacmm_pin"), quiet=1)
+    compileall.compile_dir(str((root or BENCH.parent) / "aacmm_pin"), quiet=1)
 
 
 def machine() -> str:

@@ -99,9 +99,7 @@ def main(before: Path | None = None) -> None:
 
     compile_package()
     if before is not None:  # its bytecode too: else each of its runs compiles the whole package
-        import compileall
-
-        compileall.compile_dir(str(before / "aacmm_pin"), quiet=1)
+        compile_package(before)
     rows: list[str] = []
     paired: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
