@@ -115,11 +115,10 @@ def _cpu_model() -> str:
     return platform.processor()
 
 
-def _run_key() -> dict:
-    """What a run must share with an earlier one for their rounds to be pooled: the script and
-    its arguments, the code (:func:`_code`) and the machine (its description, processor model and
-    the versions of the libraries the timings depend on)."""
-    import sys
+@functools.cache
+def _machine_key() -> str:
+    """The machine as a run key states it: its description, processor model and the versions of
+    the libraries the timings depend on (taken once: reading them costs about 10 ms)."""
     from importlib import metadata
 
     versions = []
@@ -128,8 +127,16 @@ def _run_key() -> dict:
             versions.append(f"{dist} {metadata.version(dist)}")
         except metadata.PackageNotFoundError:
             pass
+    return ", ".join([machine(), _cpu_model(), *versions])
+
+
+def _run_key() -> dict:
+    """What a run must share with an earlier one for their rounds to be pooled: the script and
+    its arguments, the code (:func:`_code`) and the machine (:func:`_machine_key`)."""
+    import sys
+
     return {"script": " ".join([Path(sys.argv[0]).stem, *sys.argv[1:]]), "code": _code(),
-            "machine": ", ".join([machine(), _cpu_model(), *versions])}
+            "machine": _machine_key()}
 
 
 def _load_history() -> list[dict]:
@@ -238,8 +245,9 @@ def _record() -> str:
             f"the same code on this machine ({dates}; `benchmarks/history.json`): within one run "
             f"the rounds understate how far a ratio moves between runs. The values are this "
             f"run's; "
-            + (f"all {checked} fell within the earlier {whose} range."
-               if not outside else
+            + (f"{'the one value' if checked == 1 else f'all {checked}'} fell within the "
+               f"earlier {whose} range." if checked and not outside else
+               "none of them was stated by the earlier runs." if not checked else
                f"{checked - len(outside)} of {checked} fell within the earlier {whose} "
                f"range, not: " + "; ".join(outside) + " (the ranges above include them)."))
 

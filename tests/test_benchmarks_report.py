@@ -111,7 +111,7 @@ def test_a_ratio_range_pools_the_earlier_runs_of_the_same_code(report, capsys) -
     assert "NOT reproduced" in capsys.readouterr().err
     cell, text = _run(report, [2.3, 2.3, 2.3])
     assert cell == "2.30x (2.00 - 2.60)"
-    assert "all 1 fell within the earlier runs' range" in text
+    assert "the one value fell within the earlier runs' range" in text
 
 
 def test_ratios_are_pooled_by_name(report) -> None:
