@@ -166,3 +166,38 @@ def test_write_timeout_of_a_sent_request_is_no_lost_port() -> None:
     assert "port_lost" not in faults(events), events
     assert [e for e in events if e[0] in ("reconnect", "gone")] == []
     assert values(events) == [(1, pytest.approx(1e-5, abs=1e-15))] * 2
+
+
+class HaltedWhileReading(ScriptedPort):
+    """A streaming port whose bytes come while the reader waits for a first one, and the halt
+    with them: the reader's read returns that byte and finds the run stopped."""
+
+    def __init__(self, pending: bytes, stop: threading.Event):
+        super().__init__()
+        self.pending, self.stop = pending, stop
+
+    def read(self, size: int = 1) -> bytes:
+        if not self.pending:
+            return super().read(size)
+        first, rest, self.pending = self.pending[:1], self.pending[1:], b""
+        self.feed(rest)
+        self.stop.set()
+        return first
+
+
+def test_lines_that_arrived_before_the_halt_are_read_not_dropped() -> None:
+    """Halted with complete lines waiting in the port: every one comes out (nothing lost), the
+    incomplete rest does not."""
+    sent = [format_arm_line(k, [10.0 * k] * 6) for k in range(3)]
+    out: queue.Queue[PortEvent] = queue.Queue()
+    stop = threading.Event()
+    port = HaltedWhileReading(b"".join(sent) + sent[0][:5], stop)
+    reader = PortReader(arm_port("scripted", 6), out, stop, port)
+    reader.start()
+    reader.join(timeout=5.0)
+    assert not reader.is_alive()
+    events = []
+    while not out.empty():
+        events.append(out.get_nowait())
+    assert [counter for counter, _ in values(events)] == [0, 1, 2]
+    assert faults(events) == []

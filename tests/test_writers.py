@@ -173,6 +173,30 @@ def test_a_claim_is_exclusive_across_threads(tmp_path):
     assert list(tmp_path.iterdir()) == []  # the lock file is gone
 
 
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
+                    reason="Python runs signal handlers in the main thread only")
+def test_ctrl_c_as_the_lock_file_is_made_leaves_no_lock_file(tmp_path, monkeypatch):
+    """A Ctrl-C that lands just after the lock file's creation (before the claim holds it) still
+    interrupts, once the claim can clean up: no lock file and no folder made for it remain.
+    Ctrl-C's outside the claim are untouched: the handler before it is back after."""
+    from aacmm_pin.data import output_claim
+
+    made = output_claim._lock
+
+    def lock_then_ctrl_c(lock: Path, target: Path) -> int:
+        fd = made(lock, target)
+        os.kill(os.getpid(), signal.SIGINT)  # its handler runs at the next bytecode boundary
+        return fd
+
+    monkeypatch.setattr(output_claim, "_lock", lock_then_ctrl_c)
+    handler = signal.getsignal(signal.SIGINT)
+    out = tmp_path / "new" / "out"
+    with pytest.raises(KeyboardInterrupt), claim_output(out):
+        pytest.fail("the claim went on after a Ctrl-C")
+    assert list(tmp_path.iterdir()) == []  # no lock file, no folder "new"
+    assert signal.getsignal(signal.SIGINT) is handler
+
 SLOW = """
 import sys
 import aacmm_pin.data.campaign as campaign

@@ -220,25 +220,12 @@ class PortReader(threading.Thread):
                 awaiting, t_empty = False, time.monotonic()
                 continue
             now = time.monotonic()
-            good = []
+            good: list[tuple[float, Any, float]] = []
             if chunk:
-                buf += chunk
-                *lines, rest = buf.split(b"\n")
-                buf = bytearray(rest)
-                if len(buf) > MAX_LINE:
-                    self._emit("fault", cfg.name, "garbled", f"{len(buf)} bytes without a line end")
-                    buf.clear()
                 # the lines arrived after the input was last seen empty (and after the request)
                 since = max(t_asked, t_empty) if awaiting else t_empty
-                t, u = (now + since) / 2, (now - since) / 2
-                for line in lines:
-                    if not line.strip():
-                        continue
-                    awaiting = False
-                    try:
-                        good.append((t, cfg.parse(bytes(line)), u))
-                    except LineError as exc:
-                        self._emit("fault", cfg.name, exc.kind, exc.reason)
+                good, answered = self._lines(buf, chunk, now, since)
+                awaiting = awaiting and not answered
             if drained:  # what the next read returns arrived after this
                 t_empty = now
             if good:
@@ -250,7 +237,45 @@ class PortReader(threading.Thread):
             if now - last_good > cfg.give_up:
                 self._emit("gone", cfg.name, "", f"no good line for {cfg.give_up:g} s")
                 break
+        else:  # stopped: the lines that had arrived are taken, not dropped
+            try:
+                chunk = self.port.read(self.port.in_waiting) if self.port.in_waiting else b""
+            except errors:
+                chunk = b""
+            if chunk:
+                now = time.monotonic()
+                good, _ = self._lines(buf, chunk, now,
+                                      max(t_asked, t_empty) if awaiting else t_empty)
+                if good:
+                    self.out.put(("data", cfg.name, cfg.kind, good))
         self._close()
+
+    def _lines(self, buf: bytearray, chunk: bytes, now: float,
+               since: float) -> tuple[list[tuple[float, Any, float]], bool]:
+        """Add ``chunk`` to ``buf`` and take the complete lines out of it.
+
+        Returns the good lines as ``(t, value, u)``, arrived between ``since`` and ``now``
+        (host monotonic time, s), and whether any line (good or not) came. A garbled line and a
+        rest longer than :data:`MAX_LINE` without a line end are reported as faults.
+        """
+        cfg = self.config
+        buf += chunk
+        *lines, rest = buf.split(b"\n")
+        buf[:] = rest
+        if len(buf) > MAX_LINE:
+            self._emit("fault", cfg.name, "garbled", f"{len(buf)} bytes without a line end")
+            buf.clear()
+        t, u = (now + since) / 2, (now - since) / 2
+        good, answered = [], False
+        for line in lines:
+            if not line.strip():
+                continue
+            answered = True
+            try:
+                good.append((t, cfg.parse(bytes(line)), u))
+            except LineError as exc:
+                self._emit("fault", cfg.name, exc.kind, exc.reason)
+        return good, answered
 
     def _close(self) -> None:
         try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import errno
 import os
+import signal
 import sys
 import threading
 from collections.abc import Iterable, Iterator
@@ -160,28 +161,62 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
         return
     check_output(target, force, inputs, folder)  # a file on the way: before creating folders
     created = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]
-    with named_os_error(target, lock.parent):  # a read-only folder: named by the output
-        lock.parent.mkdir(parents=True, exist_ok=True)
-        fd = _lock(lock, target)
-    _HELD[key] = 1
+    fd = -1
     try:
+        with _interrupts_deferred():  # a Ctrl-C now arrives inside this try: no lock file left
+            with named_os_error(target, lock.parent):  # a read-only folder: named by the output
+                lock.parent.mkdir(parents=True, exist_ok=True)
+                fd = _lock(lock, target)
+            _HELD[key] = 1
         check_output(target, force, inputs, folder)  # what the lock's holder may have written
         yield target
     finally:
-        del _HELD[key]
-        if sys.platform == "win32":  # an open file cannot be removed there
-            os.close(fd)
+        if fd >= 0:
+            _release(lock, fd, key, created, target)
+
+
+@contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) back while inside; it is raised again on leaving.
+
+    A KeyboardInterrupt between a lock file's creation and the ``try`` that removes it would leave
+    the file behind. Python runs signal handlers in the main thread only, so only there is
+    anything held back: the handler is swapped for one that notes the signal, and on leaving the
+    one before is restored and the noted signal raised again (then handled as it would have been).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    noted: list[int] = []
+    before = signal.getsignal(signal.SIGINT)
+    if before is None:  # a handler not set from Python: it could not be restored
+        yield
+        return
+    try:
+        signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+        if noted:
+            signal.raise_signal(signal.SIGINT)
+
+
+def _release(lock: Path, fd: int, key: tuple[str, int], created: list[Path], target: Path) -> None:
+    """Give up a claim: forget it, remove its lock file and the folders made for it if empty."""
+    _HELD.pop(key, None)
+    if sys.platform == "win32":  # an open file cannot be removed there
+        os.close(fd)
+    try:
+        lock.unlink()  # while locked (POSIX): a run waiting on it takes a new one
+    except OSError:
+        pass
+    if sys.platform != "win32":
+        os.close(fd)
+    for made in created if not target.exists() else []:  # nothing written: no empty folders
         try:
-            lock.unlink()  # while locked (POSIX): a run waiting on it takes a new one
+            made.rmdir()
         except OSError:
-            pass
-        if sys.platform != "win32":
-            os.close(fd)
-        for made in created if not target.exists() else []:  # nothing written: no empty folders
-            try:
-                made.rmdir()
-            except OSError:
-                break
+            break
 
 
 def _busy(target: Path, holder: str) -> OutputExistsError:
