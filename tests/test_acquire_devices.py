@@ -50,19 +50,33 @@ def fakes(tmp_path_factory):
         log = (folder / f"fake{location}.log").open("w")
         procs.append(subprocess.Popen(
             [*CLI, "fake-devices", "--location", str(location), "--gauge-format", fmt,
-             "--effects", "dh,rtest", "--rate-hz", "500", "--dwell-s", "0.1", "--seconds", "40",
+             "--effects", "dh,rtest", "--rate-hz", "500", "--dwell-s", "0.1", "--seconds", "300",
              "--json", str(path),
              *FAULTS], stdout=log, stderr=subprocess.STDOUT, env=ENV, cwd=ROOT))
         paths.append(path)
     deadline = time.monotonic() + 30
     while not all(p.exists() for p in paths) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert all(p.exists() for p in paths), "fake-devices did not start"
+    started = all(p.exists() for p in paths)
+    for proc in procs if not started else []:
+        proc.kill()
+        proc.wait()
+    assert started, "fake-devices did not start"
     yield {k + 1: json.loads(p.read_text()) for k, p in enumerate(paths)}
+    # they run until ended here, whatever the load (300 s: for a test process that dies first)
+    early = [proc.poll() for proc in procs]
     for proc in procs:
         proc.send_signal(signal.SIGTERM)
-    for proc, location in zip(procs, (1, 2)):
-        assert proc.wait(timeout=10) == 0
+    try:
+        codes = [proc.wait(timeout=10) for proc in procs]
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert early == [None, None], f"fake-devices ended before the module's tests: {early}"
+    assert codes == [0, 0]
+    for location in (1, 2):
         injected = json.loads((folder / f"fake{location}.json").read_text())["injected"]
         assert all(v > 0 for v in injected.values()), injected
 

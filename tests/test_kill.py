@@ -36,8 +36,9 @@ def _start(*args: str, cwd: Path) -> subprocess.Popen[bytes]:
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
 
-def _kill_after(proc: subprocess.Popen[bytes], delay: float) -> int | None:
-    """Kill ``proc`` with SIGKILL after ``delay`` s unless it ended; return its exit code then."""
+def _kill_after(proc: subprocess.Popen[bytes], delay: float | None) -> int | None:
+    """Kill ``proc`` with SIGKILL after ``delay`` s (None: never) unless it ended; return its exit
+    code then."""
     try:
         return proc.wait(timeout=delay)
     except subprocess.TimeoutExpired:
@@ -83,38 +84,50 @@ def _timed(args: list[str], cwd: Path) -> float:
 
 def _kill_over(old: Path, what: str, work: Path, name: str, command: Callable[[Path], list[str]],
                full: float, seed: int, n: int, check_new: Callable[[Path], None],
-               codes: tuple[int | None, ...]) -> list[str]:
+               codes: tuple[int | None, ...], ends: bool = False) -> list[str]:
     """Kill ``aacmm-pin command(out)`` n times at a random moment, over a copy of ``old`` (70 %)
     or into no folder; return each outcome ("old", "new" or "none"), never a mix.
 
     ``full`` is the uninterrupted run's time; ``check_new`` asserts that ``out`` is the new output,
-    whole; ``codes`` are the exit statuses a run that was not killed may have.
+    whole; ``codes`` are the exit statuses a run that was not killed may have. ``ends``: first two
+    runs over ``old`` whose outcome does not depend on how fast the probe ran, one killed at once
+    (must leave "old") and one not killed (must give "new"); then the n random ones.
     """
     rng = np.random.default_rng(seed)
     outcomes = []
-    for i in range(n):
+
+    def one(i: int, existed: bool, delay: float | None) -> str:
         parent = work / f"{name}{i}"
         parent.mkdir()
         out = parent / name
-        existed = rng.random() < 0.7
         if existed:
             subprocess.run(["cp", "-a", str(old), str(out)], check=True)
-        code = _kill_after(_start(*command(out), cwd=parent), _delay(rng, full))
+        code = _kill_after(_start(*command(out), cwd=parent), delay)
         assert _visible(parent) <= {name}, f"stray output beside {out}: {_visible(parent)}"
         if not out.exists():
             assert not existed, f"kill #{i}: the old {what} is gone"
-            outcomes.append("none")
+            outcome = "none"
         elif existed and _same_tree(out, old):
-            outcomes.append("old")
+            outcome = "old"
         else:  # the new one, whole
             check_new(out)
-            outcomes.append("new")
+            outcome = "new"
         assert code in codes
+        return outcome
+
+    if ends:
+        assert one(n, True, 0.0) == "old", f"killed at once, the old {what} changed"
+        assert one(n + 1, True, None) == "new", f"not killed, the old {what} stayed"
+        outcomes += ["old", "new"]
+    for i in range(n):
+        existed = rng.random() < 0.7
+        outcomes.append(one(i, existed, _delay(rng, full)))
     return outcomes
 
 
-def kill_identify(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
-    """Kill ``identify --force`` over an old calibration (and into no folder) n times."""
+def kill_identify(campaign: Path, work: Path, seed: int, n: int, ends: bool = False) -> list[str]:
+    """Kill ``identify --force`` over an old calibration (and into no folder) n times (``ends``:
+    see :func:`_kill_over`)."""
     args = ["identify", str(campaign), "--model", "proposed", "--force"]
 
     def new_calibration(out: Path) -> None:
@@ -126,11 +139,12 @@ def kill_identify(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
     return _kill_over(campaign.parent / "old_cal", "calibration", work, "cal",
                       lambda out: [*args, "--out", str(out)],
                       _timed([*args, "--out", str(work / "probe")], work), seed, n,
-                      new_calibration, (None, 0, 1))
+                      new_calibration, (None, 0, 1), ends)
 
 
-def kill_simulate(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
-    """Kill ``simulate --force`` over an old campaign (and into no folder) n times."""
+def kill_simulate(campaign: Path, work: Path, seed: int, n: int, ends: bool = False) -> list[str]:
+    """Kill ``simulate --force`` over an old campaign (and into no folder) n times (``ends``: see
+    :func:`_kill_over`)."""
     args = ["simulate", "--samples-per-location", "30", "--samples-per-socket", "5", "--seed",
             "7", "--force"]
 
@@ -141,7 +155,7 @@ def kill_simulate(campaign: Path, work: Path, seed: int, n: int) -> list[str]:
 
     return _kill_over(campaign, "campaign", work, "camp", lambda out: [*args, str(out)],
                       _timed([*args, str(work / "probe_sim")], work), seed, n, new_campaign,
-                      (None, 0))
+                      (None, 0), ends)
 
 
 @pytest.fixture(scope="module")
@@ -218,10 +232,10 @@ def test_kill_simulate(campaign: Path, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_kill_many(campaign: Path, tmp_path: Path) -> None:
-    outcomes = kill_identify(campaign, tmp_path, seed=1, n=25)
-    outcomes += kill_simulate(campaign, tmp_path, seed=1, n=25)
+    outcomes = kill_identify(campaign, tmp_path, seed=1, n=25, ends=True)
+    outcomes += kill_simulate(campaign, tmp_path, seed=1, n=25, ends=True)
     print({k: outcomes.count(k) for k in set(outcomes)})
-    assert {"old", "new"} <= set(outcomes)  # both ends were hit
+    assert {"old", "new"} <= set(outcomes)  # both ends were hit (whatever the probe's time)
 
 
 @pytest.mark.slow

@@ -60,47 +60,69 @@ def test_a_reader_that_leaves_early_gets_no_traceback():
     assert "Traceback" not in err and "BrokenPipe" not in err, err
 
 
-def test_heartbeat_speaks_after_a_silence_and_gives_the_streams_back(monkeypatch, capsys):
-    """A silent stretch longer than HEARTBEAT_S gets a "still working" line with the phase; a
-    line left open on stderr is ended first."""
-    import sys
+def _read_until(capsys, beat, done, timeout_s: float = 10.0) -> tuple[str, str]:
+    """What the test has printed (stdout, stderr), read under ``beat``'s lock every 20 ms until
+    ``done(err)`` holds or ``timeout_s`` has passed (a loaded machine may stall a thread ~0.5 s)."""
     import time
+
+    out = err = ""
+    deadline = time.monotonic() + timeout_s
+    while not done(err) and time.monotonic() < deadline:
+        time.sleep(0.02)
+        with beat.lock:  # not in the middle of a heartbeat's line
+            captured = capsys.readouterr()
+        out, err = out + captured.out, err + captured.err
+    return out, err
+
+
+def test_heartbeat_speaks_after_a_silence_and_gives_the_streams_back(monkeypatch, capsys):
+    """A silent stretch longer than HEARTBEAT_S gets a "still working" line with the phase, and
+    another after each further HEARTBEAT_S; a line left open on stderr is ended first."""
+    import sys
 
     from aacmm_pin.progress import Heartbeat, phase
 
     monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.2)
     monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.2)
     before = sys.stdout, sys.stderr
-    with Heartbeat("aacmm-pin demo"):
+    with Heartbeat("aacmm-pin demo") as beat:
         print("table", flush=True)
         print("reading ...", end="", file=sys.stderr)  # an open line
         phase("writing figures")
-        time.sleep(0.7)
+        out, err = _read_until(capsys, beat, lambda err: err.count("still working") >= 2)
     assert (sys.stdout, sys.stderr) == before
     captured = capsys.readouterr()
-    assert captured.out == "table\n"
-    first, *beats = captured.err.split("\n")
-    assert first == "reading ..." and beats[-1] == "" and len(beats) >= 3, captured.err
+    out, err = out + captured.out, err + captured.err
+    assert out == "table\n"
+    first, *beats = err.split("\n")
+    assert first == "reading ..." and beats[-1] == "" and len(beats) >= 3, err
     assert all(re.fullmatch(r"aacmm-pin demo: still working, writing figures, [0-9.]+ s", b)
                for b in beats[:-1]), beats
 
 
 def test_heartbeat_is_quiet_while_the_command_talks_or_counts(monkeypatch, capsys):
     """Writes, and a Progress that counts work (its log line comes first), leave no heartbeat
-    line."""
+    line.
+
+    Each stretch lasts 1 s, longer than HEARTBEAT_S = 0.6 s (a heartbeat that missed the writes
+    or spoke before the Progress would speak in it); the writes and updates come every 0.05 s, so
+    a stall of the test's thread shorter than 0.55 s leaves no silence of HEARTBEAT_S.
+    """
     import time
 
     from aacmm_pin.progress import Heartbeat
 
-    monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.3)
-    monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.3)
+    monkeypatch.setattr(progress_module, "HEARTBEAT_S", 0.6)
+    monkeypatch.setattr(progress_module, "FIRST_BEAT_S", 0.6)
     monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.1)  # after 0.1 s of silence
     with Heartbeat("aacmm-pin plan"):
-        for _ in range(5):
+        start = time.monotonic()
+        while time.monotonic() - start < 1.0:
             print("candidate", flush=True)
             time.sleep(0.05)
+        start = time.monotonic()
         with Progress("identify", "evaluation") as bar:  # its stream: the wrapped stderr
-            for _ in range(24):
+            while time.monotonic() - start < 1.0:
                 bar.update(rms_um=2.0)
                 time.sleep(0.05)
     captured = capsys.readouterr()

@@ -17,6 +17,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from html.parser import HTMLParser
 from pathlib import Path
 from types import SimpleNamespace
@@ -255,8 +256,7 @@ def test_live_server_page_in_chromium_and_pose(folders, browser, capsys):
         page.evaluate("() => viewer.animator.pause()")
         q = np.radians([30, -20, 40, 60, -30, 45, 10])
         result.pose(q)
-        page.wait_for_timeout(300)
-        _assert_stylus_at(page, result, q)
+        _assert_stylus_at(page, result, q, wait_s=10.0)  # the pose goes over the websocket
         result.show_model("dh")
         page.wait_for_function(f"() => ({JS_NODE})('/meshcat/models/dh').visible && "
                                f"!({JS_NODE})('/meshcat/models/proposed').visible", timeout=5_000)
@@ -280,13 +280,23 @@ class _Tags(HTMLParser):
         self.external += [v for k, v in attrs if k in ("src", "href") and v and not v.startswith("data:")]
 
 
-def _assert_stylus_at(page, result, q: np.ndarray) -> None:
-    """The drawn stylus sphere sits at Pinocchio's stylus centre for readouts ``q`` (r-CS)."""
-    world, root = (np.array(m).reshape(4, 4).T for m in
-                   page.evaluate(JS_IN_MESHCAT, "/meshcat/arm/visuals/stylus_0"))
-    drawn = (np.linalg.inv(root) @ world)[:3, 3]
+def _assert_stylus_at(page, result, q: np.ndarray, wait_s: float = 0.0) -> None:
+    """The drawn stylus sphere sits at Pinocchio's stylus centre for readouts ``q`` (r-CS).
+
+    ``wait_s``: how long the page may take to get there (a pose sent to a live page arrives
+    over its websocket); the position is read every 50 ms until it matches or the time is up.
+    """
     model = result.scene.models[0]
-    np.testing.assert_allclose(drawn, predict(model.arm, model.params, q[None])[0], atol=1e-6)
+    predicted = predict(model.arm, model.params, q[None])[0]
+    deadline = time.monotonic() + wait_s
+    while True:
+        world, root = (np.array(m).reshape(4, 4).T for m in
+                       page.evaluate(JS_IN_MESHCAT, "/meshcat/arm/visuals/stylus_0"))
+        drawn = (np.linalg.inv(root) @ world)[:3, 3]
+        if np.allclose(drawn, predicted, rtol=0.0, atol=1e-6) or time.monotonic() > deadline:
+            break
+        page.wait_for_timeout(50)
+    np.testing.assert_allclose(drawn, predicted, atol=1e-6)
 
 
 def _drawn_pixels(page, hide: list[str]) -> int:
