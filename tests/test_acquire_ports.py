@@ -185,19 +185,45 @@ class HaltedWhileReading(ScriptedPort):
         return first
 
 
-def test_lines_that_arrived_before_the_halt_are_read_not_dropped() -> None:
-    """Halted with complete lines waiting in the port: every one comes out (nothing lost), the
-    incomplete rest does not."""
-    sent = [format_arm_line(k, [10.0 * k] * 6) for k in range(3)]
+def events_to_halt(port_class: type[HaltedWhileReading], pending: bytes) -> list[PortEvent]:
+    """Run an arm port's reader on ``port_class(pending, stop)`` until it halts; its events."""
     out: queue.Queue[PortEvent] = queue.Queue()
     stop = threading.Event()
-    port = HaltedWhileReading(b"".join(sent) + sent[0][:5], stop)
-    reader = PortReader(arm_port("scripted", 6), out, stop, port)
+    reader = PortReader(arm_port("scripted", 6), out, stop, port_class(pending, stop))
     reader.start()
     reader.join(timeout=5.0)
     assert not reader.is_alive()
     events = []
     while not out.empty():
         events.append(out.get_nowait())
+    return events
+
+
+def test_lines_that_arrived_before_the_halt_are_read_not_dropped() -> None:
+    """Halted with complete lines waiting in the port: every one comes out (nothing lost), the
+    incomplete rest does not."""
+    sent = [format_arm_line(k, [10.0 * k] * 6) for k in range(3)]
+    events = events_to_halt(HaltedWhileReading, b"".join(sent) + sent[0][:5])
     assert [counter for counter, _ in values(events)] == [0, 1, 2]
     assert faults(events) == []
+
+
+class LostAtHalt(HaltedWhileReading):
+    """A port that fails (unplugged) when the reader takes its last lines after the halt."""
+
+    def __init__(self, pending: bytes, stop: threading.Event):
+        super().__init__(pending, stop)
+        self.asked = 0
+
+    @property
+    def in_waiting(self) -> int:
+        self.asked += 1
+        if self.stop.is_set() and self.asked > 2:  # the final read's question
+            raise serial.SerialException("device reports readiness to read but returned no data")
+        return 0
+
+
+def test_a_port_lost_at_the_last_read_is_a_counted_fault() -> None:
+    """The port fails as the halted reader takes its waiting lines: a port_lost fault, no crash."""
+    events = events_to_halt(LostAtHalt, b"$")
+    assert faults(events) == ["port_lost"] and values(events) == []

@@ -197,6 +197,69 @@ def test_ctrl_c_as_the_lock_file_is_made_leaves_no_lock_file(tmp_path, monkeypat
     assert list(tmp_path.iterdir()) == []  # no lock file, no folder "new"
     assert signal.getsignal(signal.SIGINT) is handler
 
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
+                    reason="Python runs signal handlers in the main thread only")
+def test_a_second_ctrl_c_as_the_lock_file_is_removed_leaves_no_lock_file(tmp_path, monkeypatch):
+    """Ctrl-C pressed twice: the second lands as the claim removes its lock file, after the first
+    ended the command. Both interrupt; the lock file is gone all the same."""
+    from aacmm_pin.data import output_claim
+
+    class SecondCtrlC(type(tmp_path)):  # type: ignore[misc]
+        def unlink(self, missing_ok: bool = False) -> None:
+            os.kill(os.getpid(), signal.SIGINT)  # its handler runs at the next bytecode boundary
+            super().unlink(missing_ok)
+
+    monkeypatch.setattr(output_claim, "lock_path",
+                        lambda target: SecondCtrlC(Path(target).parent / f".{Path(target).name}.lock"))
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt) as raised, claim_output(out):
+        raise KeyboardInterrupt  # the first Ctrl-C
+    assert isinstance(raised.value.__context__, KeyboardInterrupt)  # the second, over the first
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
+                    reason="Python runs signal handlers in the main thread only")
+@pytest.mark.parametrize("disposition", [signal.SIG_IGN, signal.SIG_DFL])
+def test_a_claim_leaves_an_ignored_or_system_ctrl_c_alone(tmp_path, monkeypatch, disposition):
+    """Where SIGINT is ignored or left to the system, no Python handler is put in its place even
+    for the claim's moment (a program started then would not inherit the ignore)."""
+    from aacmm_pin.data import output_claim
+
+    made, seen = output_claim._lock, []
+
+    def lock_and_look(lock: Path, target: Path) -> int:
+        seen.append(signal.getsignal(signal.SIGINT))
+        return made(lock, target)
+
+    monkeypatch.setattr(output_claim, "_lock", lock_and_look)
+    previous = signal.signal(signal.SIGINT, disposition)
+    try:
+        with claim_output(tmp_path / "out"):
+            pass
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert seen == [disposition]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="flock is POSIX")
+def test_a_lock_file_that_cannot_be_written_names_the_output_and_leaves_nothing(tmp_path,
+                                                                               monkeypatch):
+    """The lock file is made and locked but cannot be written (an I/O error): the error names the
+    output and no lock file stays behind."""
+    from aacmm_pin.data import output_claim
+
+    def failing(fd: int, length: int) -> None:
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(output_claim.os, "ftruncate", failing)  # called by the claim alone
+    out = tmp_path / "out"
+    with pytest.raises(OSError, match="Input/output error") as raised, claim_output(out):
+        pass
+    assert raised.value.filename == str(out)
+    assert list(tmp_path.iterdir()) == []
+
 SLOW = """
 import sys
 import aacmm_pin.data.campaign as campaign

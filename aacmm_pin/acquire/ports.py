@@ -240,7 +240,8 @@ class PortReader(threading.Thread):
         else:  # stopped: the lines that had arrived are taken, not dropped
             try:
                 chunk = self.port.read(self.port.in_waiting) if self.port.in_waiting else b""
-            except errors:
+            except errors as exc:
+                self._emit("fault", cfg.name, "port_lost", str(exc))
                 chunk = b""
             if chunk:
                 now = time.monotonic()
