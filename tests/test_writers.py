@@ -173,7 +173,6 @@ def test_a_claim_is_exclusive_across_threads(tmp_path):
     assert list(tmp_path.iterdir()) == []  # the lock file is gone
 
 
-
 @pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
                     reason="Python runs signal handlers in the main thread only")
 def test_ctrl_c_as_the_lock_file_is_made_leaves_no_lock_file(tmp_path, monkeypatch):
@@ -259,6 +258,7 @@ def test_a_lock_file_that_cannot_be_written_names_the_output_and_leaves_nothing(
         pass
     assert raised.value.filename == str(out)
     assert list(tmp_path.iterdir()) == []
+
 
 SLOW = """
 import sys
