@@ -17,6 +17,8 @@ silenced in-process: a command's output is then the same on a busy machine as on
 from __future__ import annotations
 
 import os
+import signal
+from collections.abc import Iterator
 
 import pytest
 
@@ -109,3 +111,13 @@ def sim_400(arm: ap.Arm) -> ap.Simulation:
 def cal_400(arm: ap.Arm, sim_400: ap.Simulation) -> ap.Calibration:
     """The proposed model identified on :func:`sim_400`."""
     return ap.identify(sim_400.campaign, arm)
+
+
+@pytest.fixture
+def sigint_as_from_a_terminal() -> Iterator[None]:
+    """SIGINT raises KeyboardInterrupt in this process and in the commands it starts, as when the
+    tests run from a terminal: a shell's background job (and every process it starts) inherits
+    SIGINT ignored, and a command keeps that ignore."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)

@@ -21,6 +21,8 @@ import pytest
 import aacmm_pin as ap
 
 ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.usefixtures("sigint_as_from_a_terminal")
+
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
 
 
@@ -79,3 +81,17 @@ def test_ctrl_c_turned_into_another_error_is_still_an_interrupt(monkeypatch, cap
     monkeypatch.setattr(cli, "_run", plain_error)
     with pytest.raises(ImportError, match="a real one"):
         cli.main(["axes"])
+
+
+def test_an_ignored_ctrl_c_stays_ignored(monkeypatch) -> None:
+    """A command started with SIGINT ignored (a script's background job) keeps it ignored: the
+    CLI puts no handler of its own in its place."""
+    from aacmm_pin import cli
+
+    seen = []
+    monkeypatch.setattr(cli, "_run", lambda args, name, beat: seen.append(
+        signal.getsignal(signal.SIGINT)) or 0)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    assert cli.main(["axes"]) == 0
+    assert seen == [signal.SIG_IGN]
+    assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN

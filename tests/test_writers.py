@@ -175,6 +175,7 @@ def test_a_claim_is_exclusive_across_threads(tmp_path):
 
 @pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
                     reason="Python runs signal handlers in the main thread only")
+@pytest.mark.usefixtures("sigint_as_from_a_terminal")
 def test_ctrl_c_as_the_lock_file_is_made_leaves_no_lock_file(tmp_path, monkeypatch):
     """A Ctrl-C that lands just after the lock file's creation (before the claim holds it) still
     interrupts, once the claim can clean up: no lock file and no folder made for it remain.
@@ -199,6 +200,7 @@ def test_ctrl_c_as_the_lock_file_is_made_leaves_no_lock_file(tmp_path, monkeypat
 
 @pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
                     reason="Python runs signal handlers in the main thread only")
+@pytest.mark.usefixtures("sigint_as_from_a_terminal")
 def test_a_second_ctrl_c_as_the_lock_file_is_removed_leaves_no_lock_file(tmp_path, monkeypatch):
     """Ctrl-C pressed twice: the second lands as the claim removes its lock file, after the first
     ended the command. Both interrupt; the lock file is gone all the same."""

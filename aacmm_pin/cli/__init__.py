@@ -20,7 +20,6 @@ import contextlib
 import os
 import signal
 import sys
-import threading
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
@@ -28,6 +27,7 @@ from typing import Any
 from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
 from aacmm_pin.errors import AacmmError, CampaignWarning
+from aacmm_pin.interrupts import sigint_handler
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
 
@@ -106,27 +106,21 @@ INTERRUPTED = 128 + 2
 def sigint_noted() -> Iterator[list[bool]]:
     """Within: Ctrl-C raises ``KeyboardInterrupt`` and is noted in the yielded one-element list.
 
-    SIGINT is handled as Python's default handler does, plus the note (in the main thread;
-    elsewhere nothing changes).
+    SIGINT is handled as Python's default handler does, plus the note, where Python's handler
+    would raise (:func:`~aacmm_pin.interrupts.sigint_handler`; an ignored SIGINT stays ignored).
 
     An interrupt that lands inside an import of a C extension can surface as another error
     (numpy turns it into an ``ImportError`` about a bad install); the note tells the caller it
     was Ctrl-C.
     """
     noted = [False]
-    if threading.current_thread() is not threading.main_thread():
-        yield noted
-        return
 
     def on_sigint(signum: int, frame: Any) -> None:
         noted[0] = True
         signal.default_int_handler(signum, frame)
 
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    try:
+    with sigint_handler(on_sigint):
         yield noted
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 QUIET_COMMANDS = ("acquire", "fake-devices")

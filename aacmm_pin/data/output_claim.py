@@ -12,16 +12,14 @@ from __future__ import annotations
 
 import errno
 import os
-import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from types import FrameType
-from typing import Any
 
 from aacmm_pin.errors import AacmmError
+from aacmm_pin.interrupts import interrupts_deferred
 
 if sys.platform != "win32":
     import fcntl
@@ -165,7 +163,7 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
     created = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]
     fd = -1
     try:
-        with _interrupts_deferred():  # a Ctrl-C now arrives inside this try: no lock file left
+        with interrupts_deferred():  # a Ctrl-C now arrives inside this try: no lock file left
             with named_os_error(target, lock.parent):  # a read-only folder: named by the output
                 lock.parent.mkdir(parents=True, exist_ok=True)
                 fd = _lock(lock, target)
@@ -174,55 +172,8 @@ def claim_output(target: str | Path, force: bool = False, inputs: Iterable[str |
         yield target
     finally:
         if fd >= 0:
-            with _interrupts_deferred():  # a second Ctrl-C: after the lock file is gone
+            with interrupts_deferred():  # a second Ctrl-C: after the lock file is gone
                 _release(lock, fd, key, created, target)
-
-
-@contextmanager
-def _interrupts_deferred() -> Iterator[None]:
-    """Hold a Ctrl-C (SIGINT) back while inside; it is raised again on leaving.
-
-    A KeyboardInterrupt between a lock file's creation and the ``try`` that removes it, or inside
-    the removal, would leave the file behind. Python runs signal handlers in the main thread only,
-    so only there is anything held back, and only where a Python handler would raise (not where
-    SIGINT is ignored or left to the system): the handler is swapped for one that notes the
-    signal; on leaving, the one before is restored and the noted signal raised again (then handled
-    as it would have been).
-    """
-    on_main = threading.current_thread() is threading.main_thread()
-    before = signal.getsignal(signal.SIGINT) if on_main else None
-    noted: list[int] = []
-    try:
-        if callable(before):
-            signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
-        else:  # another thread, SIG_IGN, SIG_DFL or a handler not set from Python
-            before = None
-    except ValueError:  # a subinterpreter's main thread: signals belong to the main interpreter
-        before = None
-    try:
-        yield
-    finally:
-        if before is not None:
-            _restore_sigint(before)
-            if noted:
-                signal.raise_signal(signal.SIGINT)
-
-
-def _restore_sigint(handler: Callable[[int, FrameType | None], Any]) -> None:
-    """Set ``handler`` for SIGINT, then raise what a pending signal's handler raised meanwhile.
-
-    Python runs pending handlers before it sets one: one that raises (e.g. a SIGTERM handler's
-    SystemExit) would otherwise leave the noting handler in place, and Ctrl-C unheard.
-    """
-    error: BaseException | None = None
-    while True:
-        try:
-            signal.signal(signal.SIGINT, handler)
-            break
-        except BaseException as exc:  # noqa: BLE001 - re-raised once the handler is back
-            error = error or exc
-    if error is not None:
-        raise error
 
 
 def _release(lock: Path, fd: int, key: tuple[str, int], created: list[Path], target: Path) -> None:
