@@ -72,5 +72,12 @@ class FrameNotFound(AacmmError):
         super().__init__(f"'{name}' is not in the arm; choose from: {', '.join(self.choices)}")
 
 
+class ArgumentError(AacmmError, ValueError):
+    """A value given to a function is unfit: wrong shape, not finite, or in the wrong unit.
+
+    Its message is one line naming the argument (a ``ValueError`` too, as scipy's are).
+    """
+
+
 class CampaignWarning(UserWarning):
     """A campaign is read, but something in it deserves the user's eye (e.g. copied rows)."""

@@ -557,6 +557,14 @@ class Arm:
         return build_model(tree)
 
     @cached_property
+    def nominal_model(self) -> pin.Model:
+        """The runtime model at the URDF's own values (:meth:`runtime_model`), built once.
+
+        Shared, read only (e.g. the gravity torques of :class:`~aacmm_pin.model.samples.Samples`).
+        """
+        return self.runtime_model()
+
+    @cached_property
     def identification(self) -> IdentificationModel:
         """The identification model (built once)."""
         return IdentificationModel(self)
