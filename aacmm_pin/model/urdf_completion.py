@@ -28,6 +28,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from aacmm_pin.errors import ArmModelError
 from aacmm_pin.model.urdf_tree import Joint, UrdfTree
 
@@ -59,16 +61,20 @@ class Completion:
         """Return one line saying what was added to the URDF ``source``, None when nothing was."""
         parts = []
         if self.error_frames:
-            per = len(self.error_frames) // max(len(self.axes), 1)
+            counts = {a: sum(1 for n in self.error_frames
+                             if re.fullmatch(rf"[a-z]+{k}", n)) for k, a in enumerate(self.axes, 1)}
             names = (" ... ".join((self.axes[0], self.axes[-1])) if len(self.axes) > 1
                      else self.axes[0])
+            most = max(counts.values())
+            fewer = [f"{c or 'none'} before {a}" for a, c in counts.items() if c != most]
+            where = (f"the complete set of its {len(self.axes)} axes ({names}): {most} before "
+                     f"each" + (f", {', '.join(fewer)} (other parameters move the arm alike)"
+                                if fewer else ""))
             parts.append(f"{Path(source).name} has no error frames: added "
-                         f"{len(self.error_frames)}, {per} before each of its {len(self.axes)} "
-                         f"axes ({names})")
+                         f"{len(self.error_frames)}, {where}")
         if self.tool_frame is not None:
-            parts.append(f"tool: the point on {self.tool_frame} (joint 'tool')")
-            if not self.error_frames:
-                parts[0] = f"{Path(source).name}: {parts[0]}"
+            tool = f"tool: the point on {self.tool_frame} (joint 'tool')"
+            parts.append(tool if parts else f"{Path(source).name}: {tool}")
         return "; ".join(parts) or None
 
 
@@ -145,12 +151,76 @@ def add_tool_joint(urdf: UrdfTree, tool_frame: str | None = None) -> tuple[UrdfT
     return urdf, tool_frame
 
 
-def add_error_frames(urdf: UrdfTree, axes: list[str]) -> tuple[UrdfTree, tuple[str, ...]]:
-    """Return a copy of the URDF with six error frames before each axis (see the module doc).
+def _previous_axes(joints: list[Joint], axes: list[str]) -> dict[str, tuple[str, np.ndarray] | None]:
+    """Return axis -> (the previous axis on its chain, that axis' direction in its parent link).
+
+    None for an axis with no axis before it. The direction is a unit vector in the frame of the
+    axis' parent link (where its error frames sit), through the fixed origins on the way.
+    """
+    by_child = {j.child: j for j in joints}
+    parent_of = {j.name: j.parent for j in joints}
+    out: dict[str, tuple[str, np.ndarray] | None] = {}
+    for axis in axes:
+        link, rot, found = parent_of[axis], np.eye(3), None
+        for _ in range(len(joints)):
+            joint = by_child.get(link)
+            if joint is None:
+                break
+            if joint.name in axes:
+                found = (joint.name, rot.T @ joint.axis)
+                break
+            rot = joint.origin[:3, :3] @ rot
+            link = joint.parent
+        out[axis] = found
+    return out
+
+
+def error_frame_kinds(joints: list[Joint], axes: list[str]) -> dict[str, tuple[str, ...]]:
+    """Return axis -> the error frames (kinds of :data:`ERROR_KINDS`) a complete minimal set adds.
+
+    Six before every axis model any error of its placement; some are the same motion as another
+    parameter's, whatever the data:
+
+    * before the first axis (the only one with no axis before it), all six: the instrument frame
+      X0 (six unknowns) moves the whole arm alike;
+    * before an axis whose previous axis (the only one after it) points along a coordinate axis of
+      the parent link, the translation along and the rotation about that direction: they commute
+      with the previous joint, so the previous axis' own error frames hold them.
+
+    Every other error frame is kept (a direction the data still cannot see is held at its start
+    value by the identification).
+    """
+    previous = _previous_axes(joints, axes)
+    followers: dict[str, int] = {}
+    for entry in previous.values():
+        if entry is not None:
+            followers[entry[0]] = followers.get(entry[0], 0) + 1
+    roots = [a for a in axes if previous[a] is None]
+    out: dict[str, tuple[str, ...]] = {}
+    for axis in axes:
+        entry = previous[axis]
+        drop: set[str] = set()
+        if entry is None:
+            if len(roots) == 1:
+                drop = set(ERROR_KINDS)
+        elif followers[entry[0]] == 1:
+            direction = entry[1]
+            i = int(np.argmax(np.abs(direction)))
+            if abs(abs(direction[i]) - 1.0) < 1e-9:
+                drop = {ERROR_KINDS[i], ERROR_KINDS[3 + i]}
+        out[axis] = tuple(k for k in ERROR_KINDS if k not in drop)
+    return out
+
+
+def add_error_frames(urdf: UrdfTree, axes: list[str], minimal: bool = True
+                     ) -> tuple[UrdfTree, tuple[str, ...]]:
+    """Return a copy of the URDF with error frames before each axis (see the module doc).
 
     Args:
         urdf: the URDF (with its tool joint), not edited.
         axes: the axes' joint names in axis order (:attr:`aacmm_pin.model.arm.Arm.axis_names`).
+        minimal: leave out the error frames that are another parameter's motion whatever the data
+            (:func:`error_frame_kinds`); False: six before every axis.
 
     Returns:
         The completed URDF and the added error frames' names, chain order.
@@ -158,17 +228,20 @@ def add_error_frames(urdf: UrdfTree, axes: list[str]) -> tuple[UrdfTree, tuple[s
     Raises:
         ArmModelError: one line naming the file, if an added name is taken by a joint or link.
     """
-    names = [f"{kind}{k}" for k in range(1, len(axes) + 1) for kind in ERROR_KINDS]
     joints = urdf.joints()
+    kinds = (error_frame_kinds(joints, axes) if minimal
+             else dict.fromkeys(axes, ERROR_KINDS))
+    names = [f"{kind}{k}" for k, axis in enumerate(axes, start=1) for kind in kinds[axis]]
     _check_free(urdf, joints, names, [n + FRAME_SUFFIX for n in names],
                 "cannot add the error frames")
     parent_of = {j.name: j.parent for j in joints}
     urdf = urdf.copy()
     for k, axis in enumerate(axes, start=1):
         parent = parent_of[axis]
-        for kind in ERROR_KINDS:
+        for kind in kinds[axis]:
             name = f"{kind}{k}"
             urdf.insert_fixed(name, parent, name + FRAME_SUFFIX, before=axis)
             parent = name + FRAME_SUFFIX
-        urdf.set_parent(axis, parent)
+        if parent != parent_of[axis]:
+            urdf.set_parent(axis, parent)
     return urdf, tuple(names)
