@@ -23,6 +23,9 @@ does too):
   holds one elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
   Error frames are the ones on the tools' chains, in the same depth-first order as the axes.
 * Every other fixed joint is nominal geometry (e.g. ``L2z``).
+* **A robot's own URDF** (ROS-style: ``tool0``, no error frames) is completed in memory by
+  :func:`load_arm`: a ``tool`` joint on the tool frame named by ``tool_frame`` (default ``tool0``)
+  and error frames before the axes (:mod:`aacmm_pin.model.urdf_completion`).
 * **Coupled joints.** An axis whose angle follows others' (a passive joint, no encoder) is stated
   by a URDF ``<mimic joint multiplier offset>`` or, for a sum of several joints, by the
   ``couplings`` block of the arm's sizes file (:mod:`aacmm_pin.data.couplings`): it keeps its axis
