@@ -146,3 +146,13 @@ def test_axes_writes_the_error_frames_and_the_file_needs_no_option(tmp_path, cap
     assert links < new_links and joints < new_joints
     meshes = [e.get("filename") for e in etree.parse(str(out)).iter("mesh")]
     assert meshes and all(m.startswith("package://example-robot-data/") for m in meshes)
+
+
+def test_cli_tool_frame_is_passed_and_a_wrong_one_refused_in_one_line(capsys):
+    """``--tool-frame`` reaches the arm (``axes`` lists the point on ee_link); an unknown link is
+    one error line naming the file, exit status 2."""
+    assert main(["axes", str(ROS_UR5), "--tool-frame", "ee_link"]) == 0
+    assert "link ee_link_point" in capsys.readouterr().out
+    assert main(["axes", str(ROS_UR5), "--tool-frame", "nope"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if "still working" not in line]
+    assert len(err) == 1 and "ur5_robot.urdf" in err[0] and "'nope' is no link" in err[0]
