@@ -91,8 +91,7 @@ def test_the_minimal_set_is_as_complete_as_six_per_axis():
     full = Arm(add_error_frames(urdf, bare.axis_names, minimal=False)[0], ROS_UR5, "full")
     minimal = load_arm(ROS_UR5)
     assert len(full.error_names) == 36 and len(minimal.error_names) == 20
-    assert _rank(minimal) == _rank(full) == 25  # Everett et al.: 4R + 6 - 3 + 3 (a point), - 2:
-    # the wrist's two last parallel-free axes and the point leave two further directions unseen
+    assert _rank(minimal) == _rank(full) == 25  # identify's "25 parameters determined" on both
 
 
 def test_pickled_arm_reloads_with_its_tool_frame_and_sizes(tmp_path):
