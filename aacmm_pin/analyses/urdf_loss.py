@@ -151,7 +151,7 @@ def loss_line(report: dict[str, Any] | None, sidecar: str) -> str | None:
     if not isinstance(entry, dict):
         return None
     if entry.get("rms") == 0 and entry.get("max") == 0:
-        return f"the URDF holds the whole calibration ({entry.get('why')})"
+        return str(entry.get("why"))  # the URDF holds the whole calibration
     return (f"the URDF alone is {entry.get('rms'):.3g} um RMS / {entry.get('max'):.3g} um max from "
             f"the full calibration over {entry.get('n_poses')} poses: {entry.get('why')}; "
             f"{sidecar} holds all of it")
