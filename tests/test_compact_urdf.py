@@ -138,7 +138,7 @@ def test_an_error_link_with_inertia_and_visuals_hands_them_to_its_parent(tmp_pat
     assert np.abs(xyz - [0.2 * c, 0.2 * s, 0]).max() < 1e-15  # Rz(0.3) (0.2, 0, 0)
 
 
-@pytest.mark.parametrize("name", ["aacmm7", "ur5"])
+@pytest.mark.parametrize("name", ["aacmm7", "ur5", "torso"])
 def test_compact_parameters_predict_as_the_full_ones(name: str, tmp_path: Path) -> None:
     """The compact URDF with its parameters (maps, compliance, no DH) predicts as the full URDF.
 
@@ -151,7 +151,8 @@ def test_compact_parameters_predict_as_the_full_ones(name: str, tmp_path: Path) 
     nominal = ap.Parameters.nominal(arm)
     maps = {a: EncoderMap(rng.normal(0, 1e-4, nominal.map(a).nodes.size), nominal.step_deg)
             for a in range(1, arm.n_axes + 1)}
-    params = nominal.replace(dh=dh, tool=tools[arm.tool_joints[0]], encoder_maps=maps,
+    vectors = {"tools": tools} if arm.n_tools > 1 else {"tool": tools[arm.tool_joints[0]]}
+    params = nominal.replace(dh=dh, encoder_maps=maps, **vectors,
                              extensions={compliance(2).key: np.array([2e-5])})
     tree = arm.urdf_tree(dh, tools=tools)
     compact = compact_urdf(tree)
@@ -160,8 +161,9 @@ def test_compact_parameters_predict_as_the_full_ones(name: str, tmp_path: Path) 
     full, small = ap.load_arm(tmp_path / "full.urdf"), ap.load_arm(tmp_path / "compact.urdf")
     assert small.error_frames == [] and small.axis_names == arm.axis_names
     q = rng.uniform(-np.pi, np.pi, (40, arm.n_axes))
-    assert np.abs(ap.predict(small, compact_parameters(params, arm, compact), q)
-                  - ap.predict(full, params, q)).max() < 1e-9
+    for tool in range(arm.n_tools):
+        assert np.abs(ap.predict(small, compact_parameters(params, arm, compact), q, tool=tool)
+                      - ap.predict(full, params, q, tool=tool)).max() < 1e-9
 
 
 @pytest.fixture(scope="module")
