@@ -16,9 +16,9 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-import pinocchio as pin
 
 from aacmm_pin.effects.calibrated import predict
+from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm, build_model
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
@@ -83,8 +83,9 @@ def _missing(arm: Arm, params: Parameters) -> tuple[str, ...]:
 def urdf_positions(arm: Arm, urdf: UrdfTree, q: np.ndarray) -> np.ndarray:
     """Return every tool's position with the URDF alone: readouts as joint angles, no corrections.
 
-    Pinocchio's forward kinematics of the URDF, one sample at a time; movable joints on no tool's
-    chain at zero, a coupled axis at its coupling of the readouts (a URDF ``<mimic>``).
+    Forward kinematics of Pinocchio's model of the URDF (evaluated for all samples at once,
+    :class:`~aacmm_pin.model._chain.BatchedChain`); movable joints on no tool's chain at zero, a
+    coupled axis at its coupling of the readouts (a URDF ``<mimic>``). The axes are found by name.
 
     Args:
         arm: the arm (its axes, tools and couplings; the URDF has its joint and link names).
@@ -98,18 +99,13 @@ def urdf_positions(arm: Arm, urdf: UrdfTree, q: np.ndarray) -> np.ndarray:
     for name in arm.off_chain:
         tree.make_fixed(name)
     model = build_model(tree)
-    data = model.createData()
     idx = [model.joints[model.getJointId(name)].idx_q for name in arm.axis_names]
-    frames = [model.getFrameId(link) for link in arm.tool_links]
     angles = arm.joint_angles(np.atleast_2d(q))
-    out = np.empty((len(frames), len(angles), 3))
-    config = pin.neutral(model)
-    for i, row in enumerate(angles):
-        config[idx] = row
-        pin.forwardKinematics(model, data, config)
-        for k, fid in enumerate(frames):
-            out[k, i] = pin.updateFramePlacement(model, data, fid).translation
-    return out
+    config = np.zeros((len(angles), model.nq))
+    config[:, idx] = angles
+    chain = BatchedChain(model)
+    return np.stack([chain.positions(config, np.full(len(angles), model.getFrameId(link)))
+                     for link in arm.tool_links])
 
 
 def urdf_alone_loss(arm: Arm, params: Parameters, urdf: UrdfTree, poses: Sequence[Samples]
