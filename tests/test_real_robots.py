@@ -30,6 +30,17 @@ def test_ur5_discovered_model_on_the_random_poses(tmp_path, monkeypatch):
     dh, found = rows[1], rows[-1]
     assert dh.model == "DH" and found.model.startswith("+ ")
     assert found.test_mm <= UR5_DISCOVERED_MM < dh.test_mm
+    # the exported calibration (maps and extension terms) through the runtime object, which reads
+    # compact.urdf and compact.json, reproduces predict of the full calibration to 1e-9 m
+    import aacmm_pin as ap
+
+    folder = ap.read_calibration(tmp_path / "ur5_discovered")
+    assert folder.parameters.encoder_maps and folder.parameters.extensions
+    q = ap.read_campaign(tmp_path / "ur5_random").points.q
+    reference = ap.predict(ap.load_arm(folder.parameters.arm), folder.parameters, q)
+    runtime = ap.load_calibrated(tmp_path / "ur5_discovered")
+    assert not runtime.arm.error_frames
+    assert abs(runtime.position(q) - reference).max() < 1e-9
 
 
 ROS_UR5 = SHARED / "robots" / "ur5-ros-industrial" / "ur5_robot.urdf"

@@ -176,6 +176,7 @@ def test_calibration_folder_carries_the_arms_sizes(tmp_path):
     folder = ap.write_calibration(cal, wam, tmp_path / "cal")
     assert (folder / "calibrated.sizes.json").is_file()
     assert ap.load_arm(folder / "calibrated.urdf").sizes == wam.sizes
+    assert ap.load_arm(folder / "compact.urdf").sizes == wam.sizes  # compact.sizes.json
 
 
 def _tracker_campaign(source: Path, folder: Path) -> ap.Campaign:

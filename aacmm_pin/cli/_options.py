@@ -122,8 +122,12 @@ def arm_option(default: str | None = "aacmm7", text: str = ARM_HELP) -> argparse
     return arm_details(p)
 
 
-def load_given_arm(args: argparse.Namespace, arm: str | None = None) -> Any:
+def load_given_arm(args: argparse.Namespace, arm: str | None = None, *, error_frames: bool = True
+                   ) -> Any:
     """Load the arm ``arm`` (default ``args.arm``) with ``--tool-frame`` and ``--sizes``.
+
+    ``error_frames``: as :func:`~aacmm_pin.model.arm.load_arm`'s (False for the arm of parameters
+    without DH values: a compact URDF).
 
     Prints, in one line, what was added to the URDF in memory (a tool joint, error frames), if
     anything (:attr:`aacmm_pin.model.arm.Arm.note`). Returns the :class:`~aacmm_pin.model.arm.Arm`.
@@ -131,7 +135,7 @@ def load_given_arm(args: argparse.Namespace, arm: str | None = None) -> Any:
     from aacmm_pin.model.arm import load_arm
 
     out = load_arm(args.arm if arm is None else arm, getattr(args, "tool_frame", None),
-                   getattr(args, "sizes", None))
+                   getattr(args, "sizes", None), error_frames=error_frames)
     if out.note:
         print(out.note, flush=True)
     return out

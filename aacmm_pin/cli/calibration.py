@@ -127,7 +127,7 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
 
     folder = read_calibration(args.params)
     params = folder.parameters
-    arm = load_given_arm(args, args.arm or params.arm)
+    arm = load_given_arm(args, args.arm or params.arm, error_frames=bool(params.dh))
     folder.check(arm)
     q, columns = read_sample_columns(args.readouts, arm)
     tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
@@ -177,7 +177,8 @@ def _identify_into(args: argparse.Namespace) -> int:
                                  nests=args.nests, robust=args.robust)
     phase(f"writing {args.out}")
     write_calibration(cal, arm, args.out, force=args.force,
-                      report=None if choice is None else {"model_choice": choice.to_dict()})
+                      report=None if choice is None else {"model_choice": choice.to_dict()},
+                      campaign=campaign)
     _print_calibration(cal, args.out)
     if choice is not None and (advice := choice.advice(args.model == AUTO)):
         print(f"  {advice}")
@@ -220,6 +221,16 @@ def _print_calibration(cal: Calibration, out: Path) -> None:
         print(f"  {cal.message}")
     elif (note := cal.message.partition("; the residual is ")[2]):  # above the stated noise
         print(f"  NOTE: the residual is {note}")
+    _print_urdf_loss(out)
+
+
+def _print_urdf_loss(caldir: Path) -> None:
+    """Print how far the folder's URDF alone is from the whole calibration (its report's line)."""
+    from aacmm_pin.analyses.urdf_loss import loss_line
+    from aacmm_pin.outputs.calibration_folder import COMPACT_PARAMETERS_FILE, read_report
+
+    if line := loss_line(read_report(caldir), f"{Path(caldir) / COMPACT_PARAMETERS_FILE}"):
+        print(f"  {line}")
 
 
 def _discover(args: argparse.Namespace) -> int:
@@ -261,9 +272,10 @@ def _discover_into(args: argparse.Namespace) -> int:
     if result.scan is not None:
         print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
     sys.stdout.flush()
-    write_discovery(result, arm, args.out, force=args.force)
+    write_discovery(result, arm, args.out, force=args.force, campaign=campaign)
     print(f"wrote {args.out / 'discovery.json'}, figures and the final model (CALDIR) "
           f"in {args.out} ({result.runtime_s:.1f} s)")
+    _print_urdf_loss(args.out)
     if result.capped:  # the steps so far are written; the loop ended at a fit's cap
         print(f"discover: {result.stopped_because}", file=sys.stderr)
         return 1
@@ -321,7 +333,7 @@ def _validate_into(args: argparse.Namespace, inputs: list[Path]) -> int:
 
     cal = read_calibration(args.caldir)
     params = cal.parameters
-    arm = load_arm(params.arm)  # calibrated.urdf: its tool and error frames written out
+    arm = load_arm(params.arm, error_frames=bool(params.dh))  # calibrated.urdf: tool, error frames written
     cal.check(arm)  # exactly as predict does
     campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
@@ -373,7 +385,7 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     nodes = {a: np.degrees(cal.parameters.map(a).nodes) for a in axes}
     std = {a: mc.node_std(a, nodes[a]) for a in axes}
     with output_folder(out, args.force) as tmp:  # the folder whole, or not at all
-        write_calibration_files(cal, arm, tmp)
+        write_calibration_files(cal, arm, tmp, campaign=campaign)
         write_maps_csv(cal, tmp / "encoder_maps.csv", std=std)
         (tmp / "uncertainty.json").write_text(json.dumps(uncertainty_report(cal, mc), indent=2)
                                               + "\n")

@@ -34,7 +34,8 @@ def _load(args: argparse.Namespace) -> tuple[Any, Any]:
 
     if getattr(args, "params", None):
         folder = read_calibration(args.params)
-        arm = load_given_arm(args, args.arm or folder.parameters.arm)
+        arm = load_given_arm(args, args.arm or folder.parameters.arm,
+                             error_frames=bool(folder.parameters.dh))
         folder.check(arm)
         return arm, folder.parameters
     arm = load_given_arm(args, args.arm or "aacmm7")

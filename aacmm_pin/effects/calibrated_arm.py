@@ -444,4 +444,6 @@ def load_calibrated(path: str | Path, arm: str | Path | None = None) -> Calibrat
         compact = file / COMPACT_PARAMETERS
         file = compact if compact.is_file() else file / FULL_PARAMETERS
     params = read_parameters(file)
-    return CalibratedArm(load_arm(arm if arm is not None else params.arm), params)
+    # a compact URDF (compact.json: no DH values) is loaded as it is, without error frames
+    return CalibratedArm(load_arm(arm if arm is not None else params.arm,
+                                  error_frames=bool(params.dh)), params)

@@ -339,10 +339,14 @@ class Arm:
         self.root_link: str = joints[0].parent
         """Name of the root link (the reference CS, r-CS)."""
 
-    def __reduce__(self) -> tuple[Callable[..., Arm], tuple[str, str, str | None, str | None]]:
-        """Pickle as the URDF path, name, tool frame and sizes file (reloaded in a worker alike)."""
+    def __reduce__(self) -> tuple[Callable[..., Arm], tuple[str, str, str | None, str | None, bool]]:
+        """Pickle as the URDF path, name, tool frame, sizes file and error frames (or none).
+
+        A worker reloads the arm alike (a compact URDF without error frames added).
+        """
         return (_load_named, (str(self.source), self.name, self.completion.tool_frame,
-                              str(self.sizes_file) if self._sizes_given else None))
+                              str(self.sizes_file) if self._sizes_given else None,
+                              bool(self.error_frames)))
 
     @property
     def note(self) -> str | None:
@@ -666,7 +670,7 @@ class IdentificationModel:
 
 
 def load_arm(arm: str | Path = DEFAULT_ARM, tool_frame: str | None = None,
-             sizes: str | Path | None = None) -> Arm:
+             sizes: str | Path | None = None, *, error_frames: bool = True) -> Arm:
     """Load an arm from a URDF path or an embedded arm's name (default: ``aacmm7``).
 
     A robot's own URDF is completed in memory (:mod:`aacmm_pin.model.urdf_completion`): without a
@@ -679,6 +683,9 @@ def load_arm(arm: str | Path = DEFAULT_ARM, tool_frame: str | None = None,
             None: ``tool0``.
         sizes: the arm's sizes file (:mod:`aacmm_pin.model.sizes`); None: the one beside the URDF
             (``<urdf>.sizes.json``), else the defaults.
+        error_frames: add error frames to a URDF that has none; False loads a calibrated arm whose
+            values are folded into its joint origins (a calibration folder's ``compact.urdf``)
+            as it is.
 
     Raises:
         ArmModelError: if the file cannot be read, breaks the conventions or gives nothing to
@@ -687,26 +694,26 @@ def load_arm(arm: str | Path = DEFAULT_ARM, tool_frame: str | None = None,
     path = resolve_arm_path(arm)
     urdf, frame = add_tool_joint(read_urdf(path), tool_frame)
     out = Arm(urdf, path, str(arm), sizes=sizes, completion=Completion(frame))
-    if not out.error_frames:
+    if not out.error_frames and error_frames:
         urdf, added = add_error_frames(urdf, out.axis_names)
         out = Arm(urdf, path, str(arm), sizes=sizes,
                   completion=Completion(frame, added, tuple(out.axis_names)))
     return out
 
 
-_LOADED: dict[tuple[str, str, str | None, str | None, str], Arm] = {}
+_LOADED: dict[tuple[str, str, str | None, str | None, bool, str], Arm] = {}
 
 
 def _load_named(path: str, name: str, tool_frame: str | None = None,
-                sizes: str | None = None) -> Arm:
+                sizes: str | None = None, error_frames: bool = True) -> Arm:
     """Load (once per process) the arm of a URDF path and keep the user's name for it."""
     file = Path(sizes) if sizes is not None else sizes_file(path)
     # an edited URDF or sizes file reloads
     data = Path(path).read_bytes() + (file.read_bytes() if file is not None and file.is_file()
                                       else b"")
-    key = (path, name, tool_frame, sizes, hashlib.sha1(data).hexdigest())
+    key = (path, name, tool_frame, sizes, error_frames, hashlib.sha1(data).hexdigest())
     if key not in _LOADED:
-        arm = load_arm(path, tool_frame, sizes)
+        arm = load_arm(path, tool_frame, sizes, error_frames=error_frames)
         arm.name = name
         _LOADED[key] = arm
     return _LOADED[key]

@@ -87,8 +87,8 @@ def origin_matrix(xyz: np.ndarray, rpy: np.ndarray) -> np.ndarray:
     return out
 
 
-def _text(values: np.ndarray) -> str:
-    """Numbers as URDF attribute text, each to full double precision."""
+def number_text(values: np.ndarray | list[float]) -> str:
+    """Numbers as URDF attribute text, each to full double precision (``repr``: 17 digits at most)."""
     return " ".join(repr(float(v) + 0.0) for v in values)
 
 
@@ -194,9 +194,9 @@ class UrdfTree:
         ``keep_rotation`` sets only its translation, the rotation's text (``rpy``) kept as written.
         """
         node = self._child(self._joint(name), "origin")
-        node.set("xyz", _text(origin[:3, 3]))
+        node.set("xyz", number_text(origin[:3, 3]))
         if not keep_rotation:
-            node.set("rpy", _text(pin.rpy.matrixToRpy(np.asarray(origin[:3, :3], float))))
+            node.set("rpy", number_text(pin.rpy.matrixToRpy(np.asarray(origin[:3, :3], float))))
 
     def make_fixed(self, name: str) -> None:
         """Turn a joint into a fixed joint at zero (its origin kept)."""
@@ -216,7 +216,7 @@ class UrdfTree:
         joint.set("type", kind)
         for node in joint.findall("mimic"):
             joint.remove(node)
-        self._child(joint, "axis").set("xyz", _text(axis))
+        self._child(joint, "axis").set("xyz", number_text(axis))
         limit = self._child(joint, "limit")
         for key, value in (("lower", "-1000"), ("upper", "1000"), ("effort", "0"),
                            ("velocity", "1")):
@@ -263,6 +263,17 @@ class UrdfTree:
         etree.SubElement(joint, "parent", link=parent)
         etree.SubElement(joint, "child", link=child)
         self.make_one_dof(name, kind, axis, zero_origin=True)
+
+    def add_comment(self, text: str) -> None:
+        """Add an XML comment at the top of the document, before every other node.
+
+        Raises:
+            ValueError: if ``text`` holds ``--`` (XML comments cannot).
+        """
+        if "--" in text or text.endswith("-"):
+            raise ValueError(f"text: an XML comment cannot hold '--' or end with '-': {text!r}")
+        nodes = list(self.root.itersiblings(preceding=True))
+        (nodes[-1] if nodes else self.root).addprevious(etree.Comment(f" {text} "))
 
     def xml(self) -> str:
         """Return the URDF text (the document's comments and every element kept)."""

@@ -116,7 +116,7 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
         cal = read_calibration(source)
         params, offsets = cal.parameters, cal.nest_offsets_um
         default_label = cal.folder.resolve().name or "model"
-    arm = load_arm(params.arm)
+    arm = load_arm(params.arm, error_frames=bool(params.dh))
     check_against_arm(params, arm)
     check_extensions(params, arm, None if isinstance(source, Parameters) else cal.file)
     rot, trans = params.rotation(), params.translation

@@ -29,6 +29,12 @@ MAPS_FILE = "encoder_maps.csv"
 """Every estimated encoder map node, its value and uncertainty."""
 REPORT_FILE = "report.json"
 """The fit's report (:meth:`aacmm_pin.fit.identification_result.Calibration.report`)."""
+COMPACT_URDF_FILE = "compact.urdf"
+"""The calibrated URDF with its error frames folded into the joint origins
+(:func:`aacmm_pin.model.compact_urdf.compact_urdf`): the user's link and joint names only."""
+COMPACT_PARAMETERS_FILE = "compact.json"
+"""The parameters of the compact URDF (``"arm": "compact.urdf"``, no DH entries: folded), with
+the tool vectors, encoder maps, extension terms and the frame to the instrument."""
 
 
 @dataclass(frozen=True)

@@ -62,7 +62,7 @@ def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
         print(f"  identifying {label} ...", flush=True)  # a line per step, on a terminal or not
         phase(f"identifying {label}")
         cal = identify(campaign, arm, model=model, use_rtest=use_rtest, progress=True)
-        write_calibration(cal, arm, tmp / folder)
+        write_calibration(cal, arm, tmp / folder, campaign=campaign)
         results[folder] = validate(arm, cal.parameters, campaign, cal.accuracy)
         calibrations[folder] = cal
         (tmp / folder / "validation.json").write_text(

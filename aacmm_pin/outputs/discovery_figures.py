@@ -16,6 +16,7 @@ import numpy as np
 from aacmm_pin.analyses.discovery_results import Discovery, Step
 from aacmm_pin.analyses.linear_scorer import FOLDS
 from aacmm_pin.analyses.residual_scan import Scan
+from aacmm_pin.data.logs import Campaign
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.outputs.export import write_calibration_files
@@ -228,20 +229,22 @@ def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
     return fig
 
 
-def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False) -> Path:
+def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False,
+                    campaign: Campaign | None = None) -> Path:
     """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
 
     Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
     the named effect's variable before and after), ``discovery_unexplained.png`` (when the final
     residual is unexplained: against the variable it follows most), and the CALDIR files of
-    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...). The folder
-    is written whole (:func:`~aacmm_pin.data.output_folder.output_folder`).
+    :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...; the
+    URDF-alone loss over ``campaign``'s poses, the campaign discovered on). The folder is written
+    whole (:func:`~aacmm_pin.data.output_folder.output_folder`).
 
     Raises:
         OutputExistsError: if ``folder`` holds files and not ``force``.
     """
     with output_folder(folder, force) as tmp:
-        write_calibration_files(result.calibration, arm, tmp)
+        write_calibration_files(result.calibration, arm, tmp, campaign=campaign)
         (tmp / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
         with figure_batch():
             gap_figure(result, tmp / "discovery_gap.png")
