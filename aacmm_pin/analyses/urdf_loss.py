@@ -67,8 +67,9 @@ class UrdfLoss(NamedTuple):
                     f"campaign).")
         return (f"This URDF alone is {self.rms / UM:.3g} um RMS / {self.max / UM:.3g} um max from "
                 f"the full calibration over the {self.n_poses} poses of its campaign: "
-                f"{self.why}. Load {sidecar} with aacmm_pin (read_calibration, aacmm-pin predict) "
-                "for all of it.")
+                f"{self.why}. For all of it, wrap the readouts with {sidecar} beside it: "
+                "aacmm_pin.load_calibrated(folder).true_angles(readouts) gives this URDF's "
+                "joint angles, .position(readouts) the point (aacmm-pin predict alike).")
 
 
 def _missing(arm: Arm, params: Parameters) -> tuple[str, ...]:
