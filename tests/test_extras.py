@@ -67,8 +67,9 @@ def _run_blocked(script: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 
 def test_without_extras_a_node_predicts_and_the_commands_say_what_is_missing(tmp_path):
-    """With the extras' modules not installed: load, read, predict, identify and discover work (no
-    figures, said in one line); view, acquire and Arm.urdf_robot fail in one line naming the extra."""
+    """With the extras' modules not installed: load, read, predict (API and CLI), identify, validate
+    and discover work (no figures, said in one line); view, acquire and Arm.urdf_robot fail in one
+    line naming the extra."""
     assert run_cli(["simulate", str(tmp_path / "c"), "--samples-per-location", "30",
                     "--samples-per-socket", "8"])[0] == 0
     done = _run_blocked("""
@@ -85,6 +86,10 @@ def test_without_extras_a_node_predicts_and_the_commands_say_what_is_missing(tmp
         if "load_calibrated" in ap.__all__:  # the runtime object
             assert np.allclose(ap.load_calibrated("cal").positions(q),
                                ap.predict(arm, cal.parameters, q), atol=1e-12)
+        with open("r.csv", "w") as f:
+            f.write("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,q7_deg\\n10,20,-30,40,50,-60,70\\n")
+        assert main(["predict", "cal", "r.csv", "--out", "p.csv"]) == 0
+        assert main(["validate", "cal", "c"]) == 0
         out = io.StringIO()
         with contextlib.redirect_stdout(out):
             assert main(["discover", "c", "--out", "disc", "--max-steps", "1"]) == 0
@@ -110,7 +115,7 @@ def test_without_extras_a_node_predicts_and_the_commands_say_what_is_missing(tmp
     assert any(ln.startswith("raised: view needs the viewer extra") for ln in lines)
     assert "Traceback" not in done.stderr
     assert {p.name for p in (tmp_path / "cal").iterdir()} >= {"parameters.json", "calibrated.urdf"}
-    assert (tmp_path / "disc" / "discovery.json").is_file()
+    assert (tmp_path / "p.csv").is_file() and (tmp_path / "disc" / "discovery.json").is_file()
     assert not list((tmp_path / "disc").glob("*.png"))
     assert not (tmp_path / "v.html").exists() and not (tmp_path / "w.html").exists()
     assert not (tmp_path / "acq").exists()
