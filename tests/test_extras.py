@@ -134,12 +134,13 @@ def test_missing_extra_error_is_one_line_and_an_import_error():
 
 @pytest.mark.slow
 def test_a_fresh_runtime_install_predicts_and_stays_small(tmp_path):
-    """`pip install .` in a fresh venv: no extra installed, import and predict work, under 400 MB.
+    """`pip install .` in a fresh venv: no extra installed, import and predict work, under 740 MB.
 
-    The ceiling: measured on Linux, CPython 3.11, 2026-11: a fresh venv with `pip install .` took
-    NNN MB, with `pip install ".[all]"` NNN MB, and main's `pip install .` before the extras
-    933 MB (docs/install.md); 400 MB leaves a margin for newer wheels and stays far below the
-    full install.
+    The ceiling: measured with `du -sm` (Linux x86_64, CPython 3.11.7, pip 23.2, 2026-11), a fresh
+    venv took 639 MB with `pip install .` (380 MB of it Pinocchio's wheels), 933 MB with
+    `pip install ".[all]"`, as `pip install .` did before the extras (docs/install.md). 740 MB is
+    the runtime plus ~100 MB of margin for newer wheels, well below the full install; an extra's
+    module slipping back into the runtime is caught directly, by the check that none is importable.
     """
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
@@ -158,5 +159,6 @@ def test_a_fresh_runtime_install_predicts_and_stays_small(tmp_path):
     """)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
-    size = sum(f.stat().st_size for f in venv.rglob("*") if f.is_file() and not f.is_symlink())
-    assert size < 400e6, f"{size / 1e6:.0f} MB"
+    size_mb = int(subprocess.run(["du", "-sm", str(venv)], capture_output=True, text=True,
+                                 check=True).stdout.split()[0])
+    assert size_mb < 740, f"{size_mb} MB"
