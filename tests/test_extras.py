@@ -134,7 +134,8 @@ def test_missing_extra_error_is_one_line_and_an_import_error():
 
 @pytest.mark.slow
 def test_a_fresh_runtime_install_predicts_and_stays_small(tmp_path):
-    """`pip install .` in a fresh venv: no extra installed, import and predict work, under 740 MB.
+    """`pip install .` in a fresh venv: no extra, import and predict work, the demo skips its
+    figures in one line, and the venv stays under 740 MB.
 
     The ceiling: measured with `du -sm` (Linux x86_64, CPython 3.11.7, pip 23.2, 2026-11), a fresh
     venv took 639 MB with `pip install .` (380 MB of it Pinocchio's wheels), 933 MB with
@@ -159,6 +160,13 @@ def test_a_fresh_runtime_install_predicts_and_stays_small(tmp_path):
     """)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+    demo = subprocess.run([str(venv / "bin" / "aacmm-pin"), "demo"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert demo.returncode == 0, demo.stderr
+    assert 'figures 5, 6 and 9 skipped: the figures extra (matplotlib) is not installed: pip ' \
+           'install "aacmm_pin[figures]"' in demo.stdout
+    assert (tmp_path / "aacmm-pin-demo" / "proposed_rtest" / "parameters.json").is_file()
+    assert not list((tmp_path / "aacmm-pin-demo").glob("*.png"))
     size_mb = int(subprocess.run(["du", "-sm", str(venv)], capture_output=True, text=True,
                                  check=True).stdout.split()[0])
     assert size_mb < 740, f"{size_mb} MB"
