@@ -40,6 +40,7 @@ if TYPE_CHECKING:
         Variable,
     )
     from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
+    from aacmm_pin.effects.calibrated_arm import CalibratedArm, load_calibrated
     from aacmm_pin.effects.registry import (
         load_effect_file,
         read_parameters,
@@ -48,6 +49,7 @@ if TYPE_CHECKING:
     )
     from aacmm_pin.errors import (
         AacmmError,
+        ArgumentError,
         ArmModelError,
         CampaignFormatError,
         FileFormatError,
@@ -59,7 +61,7 @@ if TYPE_CHECKING:
     from aacmm_pin.fit.identification_result import Calibration
     from aacmm_pin.fit.measurements import IdentificationError, measured_positions
     from aacmm_pin.model.arm import DEFAULT_ARM, Arm, ErrorFrame, IdentificationModel, load_arm
-    from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles
+    from aacmm_pin.model.encoder_map import EncoderMap, correct_readouts, node_angles, readouts_of_angles
     from aacmm_pin.model.kinematics import StylusJacobians
     from aacmm_pin.model.parameters import Parameters
     from aacmm_pin.model.sizes import Sizes, read_sizes, write_sizes
@@ -75,6 +77,7 @@ __all__ = [
     "IdentificationError", "MonteCarloResult", "Plan", "ValidationResult",
     "identify", "measured_positions", "monte_carlo", "plan", "View", "view",
     "validate", "write_calibration", "CalibrationFolder", "read_calibration",
+    "CalibratedArm", "load_calibrated", "readouts_of_angles", "ArgumentError",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
     "LengthBarLog", "MissingExtraError", "Parameters", "Problem", "Simulation", "SimulationConfig",
@@ -98,8 +101,8 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "analyses.discovery": ("discover",),
     "analyses.discovery_results": ("Discovery",),
     "outputs.discovery_figures": ("write_discovery",),
-    "model.encoder_map": ("EncoderMap", "correct_readouts", "node_angles"),
-    "errors": ("AacmmError", "ArmModelError", "CampaignFormatError", "FileFormatError",
+    "model.encoder_map": ("EncoderMap", "correct_readouts", "node_angles", "readouts_of_angles"),
+    "errors": ("AacmmError", "ArgumentError", "ArmModelError", "CampaignFormatError", "FileFormatError",
                "FrameNotFound", "MissingExtraError", "Problem"),
     "outputs.export": ("write_calibration",),
     "fit.identification": ("identify",),
@@ -108,6 +111,7 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "outputs.calibration_folder": ("CalibrationFolder", "read_calibration"),
     "model.kinematics": ("StylusJacobians",),
     "effects.calibrated": ("predict", "stylus_jacobians", "stylus_positions"),
+    "effects.calibrated_arm": ("CalibratedArm", "load_calibrated"),
     "model.parameters": ("Parameters",),
     "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm",
                      "MapTerm", "BasisTerm", "Variable"),

@@ -91,5 +91,12 @@ class MissingExtraError(AacmmError, ModuleNotFoundError):
         self.name = module
 
 
+class ArgumentError(AacmmError, ValueError):
+    """A value given to a function is unfit: wrong shape, not finite, or in the wrong unit.
+
+    Its message is one line naming the argument (a ``ValueError`` too, as scipy's are).
+    """
+
+
 class CampaignWarning(UserWarning):
     """A campaign is read, but something in it deserves the user's eye (e.g. copied rows)."""

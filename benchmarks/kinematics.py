@@ -108,7 +108,7 @@ def one_round() -> dict[str, float]:
     arm, params, q, qi, ident, fid = _setup()
     methods = {
         "pos": (lambda: stylus_positions(arm, params, q), N),
-        "jac": (lambda: stylus_jacobians(arm, params, q), N),
+        "jac": (lambda: stylus_jacobians(arm, params, q, frame="mt"), N),
         "hand_pos": (lambda: hand_positions(q, params), N),
         "hand_jac": (lambda: hand_jacobians(q, params), N),
         "loop_pos": (lambda: loop_positions(ident.model, qi, fid), N),
@@ -131,7 +131,7 @@ def main() -> None:
     arm, params, q, qi, ident, fid = _setup()
     n = N
     t = {k: np.array(v) for k, v in runs.items()}
-    ours = stylus_jacobians(arm, params, q)
+    ours = stylus_jacobians(arm, params, q, frame="mt")
     same = np.abs(ours.position - loop_jacobians(ident.model, qi, fid)[0])
     hand_p, hand_j = hand_jacobians(q, params)
     mine = np.concatenate([ours.rotation, ours.translation, ours.angles, ours.dh, ours.tool], axis=2)

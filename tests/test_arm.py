@@ -145,7 +145,8 @@ def test_unknown_parameter_name_lists_choices(arm):
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda s: s.replace('name="tool"', 'name="probe"'), "no fixed joint named 'tool'"),
+    (lambda s: s.replace('name="tool"', 'name="probe"'),
+     "no fixed joint 'tool' .*and no link 'tool0'.*--tool-frame LINK"),
     (lambda s: s.replace('<origin xyz="{dx} 0 0"/>', '<origin xyz="0 {dx} 0"/>'),
      "must hold a pure translation along"),
     (lambda s: s.replace('<origin rpy="{a} 0 0"/>', '<origin rpy="0 {a} 0"/>'),

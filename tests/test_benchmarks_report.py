@@ -62,7 +62,7 @@ def test_handwritten_chain_is_the_same_model() -> None:
                              dh={k: rng.normal(0, 1e-3) for k in nominal.dh},
                              tool=nominal.tool + rng.normal(0, 0.01, 3))
     q = rng.uniform(-3, 3, (50, 7))
-    ours = stylus_jacobians(arm, params, q)
+    ours = stylus_jacobians(arm, params, q, frame="mt")
     hand_p, hand_j = hand_jacobians(q, params)
     blocks = np.concatenate([ours.rotation, ours.translation, ours.angles, ours.dh, ours.tool],
                             axis=2)

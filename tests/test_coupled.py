@@ -130,7 +130,7 @@ def test_coupled_jacobians_match_finite_differences(coupled):
     params = _params(coupled, 3)
     q = _readouts(coupled, 6, 4)
     tool = np.array([0, 1, 0, 1, 1, 0])
-    jac = kinematics.stylus_jacobians(coupled, params, q, tool=tool)
+    jac = kinematics.stylus_jacobians(coupled, params, q, frame="mt", tool=tool)
 
     def pos(qq: np.ndarray, offsets: np.ndarray | None = None) -> np.ndarray:
         change = Adjustment(*q.shape)

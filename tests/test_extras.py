@@ -84,7 +84,7 @@ def test_without_extras_a_node_predicts_and_the_commands_say_what_is_missing(tmp
         q = np.radians([[10, 20, -30, 40, 50, -60, 70]])
         assert ap.predict(arm, cal.parameters, q).shape == (1, 3)
         if "load_calibrated" in ap.__all__:  # the runtime object
-            assert np.allclose(ap.load_calibrated("cal").positions(q),
+            assert np.allclose(ap.load_calibrated("cal").position(q),
                                ap.predict(arm, cal.parameters, q), atol=1e-12)
         with open("r.csv", "w") as f:
             f.write("q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,q7_deg\\n10,20,-30,40,50,-60,70\\n")

@@ -49,7 +49,7 @@ def test_positions_match_paper_transcription(arm, seed):
                                ref_mt * 1e3, rtol=0, atol=1e-9)
     np.testing.assert_allclose(kinematics.predict(arm, params, q) * 1e3, ref_r * 1e3,
                                rtol=0, atol=1e-9)
-    np.testing.assert_allclose(kinematics.stylus_jacobians(arm, params, q).position * 1e3,
+    np.testing.assert_allclose(kinematics.stylus_jacobians(arm, params, q, "mt").position * 1e3,
                                ref_mt * 1e3, rtol=0, atol=1e-9)
 
 

@@ -30,3 +30,43 @@ def test_ur5_discovered_model_on_the_random_poses(tmp_path, monkeypatch):
     dh, found = rows[1], rows[-1]
     assert dh.model == "DH" and found.model.startswith("+ ")
     assert found.test_mm <= UR5_DISCOVERED_MM < dh.test_mm
+
+
+ROS_UR5 = SHARED / "robots" / "ur5-ros-industrial" / "ur5_robot.urdf"
+"""example-robot-data's UR5 URDF as robotics stacks ship it (tool0, no error frames)."""
+
+
+@pytest.mark.skipif(not ROS_UR5.is_file(), reason="needs ../shared/robots")
+def test_ros_urdf_calibrates_as_the_embedded_ur5(tmp_path, capsys):
+    """The unedited ROS UR5 URDF (tool frame tool0, error frames added in memory, the UR5's sizes
+    by --sizes) calibrated by DH from the tracker grid is within 5 % of --arm ur5 on the 20 random
+    poses; its calibrated.urdf keeps every original link and joint name and its sizes."""
+    import json
+
+    from lxml import etree
+
+    from aacmm_pin.cli import main
+    from aacmm_pin.model.arm import load_arm
+
+    grid, test = tmp_path / "grid", tmp_path / "random"
+    for source, out in (("grid", grid), ("random", test)):
+        assert main(["import-points", str(DATA / "UR5" / f"3D_UR5_uncalibrated_{source}_cleaned.csv"),
+                     "--out", str(out)]) == 0
+    means = {}
+    for name, arm in (("ros", [str(ROS_UR5), "--sizes", str(ROOT / "urdf" / "ur5.sizes.json")]),
+                      ("ur5", ["ur5"])):
+        assert main(["identify", str(grid), "--arm", *arm, "--model", "dh",
+                     "--out", str(tmp_path / name)]) == 0
+        assert main(["validate", str(tmp_path / name), str(test),
+                     "--json", str(tmp_path / f"{name}.json")]) == 0
+        means[name] = json.loads((tmp_path / f"{name}.json").read_text())["points"]["mean_mm"]
+    assert capsys.readouterr().out.count("ur5_robot.urdf has no error frames") == 1
+    assert abs(means["ros"] - means["ur5"]) <= 0.05 * means["ur5"], means
+    names = {}
+    for path in (ROS_UR5, tmp_path / "ros" / "calibrated.urdf"):
+        root = etree.parse(str(path)).getroot()
+        names[path.name] = {(e.tag, e.get("name")) for e in root if e.tag in ("link", "joint")}
+    assert names["ur5_robot.urdf"] < names["calibrated.urdf"]
+    calibrated = load_arm(tmp_path / "ros" / "calibrated.urdf")  # needs no option
+    assert calibrated.note is None and calibrated.tool_joints == ["tool"]
+    assert calibrated.sizes == load_arm("ur5").sizes  # the folder carries the sizes given

@@ -195,7 +195,7 @@ def test_tree_jacobian_matches_finite_differences(torso):
     rng = np.random.default_rng(6)
     q = rng.uniform(-2, 2, (6, 15))
     tool = np.array([0, 1, 0, 1, 1, 0])
-    jac = kinematics.stylus_jacobians(torso, params, q, tool=tool)
+    jac = kinematics.stylus_jacobians(torso, params, q, frame="mt", tool=tool)
 
     def pos(p: ap.Parameters, qq: np.ndarray = q) -> np.ndarray:
         return kinematics.stylus_positions(torso, p, qq, frame="mt", tool=tool)

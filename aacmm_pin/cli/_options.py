@@ -101,11 +101,40 @@ def _parent() -> argparse.ArgumentParser:
     return argparse.ArgumentParser(add_help=False)
 
 
+TOOL_FRAME_HELP = ("for a URDF without a fixed joint 'tool': the link the measured point (stylus, "
+                   "SMR) hangs off; a joint 'tool' is added on it in memory, the point's vector "
+                   "in its frame identified (default: tool0)")
+SIZES_HELP = ("the arm's plausible error sizes, a sizes file (JSON, SI; default: <urdf>.sizes.json "
+              "beside the URDF, else the default AACMM's)")
+
+
+def arm_details(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add ``--tool-frame LINK`` and ``--sizes FILE`` (how to read an arm's URDF) to ``p``."""
+    p.add_argument("--tool-frame", default=None, metavar="LINK", help=TOOL_FRAME_HELP)
+    p.add_argument("--sizes", type=input_path, default=None, metavar="FILE", help=SIZES_HELP)
+    return p
+
+
 def arm_option(default: str | None = "aacmm7", text: str = ARM_HELP) -> argparse.ArgumentParser:
-    """``--arm URDF``: the arm's URDF path or embedded name."""
+    """``--arm URDF``: the arm's URDF path or embedded name, with ``--tool-frame`` and ``--sizes``."""
     p = _parent()
     p.add_argument("--arm", type=arm_source, default=default, metavar="URDF", help=text)
-    return p
+    return arm_details(p)
+
+
+def load_given_arm(args: argparse.Namespace, arm: str | None = None) -> Any:
+    """Load the arm ``arm`` (default ``args.arm``) with ``--tool-frame`` and ``--sizes``.
+
+    Prints, in one line, what was added to the URDF in memory (a tool joint, error frames), if
+    anything (:attr:`aacmm_pin.model.arm.Arm.note`). Returns the :class:`~aacmm_pin.model.arm.Arm`.
+    """
+    from aacmm_pin.model.arm import load_arm
+
+    out = load_arm(args.arm if arm is None else arm, getattr(args, "tool_frame", None),
+                   getattr(args, "sizes", None))
+    if out.note:
+        print(out.note, flush=True)
+    return out
 
 
 def out_option(default: Path, text: str) -> argparse.ArgumentParser:

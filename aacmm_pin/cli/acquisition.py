@@ -22,6 +22,7 @@ from aacmm_pin.cli._options import (
     claim_file,
     force_option,
     json_option,
+    load_given_arm,
     nest_option,
     positive,
     seed_option,
@@ -99,7 +100,6 @@ def _acquire(args: argparse.Namespace) -> int:
 def _fake_devices(args: argparse.Namespace) -> int:
     from aacmm_pin.acquire.fake_devices import FakeConfig, FakeDevices
     from aacmm_pin.acquire.nest import Nest, read_nest
-    from aacmm_pin.model.arm import load_arm
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     with claim_file(args.json, args.force):  # refused before the devices start
@@ -110,7 +110,7 @@ def _fake_devices(args: argparse.Namespace) -> int:
                 garbage=args.garbage, checksum=args.checksum_errors,
                 out_of_range=args.out_of_range, timeouts=args.timeouts, silence=args.silence_s,
                 nest=read_nest(args.nest) if args.nest else Nest())
-            devices = FakeDevices(config, load_arm(args.arm))
+            devices = FakeDevices(config, load_given_arm(args))
         except ValueError as exc:
             print(f"aacmm-pin fake-devices: error: {exc}", file=sys.stderr)
             return 2

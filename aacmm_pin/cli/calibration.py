@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 from aacmm_pin.cli._options import (
     FORCE_FILE,
     add_command,
+    arm_details,
     arm_option,
     arm_source,
     claim_file,
@@ -24,6 +25,7 @@ from aacmm_pin.cli._options import (
     force_option,
     input_path,
     json_option,
+    load_given_arm,
     max_nfev_option,
     model_option,
     no_rtest_option,
@@ -58,7 +60,6 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ...]) -> int:
     from aacmm_pin.analyses.simulate import simulate_campaign, write_simulation
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.progress import phase
 
     if config.points:
@@ -67,7 +68,7 @@ def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ..
         print(f"simulating {len(config.location_xy)} SPATs of {config.samples_per_location} "
               f"postures and {config.bar_placements} bar placements (seed {config.seed}; a few "
               "seconds) ...", flush=True)
-    arm = load_arm(args.arm)
+    arm = load_given_arm(args)
     if args.compliance is not None:
         config = dataclasses.replace(config, compliance=_compliances(args.compliance, arm))
     phase("simulating")
@@ -120,14 +121,13 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     )
     from aacmm_pin.data.output_file import output_file
     from aacmm_pin.effects.calibrated import predict
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.model.samples import Samples
     from aacmm_pin.outputs.calibration_folder import read_calibration
     from aacmm_pin.outputs.instrument_frames import frame_of, to_instrument_frame
 
     folder = read_calibration(args.params)
     params = folder.parameters
-    arm = load_arm(args.arm or params.arm)
+    arm = load_given_arm(args, args.arm or params.arm)
     folder.check(arm)
     q, columns = read_sample_columns(args.readouts, arm)
     tool = args.tool if args.tool is not None or arm.n_tools == 1 else read_tool_column(
@@ -157,13 +157,12 @@ def _identify_into(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.effects.registry import term_from_key
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
     terms = tuple(term_from_key(k.strip()) for k in (args.terms or "").split(",") if k.strip())
     phase("loading the arm")
-    arm = load_arm(args.arm)
+    arm = load_given_arm(args)
     _print_sizes(arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)
@@ -187,9 +186,7 @@ def _identify_into(args: argparse.Namespace) -> int:
 
 def _print_sizes(arm: Arm, indent: str = "") -> None:
     """Print which plausible sizes the arm uses: its sizes file, or the built-in defaults."""
-    from aacmm_pin.model.sizes import sizes_label
-
-    print(f"{indent}sizes: {sizes_label(arm.source)}")
+    print(f"{indent}sizes: {arm.sizes_label}")
 
 
 def _print_calibration(cal: Calibration, out: Path) -> None:
@@ -235,11 +232,10 @@ def _discover_into(args: argparse.Namespace) -> int:
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
     from aacmm_pin.data.logs import noise_summary
     from aacmm_pin.extras import skipped
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
 
-    arm = load_arm(args.arm)
+    arm = load_given_arm(args)
     effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
                                                  if e.strip()]
     campaign = read_campaign(args.campaign, arm=arm)
@@ -329,7 +325,7 @@ def _validate_into(args: argparse.Namespace, inputs: list[Path]) -> int:
 
     cal = read_calibration(args.caldir)
     params = cal.parameters
-    arm = load_arm(params.arm)
+    arm = load_arm(params.arm)  # calibrated.urdf: its tool and error frames written out
     cal.check(arm)  # exactly as predict does
     campaign = read_campaign(args.campaign, arm=arm)
     data: dict[str, Any] = {}
@@ -366,11 +362,10 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     from aacmm_pin.data.output_folder import output_folder
     from aacmm_pin.extras import skipped
     from aacmm_pin.fit.identification import identify
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
     from aacmm_pin.outputs.plots import plot_encoder_maps
 
-    arm = load_arm(args.arm)
+    arm = load_given_arm(args)
     _print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
@@ -434,9 +429,8 @@ def _plan_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     from aacmm_pin.analyses.planning import check_plannable, plan
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.fit.identification import identify
-    from aacmm_pin.model.arm import load_arm
 
-    arm = load_arm(args.arm)
+    arm = load_given_arm(args)
     _print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     check_plannable(campaign)  # before minutes of identification
@@ -470,9 +464,7 @@ def _campaign_inputs(args: argparse.Namespace) -> list[Path]:
 def _axes(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from aacmm_pin.model.arm import load_arm
-
-    arm = load_arm(args.arm)
+    arm = load_given_arm(args)
     print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order "
           "(or <joint>_deg, any order)")
     _print_sizes(arm)
@@ -487,7 +479,23 @@ def _axes(args: argparse.Namespace) -> int:
     if arm.off_chain:
         print(f"held fixed (on no tool's chain): {', '.join(arm.off_chain)}")
     print(f"error frames ({len(arm.error_names)}): {', '.join(arm.error_names)}")
+    if args.write_error_frames is not None:
+        _write_completed(arm, args.write_error_frames, args.force)
     return 0
+
+
+def _write_completed(arm: Arm, out: Path, force: bool) -> None:
+    """Write the arm's URDF as the package uses it: its added tool joint and error frames."""
+    from aacmm_pin.data.output_file import output_file
+    from aacmm_pin.outputs.urdf_resources import rebase_resources
+
+    tree = arm.urdf_tree()
+    rebase_resources(tree.root, Path(str(arm.source)).parent, Path(out).absolute().parent)
+    with output_file(out, force, [Path(str(arm.source))]) as tmp:
+        Path(tmp).write_text(tree.xml(), encoding="utf-8")
+    added = len(arm.completion.error_frames)
+    print(f"wrote {out}: {arm.n_axes} axes, {len(arm.error_names)} error frames"
+          f"{f' ({added} added)' if added else ''}, tool joints {', '.join(arm.tool_joints)}")
 
 
 def add_parsers(subparsers: Any) -> None:
@@ -506,9 +514,14 @@ def add_parsers(subparsers: Any) -> None:
 def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add axes, simulate and predict (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
-                    "over its tree), their limits, its tools and its error frames")
+                    "over its tree), their limits, its tools and its error frames",
+                    parents=[force_option(FORCE_FILE)])
     p.add_argument("arm", nargs="?", type=arm_source, default="aacmm7", metavar="URDF",
                    help="URDF path or embedded arm name (aacmm7, ur5, wam7)")
+    arm_details(p)
+    p.add_argument("--write-error-frames", type=Path, default=None, metavar="OUT.urdf",
+                   help="write the URDF as the package uses it: with the tool joint and error "
+                        "frames it adds in memory (a URDF without them), their values zero")
     p.set_defaults(handler=_axes)
 
     p = add_command(subparsers, "simulate",

@@ -19,6 +19,7 @@ from aacmm_pin.cli._options import (
     force_option,
     input_path,
     json_option,
+    load_given_arm,
     no_rtest_option,
     params_option,
     read_files,
@@ -28,16 +29,15 @@ from aacmm_pin.cli._options import (
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
     """Return (arm, parameters): from --params, else the nominal --arm."""
-    from aacmm_pin.model.arm import load_arm
     from aacmm_pin.model.parameters import Parameters
     from aacmm_pin.outputs.calibration_folder import read_calibration
 
     if getattr(args, "params", None):
         folder = read_calibration(args.params)
-        arm = load_arm(args.arm or folder.parameters.arm)
+        arm = load_given_arm(args, args.arm or folder.parameters.arm)
         folder.check(arm)
         return arm, folder.parameters
-    arm = load_arm(args.arm or "aacmm7")
+    arm = load_given_arm(args, args.arm or "aacmm7")
     return arm, Parameters.nominal(arm)
 
 

@@ -65,7 +65,7 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
                                        adjust=extension_adjustment(arm, params, readouts, samples))
 
 
-def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "mt",
+def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r",
                      samples: Samples | None = None, *, tool: ToolIndex = None,
                      tilts: bool = False) -> StylusJacobians:
     """Return stylus centres and their analytic Jacobians for N readouts.
@@ -74,7 +74,8 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         arm: the arm.
         params: parameters at which to linearise.
         readouts: encoder readouts, shape (N, n_axes), in rad.
-        frame: ``"mt"`` (MT-CS, with X0 and translation) or ``"r"`` (r-CS).
+        frame: ``"r"`` (the arm's own frame, the r-CS; the default, as everywhere) or ``"mt"``
+            (the instrument's MT-CS, with X0 and translation).
         samples: per-sample columns for extensions that need them.
         tool: which tool each sample measures; each sample's Jacobian is its own tool frame's.
         tilts: also the columns of each joint's lateral tilts (:attr:`StylusJacobians.tilts`).

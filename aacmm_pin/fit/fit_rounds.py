@@ -29,7 +29,6 @@ from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
 from aacmm_pin.fit.solver_values import BudgetSpent
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.parameters import Parameters
-from aacmm_pin.model.sizes import sizes_label
 
 
 class Fit(NamedTuple):
@@ -128,7 +127,7 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
         # with it, but not the start's: the inputs disagree only if the start's bulk does too
         scale = min(scale, _median_scale(now.problem.data_residuals(x_start), keep))
     plausibility.check_agreement(scale, plausible, sigma_class, nfev,
-                                 sizes_label(unknowns.arm.source))
+                                 unknowns.arm.sizes_label)
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
         jac_now = landed.pop() if landed else jacobian(x_now)

@@ -49,7 +49,6 @@ from aacmm_pin.fit.solver_values import Budget, BudgetSpent, Counted
 from aacmm_pin.fit.unknowns import FrameKey, NestKey, UnknownKey, Unknowns
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.parameters import Parameters
-from aacmm_pin.model.sizes import sizes_label
 from aacmm_pin.progress import Progress
 from aacmm_pin.units import (
     SIGMA_BAR,
@@ -381,7 +380,7 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | N
         nominal = stylus_positions(arm, Parameters.nominal(arm, options.step_deg), q[pts], "r",
                                    tool=None if samples.tool is None else samples.tool[pts])
         plausibility.check_point_spread(meas.measured[pts], nominal, group[pts],
-                                        sizes_label(arm.source))
+                                        arm.sizes_label)
     start = options.start or _initial_frame(arm, Parameters.nominal(arm, options.step_deg),
                                             q[main], meas.measured[main], group[main],
                                             None if samples.tool is None else samples.tool[main])

@@ -23,6 +23,9 @@ does too):
   holds one elementary transform of the paper's Eq. (2); its origin holds the parameter's value.
   Error frames are the ones on the tools' chains, in the same depth-first order as the axes.
 * Every other fixed joint is nominal geometry (e.g. ``L2z``).
+* **A robot's own URDF** (ROS-style: ``tool0``, no error frames) is completed in memory by
+  :func:`load_arm`: a ``tool`` joint on the tool frame named by ``tool_frame`` (default ``tool0``)
+  and error frames before the axes (:mod:`aacmm_pin.model.urdf_completion`).
 * **Coupled joints.** An axis whose angle follows others' (a passive joint, no encoder) is stated
   by a URDF ``<mimic joint multiplier offset>`` or, for a sum of several joints, by the
   ``couplings`` block of the arm's sizes file (:mod:`aacmm_pin.data.couplings`): it keeps its axis
@@ -61,7 +64,9 @@ from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm_files import EMBEDDED as EMBEDDED  # re-exported: the embedded arms
 from aacmm_pin.model.arm_files import resolve_arm_path as resolve_arm_path
-from aacmm_pin.model.sizes import Sizes, sizes_of_urdf, sizes_path
+from aacmm_pin.model.sizes import DEFAULT as DEFAULT_SIZES
+from aacmm_pin.model.sizes import Sizes, read_sizes, sizes_file
+from aacmm_pin.model.urdf_completion import Completion, add_error_frames, add_tool_joint
 from aacmm_pin.model.urdf_tree import Joint, UrdfTree, read_urdf
 
 if TYPE_CHECKING:
@@ -147,7 +152,7 @@ def _read_couplings(arm: Arm) -> dict[str, Coupling]:
             out[name] = Coupling(name, ((other, multiplier),), offset,
                                  f"line {joint.line}: <mimic> of '{name}'")
             files[name] = arm.source
-    sizes = sizes_path(arm.source)
+    sizes = arm.sizes_file or "<sizes>"
     for name, entry in arm.sizes.couplings.items():
         if name in out:
             raise ArmModelError(sizes, f"couplings.{name}: '{name}' has a <mimic> already "
@@ -250,16 +255,22 @@ def _error_frame(joint: Joint, next_axis: np.ndarray | None, path: Path | str) -
 
 
 class Arm:
-    """An AACMM: its URDF, its axes, error frames and tool, and its Pinocchio models.
+    """An arm (an AACMM, a robot): its URDF, its axes, error frames and tools, its Pinocchio models.
 
     Use :func:`load_arm` to make one.
     """
 
-    def __init__(self, urdf: UrdfTree, source: Path | str, name: str):
+    def __init__(self, urdf: UrdfTree, source: Path | str, name: str, *,
+                 sizes: Path | str | None = None, completion: Completion | None = None):
         self.source = source
         """Where the URDF came from (path)."""
         self.name = name
         """Arm name as given by the user: an embedded arm's name or a URDF path."""
+        self.sizes_file: Path | None = Path(sizes) if sizes is not None else sizes_file(source)
+        """The sizes file the arm uses (given, else the one beside the URDF); None: defaults."""
+        self._sizes_given = sizes is not None
+        self.completion: Completion = completion or Completion()
+        """What :func:`load_arm` added to the URDF in memory (tool joint, error frames)."""
         self._urdf = urdf
         all_joints = urdf.joints()
         chains = _chains(all_joints, source)
@@ -271,7 +282,10 @@ class Arm:
         """Encoder axes (revolute joints on the tools' chains) in tree order (see the module
         docstring): axis n is ``axis_names[n - 1]``, readout column ``q<n>_deg``."""
         if not self.axis_names:
-            raise ArmModelError(source, "no revolute joint between the root link and the tool")
+            tools = ", ".join(f"'{j.parent}' ('{j.name}')" for c in chains.values()
+                              for j in c[-1:])
+            raise ArmModelError(source, f"nothing to calibrate: no revolute joint between the root "
+                                        f"link and the tool frame {tools}")
         self.tool_joints: list[str] = sorted(chains, key=rank.__getitem__)
         """The tool joints (``tool`` or ``tool_<name>``), in tree order."""
         self.off_chain: list[str] = [j.name for j in all_joints
@@ -291,8 +305,9 @@ class Arm:
                                                     "next revolute axes differ")
                 elif joint.type not in ("fixed", *_MOVABLE):
                     raise ArmModelError(source, f"line {joint.line}: joint '{joint.name}' is "
-                                                f"{joint.type}; an AACMM chain holds only "
-                                                "revolute and fixed joints")
+                                                f"{joint.type} on the chain to the tool; "
+                                                "only revolute, continuous and fixed joints "
+                                                "can be calibrated")
         self.couplings: dict[str, Coupling] = _read_couplings(self)
         """Coupled joint name -> its coupling (URDF ``<mimic>`` and the sizes file's
         ``couplings``), in axis order."""
@@ -324,9 +339,20 @@ class Arm:
         self.root_link: str = joints[0].parent
         """Name of the root link (the reference CS, r-CS)."""
 
-    def __reduce__(self) -> tuple[Callable[[str, str], Arm], tuple[str, str]]:
-        """Pickle as the URDF path and name (reloaded on the other side, e.g. in a worker)."""
-        return (_load_named, (str(self.source), self.name))
+    def __reduce__(self) -> tuple[Callable[..., Arm], tuple[str, str, str | None, str | None]]:
+        """Pickle as the URDF path, name, tool frame and sizes file (reloaded in a worker alike)."""
+        return (_load_named, (str(self.source), self.name, self.completion.tool_frame,
+                              str(self.sizes_file) if self._sizes_given else None))
+
+    @property
+    def note(self) -> str | None:
+        """One line saying what :func:`load_arm` added to the URDF, None when nothing."""
+        return self.completion.note(self.source)
+
+    @property
+    def sizes_label(self) -> str:
+        """Which sizes the arm uses, for a line or a report: the file's path or the defaults."""
+        return str(self.sizes_file) if self.sizes_file is not None else "built-in defaults"
 
     # ------------------------------------------------------------------ couplings
     @property
@@ -441,13 +467,14 @@ class Arm:
     def sizes(self) -> Sizes:
         """Plausible sizes of the arm's errors (:mod:`aacmm_pin.model.sizes`), read once.
 
-        From the sizes file beside the URDF (``<name>.sizes.json``); the default AACMM's where
-        there is none.
+        From the sizes file given to :func:`load_arm`, else the one beside the URDF
+        (``<name>.sizes.json``); the default AACMM's where there is none.
 
         Raises:
-            FileFormatError: if the sizes file is malformed (naming the file and the key).
+            FileFormatError: if the sizes file is missing or malformed (naming the file and the
+                key).
         """
-        return sizes_of_urdf(self.source)
+        return read_sizes(self.sizes_file) if self.sizes_file is not None else DEFAULT_SIZES
 
     @cached_property
     def joint_limits(self) -> np.ndarray:
@@ -561,6 +588,14 @@ class Arm:
         return build_model(tree)
 
     @cached_property
+    def nominal_model(self) -> pin.Model:
+        """The runtime model at the URDF's own values (:meth:`runtime_model`), built once.
+
+        Shared, read only (e.g. the gravity torques of :class:`~aacmm_pin.model.samples.Samples`).
+        """
+        return self.runtime_model()
+
+    @cached_property
     def identification(self) -> IdentificationModel:
         """The identification model (built once)."""
         return IdentificationModel(self)
@@ -634,28 +669,48 @@ class IdentificationModel:
         return data
 
 
-def load_arm(arm: str | Path = DEFAULT_ARM) -> Arm:
+def load_arm(arm: str | Path = DEFAULT_ARM, tool_frame: str | None = None,
+             sizes: str | Path | None = None) -> Arm:
     """Load an arm from a URDF path or an embedded arm's name (default: ``aacmm7``).
 
+    A robot's own URDF is completed in memory (:mod:`aacmm_pin.model.urdf_completion`): without a
+    ``tool`` joint, one is added on the link ``tool_frame`` (default ``tool0``); without error
+    frames, six are added before each axis. :attr:`Arm.note` says what was added.
+
+    Args:
+        arm: URDF path or embedded arm name.
+        tool_frame: the link the measured point hangs off, for a URDF without a ``tool`` joint;
+            None: ``tool0``.
+        sizes: the arm's sizes file (:mod:`aacmm_pin.model.sizes`); None: the one beside the URDF
+            (``<urdf>.sizes.json``), else the defaults.
+
     Raises:
-        ArmModelError: if the file cannot be read or breaks the conventions (message names the
-            file, and the line and column for XML syntax errors).
+        ArmModelError: if the file cannot be read, breaks the conventions or gives nothing to
+            calibrate (message names the file, and the line and column for XML syntax errors).
     """
     path = resolve_arm_path(arm)
-    urdf = read_urdf(path)
-    return Arm(urdf, path, str(arm))
+    urdf, frame = add_tool_joint(read_urdf(path), tool_frame)
+    out = Arm(urdf, path, str(arm), sizes=sizes, completion=Completion(frame))
+    if not out.error_frames:
+        urdf, added = add_error_frames(urdf, out.axis_names)
+        out = Arm(urdf, path, str(arm), sizes=sizes,
+                  completion=Completion(frame, added, tuple(out.axis_names)))
+    return out
 
 
-_LOADED: dict[tuple[str, str, str], Arm] = {}
+_LOADED: dict[tuple[str, str, str | None, str | None, str], Arm] = {}
 
 
-def _load_named(path: str, name: str) -> Arm:
+def _load_named(path: str, name: str, tool_frame: str | None = None,
+                sizes: str | None = None) -> Arm:
     """Load (once per process) the arm of a URDF path and keep the user's name for it."""
-    sizes = sizes_path(path)  # an edited URDF or sizes file reloads
-    data = Path(path).read_bytes() + (sizes.read_bytes() if sizes.is_file() else b"")
-    key = (path, name, hashlib.sha1(data).hexdigest())
+    file = Path(sizes) if sizes is not None else sizes_file(path)
+    # an edited URDF or sizes file reloads
+    data = Path(path).read_bytes() + (file.read_bytes() if file is not None and file.is_file()
+                                      else b"")
+    key = (path, name, tool_frame, sizes, hashlib.sha1(data).hexdigest())
     if key not in _LOADED:
-        arm = load_arm(path)
+        arm = load_arm(path, tool_frame, sizes)
         arm.name = name
         _LOADED[key] = arm
     return _LOADED[key]

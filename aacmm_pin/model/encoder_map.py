@@ -164,6 +164,47 @@ class EncoderMap:
         angle: np.ndarray = readout + self(readout)
         return angle
 
+    @property
+    def invertible(self) -> bool:
+        """Whether :meth:`correct` rises on every segment (slope of the error above -1).
+
+        A map of physical errors (arcseconds over a few degrees) always is; a map that is not
+        would give two readouts for one angle.
+        """
+        return bool(np.all(np.radians(self.step_deg) + np.diff(self.values, append=self.values[:1])
+                           > 0.0))
+
+    def inverse(self, angle: np.ndarray) -> np.ndarray:
+        r"""Return the readouts whose corrected angle is ``angle``: the inverse of :meth:`correct`.
+
+        :meth:`correct` is piecewise linear, :math:`r + e(r)`, node k of the table going to
+        :math:`\theta^*_k + e_k`; each segment is inverted exactly (one division), so
+        ``correct(inverse(a)) == a`` to rounding, at any turn.
+
+        Args:
+            angle: true joint angles, any shape, rad.
+
+        Returns:
+            Readouts, same shape, rad.
+
+        Raises:
+            ValueError: if the map is not invertible (:attr:`invertible`).
+        """
+        if not self.invertible:
+            raise ValueError("encoder map: its corrected angle falls on some segment (an error "
+                             "slope below -1); it has no inverse")
+        angle = np.asarray(angle, dtype=float)
+        step = np.radians(self.step_deg)
+        # breakpoints of the corrected angle over one turn, node 0 .. node n (= node 0 + 2 pi)
+        values = np.append(self.values, self.values[0])
+        breaks = np.append(self.nodes, self.nodes[0] + TWO_PI) + values
+        turns = np.floor((angle - breaks[0]) / TWO_PI)
+        reduced = angle - TWO_PI * turns          # in [breaks[0], breaks[0] + 2 pi)
+        k = np.clip(np.searchsorted(breaks, reduced, side="right") - 1, 0, self.n_nodes - 1)
+        slope = 1.0 + (values[k + 1] - values[k]) / step
+        readout: np.ndarray = self.nodes[k] + (reduced - breaks[k]) / slope + TWO_PI * turns
+        return readout
+
 
 def touched_nodes(q: np.ndarray, step_deg: float) -> np.ndarray:
     """Return which map nodes the readouts touch (interpolation weight > 0), shape (n_axes, nodes).
@@ -191,6 +232,29 @@ def correct_readouts(q: np.ndarray, maps: dict[int, EncoderMap]) -> np.ndarray:
     out: np.ndarray = q.copy()
     for axis, emap in maps.items():
         out[..., axis - 1] = emap.correct(q[..., axis - 1])
+    return out
+
+
+def readouts_of_angles(angles: np.ndarray, maps: dict[int, EncoderMap]) -> np.ndarray:
+    """Return the readouts whose corrected angles are ``angles``: the inverse of :func:`correct_readouts`.
+
+    For commanding an arm through its calibration (a target joint angle -> the readout to send).
+
+    Args:
+        angles: true joint angles, shape (N, n_axes) or (n_axes,), in rad.
+        maps: axis number (1-based) -> map; axes without a map have zero error.
+
+    Returns:
+        The readouts, same shape as ``angles``, in rad (``correct_readouts`` of them gives
+        ``angles`` back to rounding).
+
+    Raises:
+        ValueError: if a map is not invertible (:attr:`EncoderMap.invertible`).
+    """
+    angles = np.array(angles, dtype=float)
+    out: np.ndarray = angles.copy()
+    for axis, emap in maps.items():
+        out[..., axis - 1] = emap.inverse(angles[..., axis - 1])
     return out
 
 

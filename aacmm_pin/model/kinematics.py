@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple, TypeAlias
 
 import numpy as np
+import pinocchio as pin
 import scipy.sparse as sp
 
 from aacmm_pin.errors import AacmmError
@@ -241,7 +242,7 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     return out
 
 
-def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "mt",
+def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: str = "r",
                      samples: Samples | None = None, *, tool: ToolIndex = None,
                      adjust: Adjustment | None = None, tilts: bool = False) -> StylusJacobians:
     """Return stylus centres and their analytic Jacobians for N readouts.
@@ -250,7 +251,8 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         arm: the arm.
         params: parameters at which to linearise.
         readouts: encoder readouts, shape (N, n_axes), in rad.
-        frame: ``"mt"`` (MT-CS, with X0 and translation) or ``"r"`` (r-CS).
+        frame: ``"r"`` (the arm's own frame, the r-CS; the default, as everywhere) or ``"mt"``
+            (the instrument's MT-CS, with X0 and translation).
         samples: temperature and motion of the samples, for extensions that need them.
         tool: which tool each sample measures (see :data:`ToolIndex`); each sample's Jacobian is
             that of its own tool's frame.
@@ -313,19 +315,7 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
         tool: which tool each sample measures (see :data:`ToolIndex`).
         adjust: the extension terms' change of the arm (see :func:`stylus_positions`).
     """
-    model = arm.runtime_model(params.dh, tools=params.tool_vectors(arm))
-    q_read = _readouts_2d(readouts, arm)
-    fids = np.array([model.getFrameId(link) for link in arm.tool_links])[
-        tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
-    change = _adjusted(adjust, q_read)
-    q = arm.joint_angles(correct_readouts(q_read, params.encoder_maps), change.offsets)
-    chain = BatchedChain(model)
-    positions: np.ndarray = chain.positions(q, fids)
-    if change.tilted:
-        axes = np.array([model.joints[model.getJointId(n)].idx_q for n in arm.axis_names])
-        positions = positions + _tilt_shift(chain, q, fids, axes, change.tilts)
-    scaled: np.ndarray = positions * change.scale[:, None]
-    return scaled
+    return JointKinematics(arm, params).positions(readouts, tool, adjust, samples)
 
 
 class JointKinematics:
@@ -344,9 +334,36 @@ class JointKinematics:
     def __init__(self, arm: Arm, params: Parameters):
         model = arm.runtime_model(params.dh, tools=params.tool_vectors(arm))
         self.arm, self.params = arm, params
+        self.model: pin.Model = model
+        """The runtime model (:meth:`Arm.runtime_model` of the parameters)."""
         self.chain = BatchedChain(model)
         self.frames = np.array([model.getFrameId(link) for link in arm.tool_links])
         self.axes = np.array([model.joints[model.getJointId(n)].idx_q for n in arm.axis_names])
+
+    def positions(self, readouts: np.ndarray, tool: ToolIndex = None,
+                  adjust: Adjustment | None = None, samples: Samples | None = None) -> np.ndarray:
+        """Return r-CS stylus centres for N readouts with the runtime model, shape (N, 3), m.
+
+        :func:`predict` on this model: the readouts wrapped by the encoder maps (and the angle
+        terms of ``adjust``), forward kinematics, lateral tilts and scale.
+
+        Args:
+            readouts: encoder readouts, shape (N, n_axes), in rad.
+            tool: which tool each sample measures (see :data:`ToolIndex`).
+            adjust: the extension terms' change of the arm (see :func:`stylus_positions`).
+            samples: the samples, whose ``tool`` is used when ``tool`` is None.
+        """
+        q_read = _readouts_2d(readouts, self.arm)
+        fids = self.frames[tool_rows(self.arm, len(q_read), tool, _matching(samples, q_read))]
+        change = _adjusted(adjust, q_read)
+        q = np.zeros((len(q_read), self.chain.nq))
+        q[:, self.axes] = self.arm.joint_angles(correct_readouts(q_read, self.params.encoder_maps),
+                                                change.offsets)
+        positions: np.ndarray = self.chain.positions(q, fids)
+        if change.tilted:
+            positions = positions + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
+        scaled: np.ndarray = positions * change.scale[:, None]
+        return scaled
 
     def position_jacobian(self, readouts: np.ndarray, tool: ToolIndex = None,
                           adjust: Adjustment | None = None) -> tuple[np.ndarray, np.ndarray]:

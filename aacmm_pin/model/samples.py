@@ -168,7 +168,7 @@ class Samples:
         others' in the independent coordinates.
         """
         if self._gravity is None:
-            self._gravity = gravity_torques(self.arm, self.arm.runtime_model(), self.q)
+            self._gravity = gravity_torques(self.arm, self.arm.nominal_model, self.q)
         return self._gravity
 
     @property
@@ -183,7 +183,7 @@ class Samples:
         axis (whose z component this is).
         """
         if self._lateral_gravity is None:
-            model = self.arm.runtime_model()
+            model = self.arm.nominal_model
             data = model.createData()
             chain = BatchedChain(model)
             ids = [model.getJointId(name) for name in self.arm.axis_names]

@@ -232,6 +232,31 @@ class UrdfTree:
         """Add an empty link."""
         etree.SubElement(self.root, "link", name=name)
 
+    def insert_fixed(self, name: str, parent: str, child: str, before: str | None = None) -> None:
+        """Add a fixed joint at the identity and its empty child link.
+
+        Both are written just before the joint ``before`` (at the end without one), so that the
+        text reads in chain order.
+        """
+        link = etree.Element("link", name=child)
+        joint = etree.Element("joint", name=name, type="fixed")
+        etree.SubElement(joint, "parent", link=parent)
+        etree.SubElement(joint, "child", link=child)
+        etree.SubElement(joint, "origin", xyz="0 0 0", rpy="0 0 0")
+        if before is None:
+            self.root.append(joint)
+            self.root.append(link)
+        else:
+            anchor = self._joint(before)
+            anchor.addprevious(joint)
+            anchor.addprevious(link)
+            for node in (joint, link):  # each on its own line
+                node.tail = "\n  "
+
+    def set_parent(self, name: str, link: str) -> None:
+        """Set a joint's parent link."""
+        self._child(self._joint(name), "parent").set("link", link)
+
     def add_joint(self, name: str, kind: str, parent: str, child: str, axis: np.ndarray) -> None:
         """Add a 1-DOF joint (``revolute`` or ``prismatic``) at the identity along ``axis``."""
         joint = etree.SubElement(self.root, "joint", name=name, type=kind)

@@ -20,7 +20,7 @@ from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.effects.registry import write_parameters
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.sizes import sizes_label, sizes_path, write_sizes
+from aacmm_pin.model.sizes import sizes_path, write_sizes
 from aacmm_pin.outputs.calibration_folder import (
     MAPS_FILE,
     PARAMETERS_FILE,
@@ -88,13 +88,13 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path,
     tree = arm.urdf_tree(params.dh, tools=params.tool_vectors(arm))
     rebase_resources(tree.root, Path(str(arm.source)).parent, folder)  # meshes found from here
     (folder / URDF_FILE).write_text(tree.xml(), encoding="utf-8")
-    if sizes_path(arm.source).is_file():
+    if arm.sizes_file is not None:  # beside the URDF or given (--sizes): the folder carries it
         write_sizes(arm.sizes, sizes_path(folder / URDF_FILE))
     write_parameters(params.replace(arm=URDF_FILE), folder / PARAMETERS_FILE)
     write_maps_csv(cal, folder / MAPS_FILE)
     report = cal.report()
     report["arm"] = arm.name
-    report["sizes"] = sizes_label(arm.source)  # the sizes file the fit used, or the defaults
+    report["sizes"] = arm.sizes_label  # the sizes file the fit used, or the defaults
     if frames := instrument_frames(cal):  # predict --frame GROUP
         report[FRAMES_KEY] = frames
     report.update(extra or {})

@@ -1,0 +1,447 @@
+r"""A calibrated arm at run time: readouts in, true joint angles, tool placements and Jacobians out.
+
+What a robotics stack holds after loading a calibration once (:func:`load_calibrated`): one
+Pinocchio model of the calibrated arm and its data, the encoder maps and the extension terms, and
+every function a control loop or a batch job calls on them:
+
+* :meth:`CalibratedArm.true_angles`: encoder readouts -> the true joint angles (maps, couplings,
+  the extension terms' angle errors), which the arm's Pinocchio model (:attr:`CalibratedArm.model`,
+  or the folder's ``compact.urdf``) takes as its configuration;
+* :meth:`CalibratedArm.readouts`: the inverse, true joint angles -> the readouts to command (after
+  an inverse kinematics on :attr:`CalibratedArm.model`, say);
+* :meth:`CalibratedArm.position`, :meth:`CalibratedArm.placement`: the tool's point and its full
+  placement, exactly :func:`aacmm_pin.predict`;
+* :meth:`CalibratedArm.jacobian`: the tool frame's Jacobian with respect to the readouts.
+
+**One frame convention.** Every result is in the arm's own frame (the r-CS: the URDF's root link)
+unless ``frame="mt"`` asks for the instrument's frame (the R-Test's MT-CS, or a tracker's frame:
+the calibration's ``base_to_mt``, paper Eq. 4).
+
+**Shapes.** A readout vector of shape (n_axes,) is one sample and gives one result (position (3,),
+placement (4, 4), Jacobian (6, n_axes)); an array (N, n_axes) is N samples and gives N results
+stacked on a leading axis. Angles in rad, lengths in m.
+
+**Checks.** Every public method refuses, in one line naming the argument, a wrong number of axes,
+a value that is not finite, and readouts beyond an axis' limits by more than half a turn (e.g.
+degrees given for radians): :class:`~aacmm_pin.errors.ArgumentError`.
+
+**Cost.** One sample without extension terms runs in plain Python floats and one Pinocchio forward
+kinematics call (a few microseconds, ``benchmarks/runtime.py``); batches run vectorised
+(:class:`~aacmm_pin.model.kinematics.JointKinematics`). Extension terms (gravity compliance,
+backlash, temperature, ...) are evaluated through the effect library on every call: slower, and
+some need per-sample inputs (``columns``: ``temp_c`` and the like; ``direction``: the direction each
+axis last moved in, for backlash; a batch's row order stands for time order when not given).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from aacmm_pin.effects.calibrated import extension_adjustment
+from aacmm_pin.effects.registry import check_extensions, read_parameters
+from aacmm_pin.errors import ArgumentError
+from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.model.encoder_map import correct_with_slopes, readouts_of_angles
+from aacmm_pin.model.kinematics import Adjustment, JointKinematics, tool_rows
+from aacmm_pin.model.parameters import Parameters, check_against_arm
+from aacmm_pin.model.samples import Samples
+
+__all__ = ["COMPACT_PARAMETERS", "CalibratedArm", "load_calibrated"]
+
+COMPACT_PARAMETERS = "compact.json"
+"""A calibration folder's parameters of its compact URDF (``compact.urdf``: the calibrated values
+folded into the joint origins), read first by :func:`load_calibrated`."""
+FULL_PARAMETERS = "parameters.json"
+"""A calibration folder's parameters of its error-frame URDF (``calibrated.urdf``)."""
+DEGREE_MARGIN = math.pi
+"""How far beyond an axis' limits (rad) a readout may lie before it is refused as degrees given for
+radians: half a turn (a readout of a table that wraps may pass a limit by less)."""
+INVERSE_TOLERANCE = 1e-13
+"""The fixed-point iteration of :meth:`CalibratedArm.readouts` with extension terms stops when no
+readout moves by more than this, rad."""
+_INVERSE_ITERATIONS = 50
+
+
+class CalibratedArm:
+    """A calibrated arm, loaded once: its Pinocchio model and data, maps and extension terms.
+
+    Args:
+        arm: the arm (its URDF: error frames or compact, see :func:`load_calibrated`).
+        params: its calibrated parameters.
+
+    Raises:
+        FileFormatError: if the parameters do not fit the arm (error frames, tools, axes, terms).
+    """
+
+    def __init__(self, arm: Arm, params: Parameters):
+        check_against_arm(params, arm)
+        check_extensions(params, arm)
+        self.arm: Arm = arm
+        """The arm."""
+        self.parameters: Parameters = params
+        """The calibrated parameters (SI)."""
+        self._joints = JointKinematics(arm, params)
+        self.model: pin.Model = self._joints.model
+        """The Pinocchio model of the calibrated arm: its configuration is the true joint angles
+        (:meth:`true_angles`) in axis order; error frames and tool vectors fixed at their values."""
+        self.data: pin.Data = self.model.createData()
+        """The model's workspace, reused by every call (one thread at a time; :meth:`copy` gives
+        another thread its own)."""
+        self.tool_frames: list[int] = [self.model.getFrameId(link) for link in arm.tool_links]
+        """Pinocchio frame ids of the tools' points (the tool links), in tool order."""
+        n = arm.n_axes
+        self._axes = self._joints.axes
+        self._direct = self.model.nq == n and bool(np.array_equal(self._axes, np.arange(n)))
+        lo, hi = (arm.joint_limits - [DEGREE_MARGIN, -DEGREE_MARGIN]).T
+        self._lo, self._hi = lo.tolist(), hi.tolist()
+        maps = params.encoder_maps
+        self._tables: list[list[float] | None] = [
+            None if a + 1 not in maps else [*maps[a + 1].values.tolist(), float(maps[a + 1].values[0])]
+            for a in range(n)]
+        self._steps = [math.radians(maps[a + 1].step_deg) if a + 1 in maps else 1.0 for a in range(n)]
+        self._shape = (n,)
+        self._fid = self.tool_frames[0]
+        self._fast = not params.extensions and not arm.couplings and self._direct
+        self._rotation = params.rotation()
+        self._translation = np.asarray(params.translation, dtype=float)
+
+    def copy(self) -> CalibratedArm:
+        """Return a calibrated arm sharing this one's model, with its own Pinocchio data."""
+        other = object.__new__(CalibratedArm)
+        other.__dict__.update(self.__dict__)
+        other.data = self.model.createData()
+        return other
+
+    # ------------------------------------------------------------------ names
+    @property
+    def n_axes(self) -> int:
+        """Number of axes (readout columns)."""
+        return self.arm.n_axes
+
+    @property
+    def axis_names(self) -> list[str]:
+        """The axes' joint names in readout order."""
+        return list(self.arm.axis_names)
+
+    @property
+    def tool_names(self) -> list[str]:
+        """The tools' names (``tool=`` of every method), in tool order."""
+        return list(self.arm.tool_names)
+
+    # ------------------------------------------------------------------ angles
+    def true_angles(self, readouts: np.ndarray, *, columns: Mapping[str, np.ndarray] | None = None,
+                    direction: np.ndarray | None = None) -> np.ndarray:
+        """Return the true joint angles of readouts: :attr:`model`'s configuration, rad.
+
+        The encoder maps, the couplings (a coupled axis' readout is not read: its angle follows
+        its coupling) and the extension terms' angle errors. Lateral tilts and scale terms are
+        not joint angles: :meth:`position` applies them.
+
+        Args:
+            readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
+            columns: per-sample inputs of extension terms by file column name, SI, each shape
+                (N,) (e.g. ``{"temp_c": ...}``).
+            direction: the direction each axis last moved in (+1, -1, 0), shape like readouts,
+                for backlash terms; default: from the row order of a batch, 0 for one sample.
+
+        Returns:
+            Shape like ``readouts``, rad.
+        """
+        q, one = self._readouts(readouts, "readouts")
+        if self._fast and one:
+            return self._true_one(q[0].tolist(), "readouts")
+        angles = self._true(q, self._change(q, columns, direction))
+        return angles[0] if one else angles
+
+    def readouts(self, angles: np.ndarray, *, columns: Mapping[str, np.ndarray] | None = None,
+                 direction: np.ndarray | None = None) -> np.ndarray:
+        """Return the readouts that give these true joint angles: the inverse of :meth:`true_angles`.
+
+        For commanding the arm through its calibration (inverse kinematics on :attr:`model`
+        gives true angles; the controller takes readouts). The maps are inverted exactly
+        (:meth:`~aacmm_pin.model.encoder_map.EncoderMap.inverse`); extension terms by a
+        fixed-point iteration (their angle errors change slowly with the readouts) to
+        :data:`INVERSE_TOLERANCE`. A coupled axis' readout is its coupling of the others'.
+
+        Args:
+            angles: true joint angles, shape (n_axes,) or (N, n_axes), rad (a coupled axis' value
+                is not read).
+            columns: per-sample inputs of extension terms (see :meth:`true_angles`).
+            direction: motion directions for backlash terms (see :meth:`true_angles`).
+
+        Returns:
+            Readouts, shape like ``angles``, rad.
+
+        Raises:
+            ArgumentError: for bad ``angles``, or if the iteration does not settle.
+        """
+        theta, one = self._readouts(angles, "angles")
+        maps = self.parameters.encoder_maps
+        q = readouts_of_angles(theta, maps)
+        if self.parameters.extensions:
+            for _ in range(_INVERSE_ITERATIONS):
+                change = self._change(q, columns, direction)
+                assert change is not None
+                new = readouts_of_angles(theta - change.offsets, maps)
+                moved = float(np.max(np.abs(new - q), initial=0.0))
+                q = new
+                if moved <= INVERSE_TOLERANCE:
+                    break
+            else:
+                raise ArgumentError(f"angles: the readouts of these angles did not settle within "
+                                    f"{_INVERSE_ITERATIONS} steps (last move {moved:.3g} rad)")
+        q = self.arm.fill_readouts(q)
+        return q[0] if one else q
+
+    # ------------------------------------------------------------------ the tool
+    def position(self, readouts: np.ndarray, *, tool: str | int | None = None, frame: str = "r",
+                 columns: Mapping[str, np.ndarray] | None = None,
+                 direction: np.ndarray | None = None) -> np.ndarray:
+        """Return the tool's point for readouts: exactly :func:`aacmm_pin.predict`, m.
+
+        Args:
+            readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
+            tool: the tool's name or index (:attr:`tool_names`); None: the arm's only tool.
+            frame: ``"r"`` (the arm's own frame, default) or ``"mt"`` (the instrument's).
+            columns: per-sample inputs of extension terms (see :meth:`true_angles`).
+            direction: motion directions for backlash terms (see :meth:`true_angles`).
+
+        Returns:
+            Shape (3,) for one sample, (N, 3) for N, m.
+        """
+        if self._fast and tool is None and frame == "r" and (vals := self._one(readouts)) is not None:
+            pin.forwardKinematics(self.model, self.data, self._true_one(vals))
+            point: np.ndarray = pin.updateFramePlacement(self.model, self.data,
+                                                         self._fid).translation.copy()
+            return point
+        q, one = self._readouts(readouts, "readouts")
+        self._check_frame(frame)
+        samples = self._samples(q, columns, direction)
+        change = extension_adjustment(self.arm, self.parameters, q, samples)
+        points = self._joints.positions(q, self._tool(tool, len(q)), change, samples)
+        if frame == "mt":
+            points = points @ self._rotation.T + self._translation
+        return points[0] if one else points
+
+    def placement(self, readouts: np.ndarray, *, tool: str | int | None = None, frame: str = "r",
+                  columns: Mapping[str, np.ndarray] | None = None,
+                  direction: np.ndarray | None = None) -> np.ndarray:
+        """Return the tool frame's placement, a homogeneous transform (4 x 4), m.
+
+        Its translation is :meth:`position`; its rotation that of the tool link at the true
+        joint angles (lateral tilts of extension terms move the point only).
+
+        Args:
+            readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
+            tool: the tool's name or index; None: the arm's only tool.
+            frame: ``"r"`` (the arm's own frame, default) or ``"mt"`` (the instrument's).
+            columns: per-sample inputs of extension terms (see :meth:`true_angles`).
+            direction: motion directions for backlash terms (see :meth:`true_angles`).
+
+        Returns:
+            Shape (4, 4) for one sample, (N, 4, 4) for N.
+        """
+        q, one = self._readouts(readouts, "readouts")
+        self._check_frame(frame)
+        angles = self._true(q, self._change(q, columns, direction))
+        fids = np.asarray(self.tool_frames)[self._tool(tool, len(q))]
+        out = np.empty((len(q), 4, 4))
+        for i, (theta, fid) in enumerate(zip(self._configurations(angles), fids)):
+            pin.forwardKinematics(self.model, self.data, theta)
+            out[i] = pin.updateFramePlacement(self.model, self.data, int(fid)).homogeneous
+        if self.parameters.extensions:  # tilts and scale move the point: predict's
+            out[:, :3, 3] = self.position(q, tool=tool, columns=columns, direction=direction)
+        if frame == "mt":
+            out[:, :3, :] = self._rotation @ out[:, :3, :]
+            out[:, :3, 3] += self._translation
+        return out[0] if one else out
+
+    def jacobian(self, readouts: np.ndarray, *, tool: str | int | None = None, frame: str = "r",
+                 columns: Mapping[str, np.ndarray] | None = None,
+                 direction: np.ndarray | None = None) -> np.ndarray:
+        """Return the tool frame's Jacobian with respect to the readouts, shape (6, n_axes).
+
+        Rows: the velocity of the tool frame's origin (m/rad), then its angular velocity
+        (rad/rad), both along the axes of ``frame`` (Pinocchio's ``LOCAL_WORLD_ALIGNED``); column
+        j is d/d(readout j): the joint's column times the slope of its map and through the
+        couplings (a coupled axis has no readout: a zero column). The extension terms' angle
+        errors enter the angles at which it is taken, not its columns (their change with the
+        readouts is second order); a scale term scales the velocity rows.
+
+        Args:
+            readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
+            tool: the tool's name or index; None: the arm's only tool.
+            frame: ``"r"`` (the arm's own frame, default) or ``"mt"`` (the instrument's).
+            columns: per-sample inputs of extension terms (see :meth:`true_angles`).
+            direction: motion directions for backlash terms (see :meth:`true_angles`).
+
+        Returns:
+            Shape (6, n_axes) for one sample, (N, 6, n_axes) for N.
+        """
+        q, one = self._readouts(readouts, "readouts")
+        self._check_frame(frame)
+        change = self._change(q, columns, direction)
+        _, slope = correct_with_slopes(q, self.parameters.encoder_maps)
+        slope[:, self.arm.coupled] = 0.0
+        angles = self._true(q, change)
+        fids = np.asarray(self.tool_frames)[self._tool(tool, len(q))]
+        out = np.empty((len(q), 6, self.n_axes))
+        world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        for i, (theta, fid) in enumerate(zip(self._configurations(angles), fids)):
+            jac = pin.computeFrameJacobian(self.model, self.data, theta, int(fid), world)
+            out[i] = jac[:, self._axes]
+        if self.arm.couplings:
+            out = out @ self.arm.coupling_matrix
+        out *= slope[:, None, :]
+        if change is not None:
+            out[:, :3, :] *= change.scale[:, None, None]
+        if frame == "mt":
+            out[:, :3, :] = self._rotation @ out[:, :3, :]
+            out[:, 3:, :] = self._rotation @ out[:, 3:, :]
+        return out[0] if one else out
+
+    # ------------------------------------------------------------------ inner
+    def _readouts(self, values: np.ndarray, name: str) -> tuple[np.ndarray, bool]:
+        """Return values as (N, n_axes) floats and whether one sample was given; check them."""
+        try:
+            q = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise ArgumentError(f"{name}: need numbers, shape ({self.n_axes},) or (N, "
+                                f"{self.n_axes}), in rad; got {type(values).__name__}") from None
+        one = q.ndim == 1
+        if q.ndim not in (1, 2) or q.shape[-1] != self.n_axes:
+            raise ArgumentError(f"{name}: need shape ({self.n_axes},) or (N, {self.n_axes}): one "
+                                f"value per axis of the arm ({', '.join(self.arm.axis_names)}), in "
+                                f"rad; got shape {q.shape}")
+        q = q.reshape(-1, self.n_axes)
+        lo, hi = np.asarray(self._lo), np.asarray(self._hi)
+        if not ((q >= lo) & (q <= hi)).all():  # NaN fails too
+            self._refuse(q, name)
+        return q, one
+
+    def _refuse(self, q: np.ndarray, name: str) -> None:
+        """Raise the one-line error for the first bad value of q (not finite, or degrees)."""
+        bad = ~np.isfinite(q)
+        if bad.any():
+            i, a = np.argwhere(bad)[0]
+            raise ArgumentError(f"{name}: sample {i}, axis {a + 1} ({self.arm.axis_names[a]}) is "
+                                f"{q[i, a]}: every value must be a finite number in rad")
+        lo, hi = np.asarray(self._lo), np.asarray(self._hi)
+        i, a = np.argwhere((q < lo) | (q > hi))[0]
+        limits = self.arm.joint_limits[a]
+        raise ArgumentError(f"{name}: sample {i}, axis {a + 1} ({self.arm.axis_names[a]}) is "
+                            f"{q[i, a]:.6g} rad, beyond its limits [{limits[0]:.4g}, "
+                            f"{limits[1]:.4g}] rad by more than half a turn: these look like "
+                            "degrees (multiply by pi/180)")
+
+    def _check_frame(self, frame: str) -> None:
+        if frame not in ("r", "mt"):
+            raise ArgumentError(f"frame: 'r' (the arm's own frame) or 'mt' (the instrument's), "
+                                f"got {frame!r}")
+
+    def _tool(self, tool: str | int | None, n: int) -> np.ndarray:
+        try:
+            return tool_rows(self.arm, n, tool)
+        except ValueError as exc:
+            raise ArgumentError(str(exc)) from None
+
+    def _one(self, values: object) -> list[float] | None:
+        """Return one sample's readouts as floats, or None where the general path must look."""
+        if isinstance(values, np.ndarray):
+            if values.shape != self._shape or values.dtype.kind != "f":
+                return None
+            out: list[float] = values.tolist()
+            return out
+        if isinstance(values, (list, tuple)) and len(values) == self._shape[0] and all(
+                type(v) is float for v in values):
+            return list(values)
+        return None
+
+    def _true_one(self, q: list[float], name: str = "readouts") -> np.ndarray:
+        """One sample's true angles in plain floats (no couplings, no extension terms), checked."""
+        out = []
+        for x, table, step, lo, hi in zip(q, self._tables, self._steps, self._lo, self._hi):
+            if not lo <= x <= hi:  # NaN too
+                self._refuse(np.array([q]), name)
+            if table is not None:
+                u = ((x + math.pi) % (2.0 * math.pi)) / step
+                k = int(u)
+                if k >= len(table) - 1:  # u == n after rounding: node 0 of the next turn
+                    k, u = 0, 0.0
+                f = u - k
+                x = x + table[k] * (1.0 - f) + table[k + 1] * f
+            out.append(x)
+        return np.array(out)
+
+    def _samples(self, q: np.ndarray, columns: Mapping[str, np.ndarray] | None,
+                 direction: np.ndarray | None) -> Samples | None:
+        """Return the samples the extension terms read (None without extension terms)."""
+        if not self.parameters.extensions:
+            return None
+        cols = {}
+        for key, value in (columns or {}).items():
+            v = np.asarray(value, dtype=float).reshape(-1)
+            if v.size == 1:
+                v = np.full(len(q), float(v[0]))
+            if v.shape != (len(q),) or not np.isfinite(v).all():
+                raise ArgumentError(f"columns: '{key}' needs one finite value per sample ({len(q)}), "
+                                    f"got shape {np.shape(value)}")
+            cols[key] = v
+        samples = Samples(self.arm, q, columns=cols, files=("columns",))
+        if direction is not None:
+            d = np.asarray(direction, dtype=float).reshape(-1, self.n_axes) if np.size(direction) \
+                else np.zeros(0)
+            if d.shape != q.shape or not np.isin(d, (-1.0, 0.0, 1.0)).all():
+                raise ArgumentError(f"direction: need +1, -1 or 0 per axis and sample, shape "
+                                    f"{q.shape if len(q) > 1 else (self.n_axes,)}; got shape "
+                                    f"{np.shape(direction)}")
+            samples._direction = d
+        return samples
+
+    def _change(self, q: np.ndarray, columns: Mapping[str, np.ndarray] | None,
+                direction: np.ndarray | None) -> Adjustment | None:
+        """Return the extension terms' change of the arm at N readouts (None without terms)."""
+        return extension_adjustment(self.arm, self.parameters, q, self._samples(q, columns, direction))
+
+    def _true(self, q: np.ndarray, change: Adjustment | None) -> np.ndarray:
+        """Return the true joint angles of N readouts, shape (N, n_axes), rad."""
+        corrected, _ = correct_with_slopes(q, self.parameters.encoder_maps)
+        angles: np.ndarray = self.arm.joint_angles(corrected, None if change is None else change.offsets)
+        return angles
+
+    def _configurations(self, angles: np.ndarray) -> np.ndarray:
+        """Return the model's configurations of true joint angles (N, n_axes), shape (N, nq)."""
+        if self._direct:
+            return angles
+        out = np.zeros((len(angles), self.model.nq))
+        out[:, self._axes] = angles
+        return out
+
+
+def load_calibrated(path: str | Path, arm: str | Path | None = None) -> CalibratedArm:
+    """Load a calibration for run time: a folder, or a parameters file of one.
+
+    A folder is read through its ``compact.json`` (the compact URDF, the calibrated values folded
+    into the joint origins, and the rest of the calibration) when it has one, else through its
+    ``parameters.json``: both give the same points.
+
+    Args:
+        path: a calibration folder (``aacmm-pin identify --out``) or a parameters file.
+        arm: the arm's URDF or embedded name instead of the one the parameters name.
+
+    Raises:
+        FileFormatError: for a missing or bad parameters file, or parameters that do not fit
+            the arm (naming the file and the key).
+        ArmModelError: if the URDF cannot be read.
+    """
+    file = Path(path)
+    if file.is_dir():
+        compact = file / COMPACT_PARAMETERS
+        file = compact if compact.is_file() else file / FULL_PARAMETERS
+    params = read_parameters(file)
+    return CalibratedArm(load_arm(arm if arm is not None else params.arm), params)
