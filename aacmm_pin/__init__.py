@@ -54,6 +54,7 @@ if TYPE_CHECKING:
         CampaignFormatError,
         FileFormatError,
         FrameNotFound,
+        MissingExtraError,
         Problem,
     )
     from aacmm_pin.fit.identification import identify
@@ -79,8 +80,8 @@ __all__ = [
     "CalibratedArm", "load_calibrated", "readouts_of_angles", "ArgumentError",
     "DEFAULT_ARM", "AacmmError", "Arm", "ArmModelError", "Campaign", "CampaignFormatError",
     "EncoderMap", "ErrorFrame", "FileFormatError", "FrameNotFound", "IdentificationModel",
-    "LengthBarLog", "Parameters", "Problem", "Simulation", "SimulationConfig", "SpatLog",
-    "StatedNoise", "read_noise", "PointLog", "ArmNames", "Column", "register_column",
+    "LengthBarLog", "MissingExtraError", "Parameters", "Problem", "Simulation", "SimulationConfig",
+    "SpatLog", "StatedNoise", "read_noise", "PointLog", "ArmNames", "Column", "register_column",
     "StylusJacobians", "correct_readouts", "load_arm", "node_angles", "predict",
     "read_campaign", "read_parameters", "read_readouts", "simulate_campaign", "stylus_jacobians",
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
@@ -102,7 +103,7 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "outputs.discovery_figures": ("write_discovery",),
     "model.encoder_map": ("EncoderMap", "correct_readouts", "node_angles", "readouts_of_angles"),
     "errors": ("AacmmError", "ArgumentError", "ArmModelError", "CampaignFormatError", "FileFormatError",
-               "FrameNotFound", "Problem"),
+               "FrameNotFound", "MissingExtraError", "Problem"),
     "outputs.export": ("write_calibration",),
     "fit.identification": ("identify",),
     "fit.identification_result": ("Calibration",),

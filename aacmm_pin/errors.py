@@ -72,6 +72,25 @@ class FrameNotFound(AacmmError):
         super().__init__(f"'{name}' is not in the arm; choose from: {', '.join(self.choices)}")
 
 
+class MissingExtraError(AacmmError, ModuleNotFoundError):
+    """An optional part of aacmm_pin (an extra: viewer, figures, serial, urdf) is not installed.
+
+    Also a ``ModuleNotFoundError`` (``name``: the module that is missing), so code that catches
+    a failed import catches this too.
+    """
+
+    def __init__(self, needed_by: str, extra: str, module: str, package: str | None = None):
+        self.needed_by = needed_by
+        """What needs it, e.g. ``view`` or ``Arm.urdf_robot``."""
+        self.extra = extra
+        """The extra that installs it, e.g. ``viewer``."""
+        self.package = package or module
+        """The name the missing module is installed by (``pyserial`` for ``serial``)."""
+        AacmmError.__init__(self, f"{needed_by} needs the {extra} extra ({self.package} is not "
+                                  f'installed): pip install "aacmm_pin[{extra}]"')
+        self.name = module
+
+
 class ArgumentError(AacmmError, ValueError):
     """A value given to a function is unfit: wrong shape, not finite, or in the wrong unit.
 

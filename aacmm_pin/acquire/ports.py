@@ -38,6 +38,7 @@ from typing import Any
 
 from aacmm_pin.acquire.faults import AcquisitionError, LineError
 from aacmm_pin.acquire.protocols import parse_arm_line, parse_heidenhain, parse_mitutoyo
+from aacmm_pin.extras import require
 
 READ_TIMEOUT = 0.02
 """Longest blocking read, s: how soon a reader notices its stop event."""
@@ -108,8 +109,10 @@ def open_port(url: str, baudrate: int = 115200) -> Any:
     """Open a serial port (device path or pyserial URL) for line reading; drop its old input.
 
     Raises:
+        MissingExtraError: if pyserial (the ``serial`` extra) is not installed.
         AcquisitionError: if the port cannot be opened.
     """
+    require("serial", "acquire")
     import serial
 
     try:

@@ -71,6 +71,9 @@ def _acquire(args: argparse.Namespace) -> int:
     from aacmm_pin.acquire.nest import Nest, read_nest
     from aacmm_pin.acquire.protocols import parse_gauge_spec
     from aacmm_pin.acquire.session import AcquisitionConfig, acquire
+    from aacmm_pin.extras import require
+
+    require("serial", "acquire")  # before a file is claimed or a port opened
 
     try:
         gauges = tuple(parse_gauge_spec(text, default_channel=k + 1)

@@ -242,6 +242,7 @@ def _discover_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.discovery import FitCapReached, discover
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
     from aacmm_pin.data.logs import noise_summary
+    from aacmm_pin.extras import skipped
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.units import UM
 
@@ -272,9 +273,13 @@ def _discover_into(args: argparse.Namespace) -> int:
     if result.scan is not None:
         print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
     sys.stdout.flush()
-    write_discovery(result, arm, args.out, force=args.force, campaign=campaign)
-    print(f"wrote {args.out / 'discovery.json'}, figures and the final model (CALDIR) "
-          f"in {args.out} ({result.runtime_s:.1f} s)")
+    no_figures = skipped("figures", "figures")  # without matplotlib: the results, no figures
+    write_discovery(result, arm, args.out, force=args.force, campaign=campaign,
+                    figures=no_figures is None)
+    print(f"wrote {args.out / 'discovery.json'}, {'' if no_figures else 'figures and '}the final "
+          f"model (CALDIR) in {args.out} ({result.runtime_s:.1f} s)")
+    if no_figures:
+        print(f"  {no_figures}")
     _print_urdf_loss(args.out)
     if result.capped:  # the steps so far are written; the loop ended at a fit's cap
         print(f"discover: {result.stopped_because}", file=sys.stderr)
@@ -368,6 +373,7 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.uncertainty import monte_carlo, uncertainty_report
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.output_folder import output_folder
+    from aacmm_pin.extras import skipped
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
     from aacmm_pin.outputs.plots import plot_encoder_maps
@@ -384,12 +390,13 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     axes = sorted(cal.node_identifiable)
     nodes = {a: np.degrees(cal.parameters.map(a).nodes) for a in axes}
     std = {a: mc.node_std(a, nodes[a]) for a in axes}
+    no_figures = skipped("figures", "fig6_encoder_maps.png") if axes else None
     with output_folder(out, args.force) as tmp:  # the folder whole, or not at all
         write_calibration_files(cal, arm, tmp, campaign=campaign)
         write_maps_csv(cal, tmp / "encoder_maps.csv", std=std)
         (tmp / "uncertainty.json").write_text(json.dumps(uncertainty_report(cal, mc), indent=2)
                                               + "\n")
-        if axes:
+        if axes and not no_figures:
             plot_encoder_maps({a: cal.parameters.map(a).values for a in axes},
                               tmp / "fig6_encoder_maps.png", identifiable=cal.node_identifiable,
                               std=std, reached=cal.node_reached)
@@ -400,6 +407,8 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     if campaign.points is not None:
         shaken += ", points by their stated noise"
     print(f"{mc.trials} Monte Carlo trials ({mc.converged} converged){shaken} -> {out}")
+    if no_figures:
+        print(f"  {no_figures}")
     print(f"Monte Carlo / linearised std: median {np.median(ratio):.3f}, "
           f"{np.mean(np.abs(ratio - 1) <= 0.2):.0%} of {ratio.size} identified values within 20%")
     if mc.length_std is not None:

@@ -562,9 +562,13 @@ class Arm:
 
         Raises:
             FrameNotFound: if ``dh`` or ``tools`` names a parameter the arm does not have.
+            MissingExtraError: if yourdfpy (the ``urdf`` extra) is not installed.
         """
         import io
 
+        from aacmm_pin.extras import require
+
+        require("urdf", "Arm.urdf_robot")  # yourdfpy, an extra
         import yourdfpy  # its import (trimesh, scipy.spatial) costs ~0.3 s: only here
 
         text = self.urdf_string(dh, tool, tools).encode()

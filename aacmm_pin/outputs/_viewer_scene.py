@@ -24,6 +24,7 @@ from aacmm_pin.analyses.validation import ValidationResult, points_in_main_frame
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import predict
 from aacmm_pin.effects.registry import check_extensions
+from aacmm_pin.extras import require
 from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.model.arm import Arm, load_arm, one_entry_per_axis
 from aacmm_pin.model.encoder_map import correct_readouts
@@ -43,9 +44,14 @@ _UM = 1e6
 
 
 def import_meshcat() -> Any:
-    """Import and return meshcat (0.3.2 warns of its own use of a deprecated pyzmq module)."""
+    """Import and return meshcat (0.3.2 warns of its own use of a deprecated pyzmq module).
+
+    Raises:
+        MissingExtraError: if the ``viewer`` extra (meshcat, matplotlib) is not installed.
+    """
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", "zmq.eventloop.ioloop is deprecated", DeprecationWarning)
+        require("viewer", "the viewer")
         import meshcat
         import meshcat.animation
         import meshcat.geometry

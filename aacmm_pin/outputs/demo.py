@@ -2,7 +2,8 @@
 
 Simulate a SPAT + length-bar campaign, identify the three models of the paper's Fig. 9 (DH only with
 the R-Test; proposed without the R-Test; proposed with the R-Test), validate each on the length bar,
-print the table and write the figures (Fig. 5, 6, 9) and the three calibration folders.
+print the table and write the figures (Fig. 5, 6, 9) and the three calibration folders. Without
+matplotlib (the ``figures`` extra) it writes all but the figures and says so.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign, wri
 from aacmm_pin.analyses.validation import ValidationResult, validate
 from aacmm_pin.data.campaign import read_campaign
 from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.extras import skipped
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.model.arm import load_arm
 from aacmm_pin.outputs.export import write_calibration
@@ -37,15 +39,22 @@ def run_demo(out: str | Path = "aacmm-pin-demo", seed: int = 0, force: bool = Fa
     """
     tic = time.perf_counter()
     out = Path(out)
+    no_figures = skipped("figures", "figures 5, 6 and 9")
     with output_folder(out, force) as tmp:  # claimed now; in place once all is written
-        results = _run_demo(out, tmp, seed)
-    print(f"figures: {out}/fig5_rtest_displacement.png, fig6_encoder_maps.png, "
-          f"fig9_length_errors.png ({time.perf_counter() - tic:.0f} s in all)")
+        results = _run_demo(out, tmp, seed, figures=no_figures is None)
+    if no_figures:
+        print(f"{no_figures} ({time.perf_counter() - tic:.0f} s in all)")
+    else:
+        print(f"figures: {out}/fig5_rtest_displacement.png, fig6_encoder_maps.png, "
+              f"fig9_length_errors.png ({time.perf_counter() - tic:.0f} s in all)")
     return results
 
 
-def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
-    """Write the demo's files into ``tmp`` (which becomes ``out``: the paths printed)."""
+def _run_demo(out: Path, tmp: Path, seed: int, figures: bool = True) -> dict[str, ValidationResult]:
+    """Write the demo's files into ``tmp`` (which becomes ``out``: the paths printed).
+
+    ``figures``: also the PNG files (matplotlib).
+    """
     from aacmm_pin.outputs.figure_files import figure_batch
     from aacmm_pin.outputs.plots import plot_encoder_maps, plot_length_errors, plot_rtest_displacement
     from aacmm_pin.progress import phase
@@ -75,6 +84,8 @@ def _run_demo(out: Path, tmp: Path, seed: int) -> dict[str, ValidationResult]:
               f"{'converged' if cal.success else 'NOT converged'}, nests "
               f"{cal.nests.split(':')[0].replace(' at their measured positions', '')} "
               f"-> {out / folder}")
+    if not figures:
+        return results
     print("  writing figures 5, 6 and 9 ...", flush=True)
     phase("writing figures")
     best = calibrations["proposed_rtest"]

@@ -18,6 +18,7 @@ from aacmm_pin.analyses.linear_scorer import FOLDS
 from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.data.logs import Campaign
 from aacmm_pin.data.output_folder import output_folder
+from aacmm_pin.extras import require
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.outputs.export import write_calibration_files
 from aacmm_pin.outputs.figure_files import figure_batch, fixed_figure, write_png
@@ -230,7 +231,7 @@ def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
 
 
 def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool = False,
-                    campaign: Campaign | None = None) -> Path:
+                    campaign: Campaign | None = None, figures: bool = True) -> Path:
     """Write ``discovery.json``, the figures and the final model as a CALDIR in ``folder``.
 
     Files: ``discovery.json``, ``discovery_gap.png``, ``discovery_step<k>.png`` (residuals against
@@ -238,19 +239,29 @@ def write_discovery(result: Discovery, arm: Arm, folder: str | Path, force: bool
     residual is unexplained: against the variable it follows most), and the CALDIR files of
     :func:`aacmm_pin.write_calibration` (``parameters.json`` with the extensions, ...; the
     URDF-alone loss over ``campaign``'s poses, the campaign discovered on). The folder is written
-    whole (:func:`~aacmm_pin.data.output_folder.output_folder`).
+    whole (:func:`~aacmm_pin.data.output_folder.output_folder`). ``figures=False`` leaves the PNG
+    files out (they need matplotlib, the ``figures`` extra).
 
     Raises:
+        MissingExtraError: if ``figures`` and matplotlib is not installed (checked first).
         OutputExistsError: if ``folder`` holds files and not ``force``.
     """
+    if figures:
+        require("figures", "write_discovery")
     with output_folder(folder, force) as tmp:
         write_calibration_files(result.calibration, arm, tmp, campaign=campaign)
         (tmp / "discovery.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
-        with figure_batch():
-            gap_figure(result, tmp / "discovery_gap.png")
-            for k, step in enumerate(result.steps, start=1):
-                step_figure(step, k, tmp / f"discovery_step{k}.png")
-            if result.scan is not None and result.scan.unexplained and result.scan.variables:
-                unexplained_figure(result.scan, tmp / "discovery_unexplained.png",
-                                   result.calibration.inputs)
+        if figures:
+            _write_figures(result, tmp)
     return Path(folder)
+
+
+def _write_figures(result: Discovery, folder: Path) -> None:
+    """Write the PNG files of :func:`write_discovery` into ``folder``."""
+    with figure_batch():
+        gap_figure(result, folder / "discovery_gap.png")
+        for k, step in enumerate(result.steps, start=1):
+            step_figure(step, k, folder / f"discovery_step{k}.png")
+        if result.scan is not None and result.scan.unexplained and result.scan.variables:
+            unexplained_figure(result.scan, folder / "discovery_unexplained.png",
+                               result.calibration.inputs)

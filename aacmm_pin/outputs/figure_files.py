@@ -6,7 +6,8 @@ Every PNG figure of the package (:mod:`aacmm_pin.outputs.plots`,
 GUI backend is looked for and no figure registry keeps figures alive. :func:`write_png` draws a
 figure with its text unhinted (:data:`TEXT_HINTING`) and writes it through matplotlib's own PNG
 writer (Pillow) at zlib level :data:`PNG_LEVEL`; :func:`figure_batch` keeps the garbage collector
-out of the way while a command writes its figures. matplotlib is imported inside the functions only.
+out of the way while a command writes its figures. matplotlib (the ``figures`` extra) is imported
+inside the functions only; without it they raise :class:`~aacmm_pin.errors.MissingExtraError`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
+
+from aacmm_pin.extras import require
 
 if TYPE_CHECKING:
     import numpy as np
@@ -32,6 +35,8 @@ PNG_LEVEL = 3
 """zlib level of the PNG files (Pillow's ``compress_level``; matplotlib leaves Pillow's 6). The
 file holds the same pixels; on a discovery step figure level 3 takes two thirds of level 6's CPU
 (60 against 89 ms) for a file 6 % larger (334 against 314 kB)."""
+FIGURES = "writing figures"
+"""What needs matplotlib, in the message of a missing ``figures`` extra."""
 
 
 def new_figure(width_in: float, height_in: float,
@@ -43,7 +48,11 @@ def new_figure(width_in: float, height_in: float,
         height_in: figure height, in.
         layout: ``"constrained"`` (margins measured at each draw) or None (the caller's fixed
             positions, :func:`fixed_figure`).
+
+    Raises:
+        MissingExtraError: if matplotlib (the ``figures`` extra) is not installed.
     """
+    require("figures", FIGURES)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -91,6 +100,7 @@ def write_png(fig: Figure, path: str | Path) -> Path:
     parent folders created; ticks are built only where they are drawn
     (:func:`~aacmm_pin.outputs.in_view_ticks.ticks_in_view`). Returns ``path`` as a Path.
     """
+    require("figures", FIGURES)
     import matplotlib
 
     from aacmm_pin.outputs.in_view_ticks import ticks_in_view
@@ -115,6 +125,7 @@ def figure_batch() -> Iterator[None]:
     the figures' own objects are collected as usual. Does nothing when objects are frozen already
     (a batch in a batch, or the caller's own freeze).
     """
+    require("figures", FIGURES)
     if gc.get_freeze_count():
         yield
         return

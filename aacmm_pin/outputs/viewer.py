@@ -18,7 +18,7 @@ r"""MeshCat viewer of a calibration on its campaign: the arm, the R-Test nests, 
 Without ``html`` a MeshCat server is started on localhost, prints its URL and is stopped by
 :meth:`View.close` (or the ``with`` block); with ``html`` the scene is written to one self-contained
 file (viewer JavaScript and data inlined: it opens offline) and no server is started. meshcat is
-imported inside the functions only.
+imported inside the functions only: it and matplotlib (the legend) are the ``viewer`` extra.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ import numpy as np
 from aacmm_pin.data.campaign import Campaign, read_campaign
 from aacmm_pin.data.output_claim import claim_output, input_paths
 from aacmm_pin.data.output_file import write_text_file
+from aacmm_pin.extras import require
 from aacmm_pin.model.parameters import Parameters
 
 if TYPE_CHECKING:
@@ -124,11 +125,14 @@ def view(caldir_or_params: Source, campaign: Campaign | str | Path, *, html: str
         The view; with a live server, call :meth:`View.close` (or use ``with``) to stop it.
 
     Raises:
+        MissingExtraError: if the ``viewer`` extra (meshcat, matplotlib) is not installed (checked
+            first).
         OutputExistsError: if ``html`` exists and not ``force``, or is one of the inputs.
         FileFormatError: for an unreadable calibration.
         CampaignFormatError: for a bad campaign folder.
         ValueError: for an unknown location or a non-positive scale.
     """
+    require("viewer", "view")
     if html is not None:  # the file claimed before the work (and checked against the inputs)
         inputs = input_paths(
             campaigns=[campaign if isinstance(campaign, (str, Path)) else None],
