@@ -54,10 +54,15 @@ def test_one_sample_and_batches_are_predict(arm: ap.Arm, truth: ap.Parameters) -
     np.testing.assert_allclose(rt.position(q[3], frame="mt"), mt[3], rtol=0, atol=1e-12)
 
 
-def test_extension_terms_are_predict(arm: ap.Arm, extended: ap.Parameters) -> None:
-    """With compliance, thermal, backlash, crosstalk, encoder harmonics and lateral compliance,
-    positions equal ap.predict given the same temperature and motion history (a batch's row
-    order; one sample with its direction stated)."""
+@pytest.mark.parametrize("tilted", [True, False])
+def test_extension_terms_are_predict(arm: ap.Arm, extended: ap.Parameters, tilted: bool) -> None:
+    """With compliance, thermal, backlash, crosstalk, encoder harmonics and lateral compliance
+    (``tilted``; without it one sample takes the plain-float path), positions equal ap.predict
+    given the same temperature and motion history (a batch's row order; one sample with its
+    direction stated)."""
+    if not tilted:
+        extended = extended.replace(extensions={k: v for k, v in extended.extensions.items()
+                                                if not k.startswith("lateral")})
     rt = CalibratedArm(arm, extended)
     q = _readouts(arm, 30, 1)
     temp = np.linspace(18.0, 26.0, len(q))
@@ -90,6 +95,10 @@ def test_inverse_maps_round_trip_over_every_axis(arm: ap.Arm, truth: ap.Paramete
             # and the other way round: true -> readout -> true
             theta = rt.true_angles(q)
             assert np.abs(rt.true_angles(rt.readouts(theta)) - theta).max() < 1e-9, axis
+            # one sample at a time (the plain-float path) gives the batch's values
+            for i in range(0, len(q), 997):
+                assert np.abs(rt.readouts(theta[i]) - back[i]).max() < 1e-15
+                assert np.abs(rt.true_angles(q[i]) - theta[i]).max() < 1e-15
 
 
 def test_inverse_with_extension_terms(arm: ap.Arm, extended: ap.Parameters) -> None:

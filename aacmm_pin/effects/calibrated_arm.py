@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from aacmm_pin.effects._plain_maps import PlainMaps
 from aacmm_pin.effects.calibrated import extension_adjustment
 from aacmm_pin.effects.registry import check_extensions, read_parameters
 from aacmm_pin.errors import ArgumentError
@@ -65,6 +66,7 @@ INVERSE_TOLERANCE = 1e-13
 """The fixed-point iteration of :meth:`CalibratedArm.readouts` with extension terms stops when no
 readout moves by more than this, rad."""
 _INVERSE_ITERATIONS = 50
+_WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 class CalibratedArm:
@@ -98,15 +100,15 @@ class CalibratedArm:
         self._axes = self._joints.axes
         self._direct = self.model.nq == n and bool(np.array_equal(self._axes, np.arange(n)))
         lo, hi = (arm.joint_limits - [DEGREE_MARGIN, -DEGREE_MARGIN]).T
-        self._lo, self._hi = lo.tolist(), hi.tolist()
-        maps = params.encoder_maps
-        self._tables: list[list[float] | None] = [
-            None if a + 1 not in maps else [*maps[a + 1].values.tolist(), float(maps[a + 1].values[0])]
-            for a in range(n)]
-        self._steps = [math.radians(maps[a + 1].step_deg) if a + 1 in maps else 1.0 for a in range(n)]
+        self._lo, self._hi = lo, hi
+        self._plain = PlainMaps(params.encoder_maps, n, lo.tolist(), hi.tolist(),
+                                lambda values, name: self._refuse(np.array([values]), name))
         self._shape = (n,)
         self._fid = self.tool_frames[0]
-        self._fast = not params.extensions and not arm.couplings and self._direct
+        self._plain_ok = not arm.couplings and self._direct and arm.n_tools == 1
+        """Whether one sample may take the plain-float path (:mod:`._plain_maps`)."""
+        self._fast = self._plain_ok and not params.extensions
+        """... and needs no extension term either."""
         self._rotation = params.rotation()
         self._translation = np.asarray(params.translation, dtype=float)
 
@@ -152,9 +154,9 @@ class CalibratedArm:
         Returns:
             Shape like ``readouts``, rad.
         """
+        if self._fast and columns is None and (vals := self._one(readouts)) is not None:
+            return np.array(self._plain.forward(vals, "readouts")[0])
         q, one = self._readouts(readouts, "readouts")
-        if self._fast and one:
-            return self._true_one(q[0].tolist(), "readouts")
         angles = self._true(q, self._change(q, columns, direction))
         return angles[0] if one else angles
 
@@ -180,6 +182,9 @@ class CalibratedArm:
         Raises:
             ArgumentError: for bad ``angles``, or if the iteration does not settle.
         """
+        if self._fast and columns is None and (vals := self._one(angles)) is not None and (
+                inverse := self._plain.inverse(vals, "angles")) is not None:
+            return np.array(inverse)
         theta, one = self._readouts(angles, "angles")
         maps = self.parameters.encoder_maps
         q = readouts_of_angles(theta, maps)
@@ -214,11 +219,17 @@ class CalibratedArm:
         Returns:
             Shape (3,) for one sample, (N, 3) for N, m.
         """
-        if self._fast and tool is None and frame == "r" and (vals := self._one(readouts)) is not None:
-            pin.forwardKinematics(self.model, self.data, self._true_one(vals))
-            point: np.ndarray = pin.updateFramePlacement(self.model, self.data,
-                                                         self._fid).translation.copy()
-            return point
+        if self._plain_ok and frame == "r" and tool is None and (
+                vals := self._one(readouts)) is not None:
+            angles = np.array(self._plain.forward(vals, "readouts")[0])
+            change = self._change(np.array([vals]), columns, direction)
+            if change is None or not change.tilted:  # else predict's tilt columns, below
+                if change is not None:
+                    angles += change.offsets[0]
+                pin.forwardKinematics(self.model, self.data, angles)
+                point: np.ndarray = pin.updateFramePlacement(self.model, self.data,
+                                                             self._fid).translation.copy()
+                return point if change is None else point * change.scale[0]
         q, one = self._readouts(readouts, "readouts")
         self._check_frame(frame)
         samples = self._samples(q, columns, direction)
@@ -246,6 +257,13 @@ class CalibratedArm:
         Returns:
             Shape (4, 4) for one sample, (N, 4, 4) for N.
         """
+        if self._fast and frame == "r" and tool is None and columns is None and (
+                vals := self._one(readouts)) is not None:
+            pin.forwardKinematics(self.model, self.data, np.array(self._plain.forward(vals,
+                                                                                      "readouts")[0]))
+            placement: np.ndarray = pin.updateFramePlacement(self.model, self.data,
+                                                             self._fid).homogeneous
+            return placement
         q, one = self._readouts(readouts, "readouts")
         self._check_frame(frame)
         angles = self._true(q, self._change(q, columns, direction))
@@ -283,6 +301,12 @@ class CalibratedArm:
         Returns:
             Shape (6, n_axes) for one sample, (N, 6, n_axes) for N.
         """
+        if self._fast and frame == "r" and tool is None and columns is None and (
+                vals := self._one(readouts)) is not None:
+            one_angles, slopes = self._plain.forward(vals, "readouts")
+            jac: np.ndarray = pin.computeFrameJacobian(self.model, self.data, np.array(one_angles),
+                                                       self._fid, _WORLD) * slopes
+            return jac
         q, one = self._readouts(readouts, "readouts")
         self._check_frame(frame)
         change = self._change(q, columns, direction)
@@ -291,10 +315,9 @@ class CalibratedArm:
         angles = self._true(q, change)
         fids = np.asarray(self.tool_frames)[self._tool(tool, len(q))]
         out = np.empty((len(q), 6, self.n_axes))
-        world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         for i, (theta, fid) in enumerate(zip(self._configurations(angles), fids)):
-            jac = pin.computeFrameJacobian(self.model, self.data, theta, int(fid), world)
-            out[i] = jac[:, self._axes]
+            out[i] = pin.computeFrameJacobian(self.model, self.data, theta, int(fid),
+                                              _WORLD)[:, self._axes]
         if self.arm.couplings:
             out = out @ self.arm.coupling_matrix
         out *= slope[:, None, :]
@@ -319,8 +342,7 @@ class CalibratedArm:
                                 f"value per axis of the arm ({', '.join(self.arm.axis_names)}), in "
                                 f"rad; got shape {q.shape}")
         q = q.reshape(-1, self.n_axes)
-        lo, hi = np.asarray(self._lo), np.asarray(self._hi)
-        if not ((q >= lo) & (q <= hi)).all():  # NaN fails too
+        if not ((q >= self._lo) & (q <= self._hi)).all():  # NaN fails too
             self._refuse(q, name)
         return q, one
 
@@ -331,8 +353,7 @@ class CalibratedArm:
             i, a = np.argwhere(bad)[0]
             raise ArgumentError(f"{name}: sample {i}, axis {a + 1} ({self.arm.axis_names[a]}) is "
                                 f"{q[i, a]}: every value must be a finite number in rad")
-        lo, hi = np.asarray(self._lo), np.asarray(self._hi)
-        i, a = np.argwhere((q < lo) | (q > hi))[0]
+        i, a = np.argwhere((q < self._lo) | (q > self._hi))[0]
         limits = self.arm.joint_limits[a]
         raise ArgumentError(f"{name}: sample {i}, axis {a + 1} ({self.arm.axis_names[a]}) is "
                             f"{q[i, a]:.6g} rad, beyond its limits [{limits[0]:.4g}, "
@@ -361,22 +382,6 @@ class CalibratedArm:
                 type(v) is float for v in values):
             return list(values)
         return None
-
-    def _true_one(self, q: list[float], name: str = "readouts") -> np.ndarray:
-        """One sample's true angles in plain floats (no couplings, no extension terms), checked."""
-        out = []
-        for x, table, step, lo, hi in zip(q, self._tables, self._steps, self._lo, self._hi):
-            if not lo <= x <= hi:  # NaN too
-                self._refuse(np.array([q]), name)
-            if table is not None:
-                u = ((x + math.pi) % (2.0 * math.pi)) / step
-                k = int(u)
-                if k >= len(table) - 1:  # u == n after rounding: node 0 of the next turn
-                    k, u = 0, 0.0
-                f = u - k
-                x = x + table[k] * (1.0 - f) + table[k + 1] * f
-            out.append(x)
-        return np.array(out)
 
     def _samples(self, q: np.ndarray, columns: Mapping[str, np.ndarray] | None,
                  direction: np.ndarray | None) -> Samples | None:

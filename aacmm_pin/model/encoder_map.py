@@ -8,6 +8,7 @@ Paper Section 2.2: the error :math:`\Delta\theta_{n,map}(i_n)` is tabulated at n
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -164,22 +165,37 @@ class EncoderMap:
         angle: np.ndarray = readout + self(readout)
         return angle
 
-    @property
+    @cached_property
     def invertible(self) -> bool:
         """Whether :meth:`correct` rises on every segment (slope of the error above -1).
 
         A map of physical errors (arcseconds over a few degrees) always is; a map that is not
         would give two readouts for one angle.
         """
-        return bool(np.all(np.radians(self.step_deg) + np.diff(self.values, append=self.values[:1])
-                           > 0.0))
+        return bool(np.all(self._slopes > 0.0))
+
+    @cached_property
+    def _slopes(self) -> np.ndarray:
+        """d(corrected angle)/d(readout) on each segment, shape (n_nodes,)."""
+        slopes: np.ndarray = 1.0 + np.diff(self.values, append=self.values[:1]) / np.radians(
+            self.step_deg)
+        return slopes
+
+    @cached_property
+    def breakpoints(self) -> np.ndarray:
+        """The corrected angle at the nodes over one turn, node 0 .. node n (node 0 + 2 pi),
+        shape (n_nodes + 1,), rad: :meth:`correct` maps segment k onto
+        ``breakpoints[k] .. breakpoints[k + 1]``."""
+        out: np.ndarray = (np.append(self.nodes, self.nodes[0] + TWO_PI)
+                           + np.append(self.values, self.values[0]))
+        return out
 
     def inverse(self, angle: np.ndarray) -> np.ndarray:
         r"""Return the readouts whose corrected angle is ``angle``: the inverse of :meth:`correct`.
 
         :meth:`correct` is piecewise linear, :math:`r + e(r)`, node k of the table going to
-        :math:`\theta^*_k + e_k`; each segment is inverted exactly (one division), so
-        ``correct(inverse(a)) == a`` to rounding, at any turn.
+        :math:`\theta^*_k + e_k` (:attr:`breakpoints`); each segment is inverted exactly (one
+        division), so ``correct(inverse(a)) == a`` to rounding, at any turn.
 
         Args:
             angle: true joint angles, any shape, rad.
@@ -194,15 +210,12 @@ class EncoderMap:
             raise ValueError("encoder map: its corrected angle falls on some segment (an error "
                              "slope below -1); it has no inverse")
         angle = np.asarray(angle, dtype=float)
-        step = np.radians(self.step_deg)
-        # breakpoints of the corrected angle over one turn, node 0 .. node n (= node 0 + 2 pi)
-        values = np.append(self.values, self.values[0])
-        breaks = np.append(self.nodes, self.nodes[0] + TWO_PI) + values
+        breaks = self.breakpoints
         turns = np.floor((angle - breaks[0]) / TWO_PI)
         reduced = angle - TWO_PI * turns          # in [breaks[0], breaks[0] + 2 pi)
         k = np.clip(np.searchsorted(breaks, reduced, side="right") - 1, 0, self.n_nodes - 1)
-        slope = 1.0 + (values[k + 1] - values[k]) / step
-        readout: np.ndarray = self.nodes[k] + (reduced - breaks[k]) / slope + TWO_PI * turns
+        readout: np.ndarray = (self.nodes[k] + (reduced - breaks[k]) / self._slopes[k]
+                               + TWO_PI * turns)
         return readout
 
 
