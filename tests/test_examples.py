@@ -188,6 +188,8 @@ def test_06_robotics_stack_commands_the_calibration_through_pink(tmp_path: Path)
     assert no_inverse[0] > float(own.group(1)) > calibrated[0]
     folder = tmp_path / "ex6" / "calibration"
     assert {p.name for p in folder.iterdir()} >= {"compact.urdf", "compact.json", "calibrated.urdf"}
+    for urdf in ("compact.urdf", "calibrated.urdf"):  # the Gazebo plugin's library kept as written
+        assert '<plugin filename="libgazebo_ros_control.so"' in (folder / urdf).read_text()
 
 
 @pytest.mark.slow  # every example once: about 90 s CPU
