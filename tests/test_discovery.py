@@ -229,7 +229,7 @@ def test_cli_prints_each_result_before_any_figure(arm: ap.Arm, tmp_path, monkeyp
     ap.write_simulation(sim, tmp_path / "camp")
     printed_before: list[str] = []
 
-    def writer(result, arm, folder, force=False):  # the figures' writer, recording what came first
+    def writer(result, arm, folder, force=False, **_):  # the figures' writer: what came first
         printed_before.append(capsys.readouterr().out)
         return folder
 

@@ -155,6 +155,43 @@ def test_no_package_file_knows_the_plugins_column() -> None:
     assert knowing == []
 
 
+def _reached(out: str, label: str) -> tuple[float, float]:
+    """Return one row of example 06's reached-error table: (mean, max), mm."""
+    row = re.search(rf"^{re.escape(label)}\s+(\S+)\s+(\S+)$", out, re.MULTILINE)
+    assert row is not None, out
+    return float(row.group(1)), float(row.group(2))
+
+
+def test_06_robotics_stack_commands_the_calibration_through_pink(tmp_path: Path) -> None:
+    """Example 06: the unedited example-robot-data UR5 calibrated from the tracker grid; its
+    compact.urdf in plain Pinocchio keeps the ROS names and, at the runtime object's true angles,
+    gives its points; pink's solutions commanded through the inverse maps reach the targets far
+    closer than the nominal URDF's, and closer than without the inverse maps."""
+    out = _run("06_robotics_stack.py", "--out", "ex6", cwd=tmp_path)
+    assert ("compact.urdf in plain Pinocchio: 12 links, joints shoulder_pan_joint, "
+            "shoulder_lift_joint, elbow_joint, wrist_1_joint, wrist_2_joint, wrist_3_joint; frames "
+            "tool0 True, tool0_point True") in out
+    assert "calibrated.urdf: 32 links (20 more: its error frames), the same joints True" in out
+    gap = re.search(r"rt\.position\(q\), 20 test poses: max (\S+) m", out)
+    assert gap is not None and float(gap.group(1)) < 1e-12, out
+    own = re.search(rf"the calibration on the 20 test poses \(vs the tracker\): mean ({NUMBER}) mm",
+                    out)
+    assert own is not None and float(own.group(1)) < 0.063, out  # 0.0602 mm: --arm ur5 + 5 %
+    calibrated = _reached(out, "calibrated: compact.urdf + rt.readouts")
+    no_inverse = _reached(out, "compact.urdf, no inverse maps")
+    uncalibrated = _reached(out, "uncalibrated: nominal ROS URDF")
+    assert uncalibrated[0] > 1.0  # the nominal UR5 is millimetres off (2.56 mm on the tracker)
+    # commanding through the calibration adds far less than the calibration's own test error
+    assert calibrated[0] < 0.1 * float(own.group(1)) and calibrated[1] < 0.1 * float(own.group(1))
+    assert calibrated[0] < 0.5 * uncalibrated[0]
+    # the maps and terms the URDF lacks are worth more than the calibration's own error
+    assert no_inverse[0] > float(own.group(1)) > calibrated[0]
+    folder = tmp_path / "ex6" / "calibration"
+    assert {p.name for p in folder.iterdir()} >= {"compact.urdf", "compact.json", "calibrated.urdf"}
+    for urdf in ("compact.urdf", "calibrated.urdf"):  # the Gazebo plugin's library kept as written
+        assert '<plugin filename="libgazebo_ros_control.so"' in (folder / urdf).read_text()
+
+
 @pytest.mark.slow  # every example once: about 90 s CPU
 def test_examples_leave_a_clean_clone(tmp_path: Path) -> None:
     """Issue 26 item 9. A copy of the repository's tracked files, committed: after each example
@@ -174,7 +211,8 @@ def test_examples_leave_a_clean_clone(tmp_path: Path) -> None:
         subprocess.run([*git, *cmd], cwd=repo, check=True)
     runs = [("01_reproduce_paper.py",), ("02_discover_compliance.py", "--samples", "60",
                                         "--placements", "3"),
-            ("03_laser_tracker_ur5_wam.py",), ("04_unexplained_drift.py",), ("05_plugin.py",)]
+            ("03_laser_tracker_ur5_wam.py",), ("04_unexplained_drift.py",), ("05_plugin.py",),
+            ("06_robotics_stack.py",)]
     for script, *args in runs:
         proc = subprocess.run([sys.executable, str(repo / "examples" / script), *args], cwd=repo,
                               env=ENV, capture_output=True, text=True, timeout=900)
