@@ -183,9 +183,11 @@ class EncoderMap:
 
     @cached_property
     def breakpoints(self) -> np.ndarray:
-        """The corrected angle at the nodes over one turn, node 0 .. node n (node 0 + 2 pi),
-        shape (n_nodes + 1,), rad: :meth:`correct` maps segment k onto
-        ``breakpoints[k] .. breakpoints[k + 1]``."""
+        """The corrected angle at the nodes over one turn, shape (n_nodes + 1,), rad.
+
+        Node 0 .. node n (node 0 + 2 pi): :meth:`correct` maps segment k onto
+        ``breakpoints[k] .. breakpoints[k + 1]``.
+        """
         out: np.ndarray = (np.append(self.nodes, self.nodes[0] + TWO_PI)
                            + np.append(self.values, self.values[0]))
         return out
