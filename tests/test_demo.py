@@ -18,7 +18,8 @@ def test_demo_prints_table_and_writes_everything(tmp_path, capsys):
         assert (tmp_path / fig).stat().st_size > 20_000
     rms = {}
     for folder in ("dh_rtest", "proposed_no_rtest", "proposed_rtest"):
-        for name in ("parameters.json", "calibrated.urdf", "encoder_maps.csv", "report.json"):
+        for name in ("parameters.json", "calibrated.urdf", "compact.json", "compact.urdf",
+                     "encoder_maps.csv", "report.json"):
             assert (tmp_path / folder / name).is_file()
         rms[folder] = json.loads((tmp_path / folder / "validation.json").read_text())["rms_um"]
     assert rms["proposed_rtest"] < rms["dh_rtest"]

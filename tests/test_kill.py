@@ -134,6 +134,7 @@ def kill_identify(campaign: Path, work: Path, seed: int, n: int, ends: bool = Fa
         params = ap.read_parameters(out)
         assert params.encoder_maps, f"{out} is not the new (proposed) calibration"
         assert {p.name for p in out.iterdir()} == {"parameters.json", "calibrated.urdf",
+                                                   "compact.json", "compact.urdf",
                                                    "encoder_maps.csv", "report.json"}
 
     return _kill_over(campaign.parent / "old_cal", "calibration", work, "cal",
