@@ -229,3 +229,22 @@ def test_a_map_that_folds_back_has_no_inverse() -> None:
     with pytest.raises(ValueError, match="no inverse"):
         emap.inverse(np.zeros(3))
     assert EncoderMap(np.full(72, 1e-3)).invertible
+
+
+def test_frames_configuration_and_directions(arm: ap.Arm, truth: ap.Parameters) -> None:
+    """to_arm_frame inverts frame='mt'; configuration is the model's (true angles); tool_links
+    name the model's frames; motion_direction keeps an axis' side while it rests."""
+    rt = CalibratedArm(arm, truth)
+    q = _readouts(arm, 6, 9)
+    np.testing.assert_allclose(rt.to_arm_frame(rt.position(q, frame="mt")), rt.position(q),
+                               rtol=0, atol=1e-14)
+    np.testing.assert_allclose(rt.to_arm_frame(rt.position(q[0], frame="mt")), rt.position(q[0]),
+                               rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(rt.configuration(q), rt.true_angles(q))
+    assert rt.configuration(q[0]).shape == (rt.model.nq,)
+    assert rt.tool_links == ["stylus"] and rt.model.existFrame("stylus")
+    with pytest.raises(ArgumentError, match=r"points: need finite numbers, shape \(3,\)"):
+        rt.to_arm_frame(np.zeros((2, 2)))
+    d = CalibratedArm.motion_direction(np.zeros(3), np.array([0.1, 0.0, -0.2]), np.array([0, -1, 1]))
+    np.testing.assert_array_equal(d, [1, -1, -1])
+    np.testing.assert_array_equal(CalibratedArm.motion_direction(np.zeros(2), np.zeros(2)), [0, 0])

@@ -43,8 +43,12 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.effects._plain_maps import PlainMaps
-from aacmm_pin.effects.calibrated import extension_adjustment
-from aacmm_pin.effects.registry import check_extensions, read_parameters
+from aacmm_pin.effects.registry import (
+    check_extensions,
+    read_parameters,
+    term_from_key,
+    terms_adjustment,
+)
 from aacmm_pin.errors import ArgumentError
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.encoder_map import correct_with_slopes, readouts_of_angles
@@ -109,6 +113,8 @@ class CalibratedArm:
         """Whether one sample may take the plain-float path (:mod:`._plain_maps`)."""
         self._fast = self._plain_ok and not params.extensions
         """... and needs no extension term either."""
+        self._terms = [(term_from_key(key), np.asarray(values, dtype=float))
+                       for key, values in params.extensions.items()]
         self._rotation = params.rotation()
         self._translation = np.asarray(params.translation, dtype=float)
 
@@ -134,6 +140,76 @@ class CalibratedArm:
     def tool_names(self) -> list[str]:
         """The tools' names (``tool=`` of every method), in tool order."""
         return list(self.arm.tool_names)
+
+    @property
+    def tool_links(self) -> list[str]:
+        """The tools' frames in :attr:`model` (and ``compact.urdf``) by name, in tool order.
+
+        The links the measured points are: an inverse kinematics' frame task names one.
+        """
+        return list(self.arm.tool_links)
+
+    def configuration(self, readouts: np.ndarray, *,
+                      columns: Mapping[str, np.ndarray] | None = None,
+                      direction: np.ndarray | None = None) -> np.ndarray:
+        """Return :attr:`model`'s configuration at readouts: :meth:`true_angles` in its entries.
+
+        The same as :meth:`true_angles` for a serial arm; a model with further configuration
+        entries (a tree's joints on no tool's chain) has them at zero.
+
+        Args:
+            readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
+            columns: per-sample inputs of extension terms (see :meth:`true_angles`).
+            direction: motion directions for backlash terms (see :meth:`true_angles`).
+
+        Returns:
+            Shape (nq,) or (N, nq), rad.
+        """
+        angles = self.true_angles(readouts, columns=columns, direction=direction)
+        out = self._configurations(np.atleast_2d(angles))
+        return out[0] if angles.ndim == 1 else out
+
+    def to_arm_frame(self, points: np.ndarray) -> np.ndarray:
+        """Return points given in the instrument's frame (``frame="mt"``) in the arm's own frame.
+
+        The inverse of the calibration's ``base_to_mt`` (paper Eq. 4): e.g. a laser tracker's
+        measured points as targets of an inverse kinematics on :attr:`model`.
+
+        Args:
+            points: shape (3,) or (N, 3), m, in the instrument's frame.
+
+        Returns:
+            Shape like ``points``, m, in the arm's frame (r-CS).
+        """
+        p = np.asarray(points, dtype=float)
+        if p.ndim not in (1, 2) or p.shape[-1] != 3 or not np.isfinite(p).all():
+            raise ArgumentError(f"points: need finite numbers, shape (3,) or (N, 3), in m; got shape "
+                                f"{p.shape}")
+        out: np.ndarray = (p - self._translation) @ self._rotation
+        return out
+
+    @staticmethod
+    def motion_direction(previous: np.ndarray, readouts: np.ndarray,
+                         direction: np.ndarray | None = None) -> np.ndarray:
+        """Return the direction each axis last moved in after a move from ``previous``.
+
+        What backlash terms read (``direction=`` of every method) when samples come one at a
+        time: +1 or -1 where a readout changed, else the axis' earlier ``direction`` (0 before
+        it first moves). For a command, pass the last commanded readouts and an estimate of the
+        new ones (e.g. the target's true angles: the sign of a move is the same).
+
+        Args:
+            previous: the readouts before, shape (n_axes,), rad.
+            readouts: the readouts now, shape (n_axes,), rad.
+            direction: each axis' direction before, shape (n_axes,); None: zeros.
+
+        Returns:
+            Shape (n_axes,): +1, -1 or 0.
+        """
+        step = np.sign(np.asarray(readouts, dtype=float) - np.asarray(previous, dtype=float))
+        before = np.zeros_like(step) if direction is None else np.asarray(direction, dtype=float)
+        out: np.ndarray = np.where(step != 0.0, step, before)
+        return out
 
     # ------------------------------------------------------------------ angles
     def true_angles(self, readouts: np.ndarray, *, columns: Mapping[str, np.ndarray] | None = None,
@@ -186,13 +262,12 @@ class CalibratedArm:
                 inverse := self._plain.inverse(vals, "angles")) is not None:
             return np.array(inverse)
         theta, one = self._readouts(angles, "angles")
-        maps = self.parameters.encoder_maps
-        q = readouts_of_angles(theta, maps)
+        q = self._inverse_maps(theta)
         if self.parameters.extensions:
             for _ in range(_INVERSE_ITERATIONS):
                 change = self._change(q, columns, direction)
                 assert change is not None
-                new = readouts_of_angles(theta - change.offsets, maps)
+                new = self._inverse_maps(theta - change.offsets)
                 moved = float(np.max(np.abs(new - q), initial=0.0))
                 q = new
                 if moved <= INVERSE_TOLERANCE:
@@ -233,7 +308,7 @@ class CalibratedArm:
         q, one = self._readouts(readouts, "readouts")
         self._check_frame(frame)
         samples = self._samples(q, columns, direction)
-        change = extension_adjustment(self.arm, self.parameters, q, samples)
+        change = None if samples is None else terms_adjustment(self._terms, samples, self.n_axes)
         points = self._joints.positions(q, self._tool(tool, len(q)), change, samples)
         if frame == "mt":
             points = points @ self._rotation.T + self._translation
@@ -408,10 +483,24 @@ class CalibratedArm:
             samples._direction = d
         return samples
 
+    def _inverse_maps(self, theta: np.ndarray) -> np.ndarray:
+        """Return the readouts of N samples' angles through the maps alone, shape (N, n_axes)."""
+        if len(theta) == 1 and self._plain_ok and (
+                one := self._plain.inverse(theta[0].tolist(), "angles")) is not None:
+            return np.array([one])
+        return readouts_of_angles(theta, self.parameters.encoder_maps)
+
     def _change(self, q: np.ndarray, columns: Mapping[str, np.ndarray] | None,
                 direction: np.ndarray | None) -> Adjustment | None:
-        """Return the extension terms' change of the arm at N readouts (None without terms)."""
-        return extension_adjustment(self.arm, self.parameters, q, self._samples(q, columns, direction))
+        """Return the extension terms' change of the arm at N readouts (None without terms).
+
+        :func:`aacmm_pin.effects.calibrated.extension_adjustment` with the terms looked up once.
+        """
+        if not self._terms:
+            return None
+        samples = self._samples(q, columns, direction)
+        assert samples is not None
+        return terms_adjustment(self._terms, samples, self.n_axes)
 
     def _true(self, q: np.ndarray, change: Adjustment | None) -> np.ndarray:
         """Return the true joint angles of N readouts, shape (N, n_axes), rad."""

@@ -246,9 +246,19 @@ def plugins_of(terms: Iterable[Term]) -> dict[str, list[str]]:
 
 def adjustment(extensions: Mapping[str, np.ndarray], samples: Samples, n_axes: int) -> Adjustment:
     """Return how the extension terms change the arm at the samples (see :class:`Adjustment`)."""
+    return terms_adjustment([(term_from_key(key), np.asarray(values, dtype=float))
+                             for key, values in extensions.items()], samples, n_axes)
+
+
+def terms_adjustment(terms: Iterable[tuple[Term, np.ndarray]], samples: Samples, n_axes: int
+                     ) -> Adjustment:
+    """Return how terms with their values change the arm at the samples (see :class:`Adjustment`).
+
+    :func:`adjustment` with the terms looked up once (the runtime object holds them).
+    """
     out = Adjustment(samples.n, n_axes)
-    for key, values in extensions.items():
-        term_from_key(key).adjust(np.asarray(values, dtype=float), samples, out)
+    for term, values in terms:
+        term.adjust(values, samples, out)
     return out
 
 
