@@ -124,7 +124,7 @@ def plain_pinocchio(folder: Path, readouts: np.ndarray) -> ap.CalibratedArm:
 
     rt = ap.load_calibrated(folder)  # compact.json: maps, extension terms, frame to the tracker
     data = compact.createData()
-    point = compact.getFrameId(rt.arm.tool_links[0])
+    point = compact.getFrameId(rt.tool_links[0])
     urdf_points = []
     for theta in rt.true_angles(readouts):  # the URDF's joint angles: maps and extension terms
         pin.framesForwardKinematics(compact, data, theta)
@@ -136,13 +136,6 @@ def plain_pinocchio(folder: Path, readouts: np.ndarray) -> ap.CalibratedArm:
     print(f"Pinocchio's FK of compact.urdf at rt.true_angles(q) vs rt.position(q), {len(readouts)} "
           f"test poses: max {gap:.1e} m (extension terms: {terms}; {why})")
     return rt
-
-
-def arm_frame_points(rt: ap.CalibratedArm, p_mt: np.ndarray) -> np.ndarray:
-    """Return points measured in the instrument's frame in the arm's frame, shape (N, 3), m."""
-    rotation = np.asarray(rt.parameters.rotation())  # the calibration's base_to_mt, Eq. 4
-    p_r: np.ndarray = (p_mt - np.asarray(rt.parameters.translation)) @ rotation  # R^T (p_mt - t)
-    return p_r
 
 
 def solve_path(model: pin.Model, frame: str, targets: np.ndarray, q0: np.ndarray,
@@ -197,7 +190,7 @@ def reach(rt: ap.CalibratedArm, folder: Path, targets: np.ndarray, start: np.nda
     nominal.addFrame(pin.Frame("tracker_point", tool0.parentJoint, nominal.getFrameId("tool0"),
                                tool0.placement * pin.SE3(np.eye(3), NOMINAL_TOOL),
                                pin.FrameType.OP_FRAME))
-    true_angles = solve_path(compact, rt.arm.tool_links[0], targets, start)
+    true_angles = solve_path(compact, rt.tool_links[0], targets, start)
     ways = [("calibrated: compact.urdf + rt.readouts", rt.readouts(true_angles)),
             ("compact.urdf, no inverse maps", true_angles),
             ("uncalibrated: nominal ROS URDF", solve_path(nominal, "tracker_point", targets, start))]
@@ -216,7 +209,7 @@ def run(data: Path, out: Path, model: str) -> list[Reached]:
     rt = plain_pinocchio(folder, test.q)
     own = np.linalg.norm(rt.position(test.q, frame="mt") - test.point, axis=1).mean() * 1e3
     print(f"the calibration on the {len(test.q)} test poses (vs the tracker): mean {own:.4f} mm")
-    return reach(rt, folder, arm_frame_points(rt, test.point), start=test.q[0])
+    return reach(rt, folder, rt.to_arm_frame(test.point), start=test.q[0])  # tracker -> arm
 
 
 if __name__ == "__main__":
