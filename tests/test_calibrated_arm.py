@@ -181,7 +181,8 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("method", ["true_angles", "readouts", "position", "placement", "jacobian"])
+@pytest.mark.parametrize("method", ["true_angles", "readouts", "position", "placement", "jacobian",
+                                    "configuration", "motion_direction"])
 @pytest.mark.parametrize("value, message", BAD)
 def test_every_method_refuses_bad_values_in_one_line(arm: ap.Arm, truth: ap.Parameters,
                                                      method: str, value: object, message: str
@@ -189,12 +190,17 @@ def test_every_method_refuses_bad_values_in_one_line(arm: ap.Arm, truth: ap.Para
     """A wrong axis count, NaN and degrees given for radians raise ArgumentError (a ValueError
     too), one line naming the argument, from every public method."""
     rt = CalibratedArm(arm, truth)
+    call = getattr(rt, method)
     with pytest.raises(ArgumentError, match=message) as info:
-        getattr(rt, method)(value)
+        call(np.zeros(7), value) if method == "motion_direction" else call(value)
     text = str(info.value)
     assert "\n" not in text
     assert text.startswith("angles:" if method == "readouts" else "readouts:")
     assert isinstance(info.value, ValueError)
+    if method == "motion_direction":  # and the other argument
+        with pytest.raises(ArgumentError, match=message) as info:
+            call(value, np.zeros(7))
+        assert str(info.value).startswith("previous:")
 
 
 def test_bad_frame_and_tool_are_refused(arm: ap.Arm, truth: ap.Parameters) -> None:
@@ -243,8 +249,12 @@ def test_frames_configuration_and_directions(arm: ap.Arm, truth: ap.Parameters) 
     np.testing.assert_array_equal(rt.configuration(q), rt.true_angles(q))
     assert rt.configuration(q[0]).shape == (rt.model.nq,)
     assert rt.tool_links == ["stylus"] and rt.model.existFrame("stylus")
-    with pytest.raises(ArgumentError, match=r"points: need finite numbers, shape \(3,\)"):
-        rt.to_arm_frame(np.zeros((2, 2)))
-    d = CalibratedArm.motion_direction(np.zeros(3), np.array([0.1, 0.0, -0.2]), np.array([0, -1, 1]))
-    np.testing.assert_array_equal(d, [1, -1, -1])
-    np.testing.assert_array_equal(CalibratedArm.motion_direction(np.zeros(2), np.zeros(2)), [0, 0])
+    for bad in (np.zeros((2, 2)), np.array([0.0, np.nan, 1.0]), np.zeros((2, 2, 3))):
+        with pytest.raises(ArgumentError, match=r"points: need finite numbers, shape \(3,\)"):
+            rt.to_arm_frame(bad)
+    now = np.array([0.1, 0.0, -0.2, 0.0, 0.0, 0.0, 0.3])
+    d = rt.motion_direction(np.zeros(7), now, np.array([0, -1, 1, 0, 1, 0, 0]))
+    np.testing.assert_array_equal(d, [1, -1, -1, 0, 1, 0, 1])
+    np.testing.assert_array_equal(rt.motion_direction(now, now), np.zeros(7))
+    with pytest.raises(ArgumentError, match="direction: need"):
+        rt.motion_direction(now, now, np.full(7, 2.0))

@@ -41,6 +41,31 @@ def test_ur5_discovered_model_on_the_random_poses(tmp_path, monkeypatch):
     runtime = ap.load_calibrated(tmp_path / "ur5_discovered")
     assert not runtime.arm.error_frames
     assert abs(runtime.position(q) - reference).max() < 1e-9
+    # the URDF alone's loss written by the export = plain Pinocchio of compact.urdf (readouts as
+    # joint angles) against predict with the grid's samples (row order: the backlash's motion)
+    import json
+
+    import numpy as np
+    import pinocchio as pin
+
+    from aacmm_pin.model.samples import Samples
+
+    grid = ap.read_campaign(tmp_path / "ur5_grid").points
+    model = pin.buildModelFromUrdf(str(tmp_path / "ur5_discovered" / "compact.urdf"))
+    data, frame = model.createData(), model.getFrameId(runtime.tool_links[0])
+    alone = []
+    for qi in grid.q:
+        pin.framesForwardKinematics(model, data, qi)
+        alone.append(data.oMf[frame].translation.copy())
+    full_arm = ap.load_arm(folder.parameters.arm)
+    full = ap.predict(full_arm, folder.parameters, grid.q, Samples.of_log(full_arm, grid))
+    d = np.linalg.norm(np.array(alone) - full, axis=1) / 1e-6  # um
+    entry = json.loads((tmp_path / "ur5_discovered" / "report.json").read_text())["urdf_alone_loss_um"]
+    assert entry["n_poses"] == len(d)
+    assert entry["rms"] == pytest.approx(np.sqrt(np.mean(d ** 2)), abs=1e-3)
+    assert entry["max"] == pytest.approx(d.max(), abs=1e-3) and d.max() > 100  # maps, backlash
+    assert f"alone is {entry['rms']:.3g} um RMS" in (tmp_path / "ur5_discovered" /
+                                                     "compact.urdf").read_text()
 
 
 ROS_UR5 = SHARED / "robots" / "ur5-ros-industrial" / "ur5_robot.urdf"

@@ -188,8 +188,7 @@ class CalibratedArm:
         out: np.ndarray = (p - self._translation) @ self._rotation
         return out
 
-    @staticmethod
-    def motion_direction(previous: np.ndarray, readouts: np.ndarray,
+    def motion_direction(self, previous: np.ndarray, readouts: np.ndarray,
                          direction: np.ndarray | None = None) -> np.ndarray:
         """Return the direction each axis last moved in after a move from ``previous``.
 
@@ -206,9 +205,17 @@ class CalibratedArm:
         Returns:
             Shape (n_axes,): +1, -1 or 0.
         """
-        step = np.sign(np.asarray(readouts, dtype=float) - np.asarray(previous, dtype=float))
-        before = np.zeros_like(step) if direction is None else np.asarray(direction, dtype=float)
-        out: np.ndarray = np.where(step != 0.0, step, before)
+        before, _ = self._readouts(previous, "previous")
+        now, _ = self._readouts(readouts, "readouts")
+        if before.shape != (1, self.n_axes) or now.shape != (1, self.n_axes):
+            raise ArgumentError(f"previous, readouts: one sample each, shape ({self.n_axes},); got "
+                                f"{np.shape(previous)} and {np.shape(readouts)}")
+        last = np.zeros(self.n_axes) if direction is None else np.asarray(direction, dtype=float)
+        if last.shape != (self.n_axes,) or not np.isin(last, (-1.0, 0.0, 1.0)).all():
+            raise ArgumentError(f"direction: need +1, -1 or 0 per axis, shape ({self.n_axes},); got "
+                                f"{last.tolist()}")
+        step = np.sign(now[0] - before[0])
+        out: np.ndarray = np.where(step != 0.0, step, last)
         return out
 
     # ------------------------------------------------------------------ angles
