@@ -2,13 +2,15 @@
 
 ``CALDIR/parameters.json`` names ``calibrated.urdf`` beside it, so the folder is self-contained;
 ``calibrated.urdf`` holds the identified DH values in its error frames and the identified tool vector
-of every tool (it carries no maps: wrap readouts with ``encoder_maps.csv`` / ``parameters.json``
-maps first); ``calibrated.sizes.json`` beside it carries the arm's plausible sizes, if it has any.
+of every tool (it carries no maps: wrap readouts with the maps first, e.g.
+:meth:`aacmm_pin.CalibratedArm.true_angles`); ``calibrated.sizes.json`` beside it carries the
+arm's plausible sizes, if it has any.
 ``compact.urdf`` is the same arm with the error frames folded into the joint origins (the user's
 names only, :mod:`aacmm_pin.model.compact_urdf`) and ``compact.json`` its parameters (no DH
 entries; the tool vectors, maps, extensions and frame to the instrument). Both URDFs say at their top,
 and ``report.json`` under ``urdf_alone_loss_um``, how far the URDF alone is from the whole
-calibration over the campaign's poses (:mod:`aacmm_pin.analyses.urdf_loss`).
+calibration over the campaign's poses (:mod:`aacmm_pin.analyses.urdf_loss`);
+:func:`aacmm_pin.load_calibrated` reads ``compact.json`` for run time.
 :func:`read_calibration` (:mod:`aacmm_pin.outputs.calibration_folder`, which needs no identification)
 reads a folder back.
 """
