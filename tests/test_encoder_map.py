@@ -105,3 +105,17 @@ def test_correct_with_slopes_equals_the_per_axis_functions(steps):
         expected[:, a - 1] += m.slope(q[:, a - 1])
     np.testing.assert_array_equal(slopes, expected)
     assert np.all(slopes[:, [0, 2, 3, 5]] == 1.0) and np.all(slopes[:, [1, 4]] != 1.0)
+
+
+def test_correct_readouts_and_its_inverse_refuse_bad_arrays_in_one_line() -> None:
+    """A q without a column for a mapped axis (was a bare IndexError) or with NaN is refused in one
+    line naming the argument; readouts_of_angles alike."""
+    import aacmm_pin as ap
+
+    maps = {a: ap.EncoderMap.zero() for a in range(1, 8)}
+    for f, name in ((ap.correct_readouts, "q"), (ap.readouts_of_angles, "angles")):
+        with pytest.raises(ap.ArgumentError, match=rf"^{name}: need shape .* got shape \(3, 6\)$"):
+            f(np.zeros((3, 6)), maps)
+        with pytest.raises(ap.ArgumentError, match=rf"^{name}: every value must be a finite"):
+            f(np.array([0.0, 1.0, np.nan, 0, 0, 0, 0]), maps)
+        assert f(np.zeros((3, 7)), maps).shape == (3, 7)

@@ -13,6 +13,8 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
+from aacmm_pin.errors import ArgumentError
+
 TWO_PI = 2.0 * np.pi
 DEFAULT_STEP_DEG = 5.0
 
@@ -242,11 +244,35 @@ def correct_readouts(q: np.ndarray, maps: dict[int, EncoderMap]) -> np.ndarray:
 
     Returns:
         The corrected angles, same shape as ``q``, in rad.
+
+    Raises:
+        ArgumentError: for a ``q`` without a column for every mapped axis, or not finite.
     """
-    q = np.array(q, dtype=float)
+    q = _checked(q, maps, "q")
     out: np.ndarray = q.copy()
     for axis, emap in maps.items():
         out[..., axis - 1] = emap.correct(q[..., axis - 1])
+    return out
+
+
+def _checked(values: np.ndarray, maps: dict[int, EncoderMap], name: str) -> np.ndarray:
+    """Return values as a float array whose last axis holds every mapped axis, all finite.
+
+    Raises:
+        ArgumentError: naming ``name``, in one line (a runtime check of the arm's own axis count,
+            range and units is :class:`aacmm_pin.CalibratedArm`'s).
+    """
+    try:
+        out = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"{name}: need numbers in rad, got {type(values).__name__}") from None
+    top = max(maps, default=0)
+    if out.ndim not in (1, 2) or out.shape[-1] < top:
+        raise ArgumentError(f"{name}: need shape (n_axes,) or (N, n_axes) with the maps' axes "
+                            f"1..{top} among the columns, in rad; got shape {out.shape}")
+    if not np.isfinite(out).all():
+        raise ArgumentError(f"{name}: every value must be a finite number in rad (found "
+                            f"{out[~np.isfinite(out)][0]})")
     return out
 
 
@@ -264,9 +290,10 @@ def readouts_of_angles(angles: np.ndarray, maps: dict[int, EncoderMap]) -> np.nd
         ``angles`` back to rounding).
 
     Raises:
+        ArgumentError: for ``angles`` without a column for every mapped axis, or not finite.
         ValueError: if a map is not invertible (:attr:`EncoderMap.invertible`).
     """
-    angles = np.array(angles, dtype=float)
+    angles = _checked(angles, maps, "angles")
     out: np.ndarray = angles.copy()
     for axis, emap in maps.items():
         out[..., axis - 1] = emap.inverse(angles[..., axis - 1])
