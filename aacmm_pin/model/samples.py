@@ -9,6 +9,7 @@ join several with :meth:`Samples.concatenate`.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -214,6 +215,12 @@ class Samples:
         return self._direction
 
 
+_DATA = threading.local()
+"""The workspace and axis indices of the model :func:`gravity_torques` last ran on, one per thread
+(a Pinocchio Data costs about 20 us to create and the lookups as much: more than the torques of a
+few samples)."""
+
+
 def gravity_torques(arm: Arm, model: pin.Model, q: np.ndarray) -> np.ndarray:
     r"""Return the torque gravity exerts on every axis, shape (N, n_axes), N m.
 
@@ -223,9 +230,13 @@ def gravity_torques(arm: Arm, model: pin.Model, q: np.ndarray) -> np.ndarray:
     joints transmit, :math:`g_i + \sum_c a_{ci} g_c`), a coupled axis keeps its own :math:`g_c`
     (the torque its joint and linkage carry, which its compliance bends under).
     """
-    data = model.createData()
-    v = [model.joints[model.getJointId(name)].idx_v for name in arm.axis_names]
-    idx = [model.joints[model.getJointId(name)].idx_q for name in arm.axis_names]
+    names = tuple(arm.axis_names)
+    if getattr(_DATA, "model", None) is not model or _DATA.names != names:
+        ids = [model.getJointId(name) for name in arm.axis_names]
+        _DATA.model, _DATA.names, _DATA.data = model, names, model.createData()
+        _DATA.v = [model.joints[j].idx_v for j in ids]
+        _DATA.idx = [model.joints[j].idx_q for j in ids]
+    data, v, idx = _DATA.data, _DATA.v, _DATA.idx
     qs = np.zeros((q.shape[0], model.nq))
     qs[:, idx] = arm.joint_angles(q)
     out: np.ndarray = -np.array([pin.computeGeneralizedGravity(model, data, qi)[v]
