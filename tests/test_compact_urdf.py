@@ -210,15 +210,17 @@ def test_compact_json_predicts_as_parameters_json(arm: ap.Arm, small_sim: ap.Sim
 def test_the_written_loss_matches_an_independent_one(arm: ap.Arm, small_sim: ap.Simulation,
                                                      with_compliance: ap.Calibration,
                                                      tmp_path: Path) -> None:
-    """report.json's and the URDFs' loss = plain Pinocchio of compact.urdf against ap.predict."""
+    """report.json's and the URDFs' loss = plain Pinocchio of compact.urdf against ap.predict of
+    the folder (its calibrated.urdf: the compliance's gravity torques of the calibrated geometry)."""
     folder = ap.write_calibration(with_compliance, arm, tmp_path / "cal", campaign=small_sim.campaign)
     campaign = small_sim.campaign
     logs = [log for log in (campaign.spat, campaign.points, campaign.lengthbar) if log is not None]
     params = with_compliance.parameters
+    folder_arm = ap.load_arm(folder / "calibrated.urdf")  # the whole calibration as predict has it
     distances = []
     for log in logs:
         alone = _tool_positions(folder / "compact.urdf", arm, log.q)[0]  # readouts as angles
-        full = ap.predict(arm, params, log.q, Samples.of_log(arm, log))
+        full = ap.predict(folder_arm, params, log.q, Samples.of_log(folder_arm, log))
         distances.append(np.linalg.norm(alone - full, axis=1))
     d = np.concatenate(distances) / 1e-6  # um
     entry = json.loads((folder / "report.json").read_text())["urdf_alone_loss_um"]

@@ -128,10 +128,13 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path,
     tree = arm.urdf_tree(params.dh, tools=params.tool_vectors(arm))
     rebase_resources(tree.root, Path(str(arm.source)).parent, folder)  # meshes found from here
     compact = compact_urdf(tree)
-    poses = campaign_poses(campaign, arm) if campaign is not None else [Samples(arm, cal.q)]
+    # the whole calibration as the folder will predict it: its own URDF's geometry (e.g. for the
+    # gravity torques of a compliance term), not the nominal arm's
+    written = Arm(tree.copy(), folder / URDF_FILE, arm.name, sizes=arm.sizes_file)
+    poses = campaign_poses(campaign, written) if campaign is not None else [Samples(written, cal.q)]
     loss: UrdfLoss | str
     try:
-        loss = urdf_alone_loss(arm, params, compact, poses)
+        loss = urdf_alone_loss(written, params, compact, poses)
     except AacmmError as exc:  # an extension's column the fitted readouts alone do not have
         loss = f"not computed: {exc}"
     if isinstance(loss, UrdfLoss):
