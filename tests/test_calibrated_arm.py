@@ -258,3 +258,70 @@ def test_frames_configuration_and_directions(arm: ap.Arm, truth: ap.Parameters) 
     np.testing.assert_array_equal(rt.motion_direction(now, now), np.zeros(7))
     with pytest.raises(ArgumentError, match="direction: need"):
         rt.motion_direction(now, now, np.full(7, 2.0))
+
+
+def test_pickles_and_refuses_what_it_cannot_do_in_one_line(arm: ap.Arm, truth: ap.Parameters,
+                                                           extended: ap.Parameters) -> None:
+    """A runtime object pickles (for worker processes); backlash on one sample without its
+    direction, and a map without an inverse, are refused in one line naming the argument."""
+    import pickle
+
+    rt = CalibratedArm(arm, truth)
+    q = _readouts(arm, 5, 10)
+    other = pickle.loads(pickle.dumps(rt))
+    np.testing.assert_array_equal(other.position(q), rt.position(q))
+    ext = CalibratedArm(arm, extended)
+    cols = {"temp_c": 21.0}
+    with pytest.raises(ArgumentError, match=r"^direction: a term of this calibration \(.*backlash"):
+        ext.position(q[0], columns=cols)
+    assert ext.position(q[0], columns=cols, direction=np.zeros(arm.n_axes)).shape == (3,)
+    folded = truth.map(3).values.copy()
+    folded[10] += math.radians(6.0)  # the next segment falls: no inverse
+    bad = CalibratedArm(arm, truth.replace(encoder_maps={**truth.encoder_maps, 3: EncoderMap(folded)}))
+    assert bad.position(q[0]).shape == (3,)  # forward is fine
+    with pytest.raises(ArgumentError, match=r"^maps: the map of A3 has no inverse"):
+        bad.readouts(np.zeros(arm.n_axes))
+
+
+def test_readouts_of_true_angles_at_the_accepted_edge(arm: ap.Arm, truth: ap.Parameters) -> None:
+    """Readouts at the very bounds accepted (half a turn past a limit) give true angles whose
+    readouts come back (the angles may pass the bound by the maps' size)."""
+    rt = CalibratedArm(arm, truth)
+    lo, hi = rt._bounds["readouts"]
+    q = np.vstack([lo, hi, lo + 1e-9, hi - 1e-9])
+    np.testing.assert_allclose(rt.readouts(rt.true_angles(q)), q, rtol=0, atol=1e-12)
+    for row in q:
+        np.testing.assert_allclose(rt.readouts(rt.true_angles(row)), row, rtol=0, atol=1e-12)
+
+
+def test_an_axis_without_limits_takes_turns_and_refuses_degrees(tmp_path) -> None:
+    """A continuous joint (no limits stated) takes readouts over two turns either way; beyond, the
+    message says no limits are stated (not the +-pi a model uses)."""
+    from tests.helpers import ROOT
+
+    text = (ROOT / "urdf" / "ur5.urdf").read_text()
+    import re as _re
+
+    text = _re.sub(r'(<joint name="A6" type=")revolute(")', r"\1continuous\2", text)
+    (tmp_path / "ur5c.urdf").write_text(text)
+    arm = ap.load_arm(tmp_path / "ur5c.urdf")
+    rt = CalibratedArm(arm, ap.Parameters.nominal(arm))
+    q = np.array([0.1, -0.5, 0.5, 0.0, 0.3, 7.0])  # A6 past one turn
+    np.testing.assert_allclose(rt.position(q), ap.predict(arm, ap.Parameters.nominal(arm), q[None])[0],
+                               rtol=0, atol=1e-12)
+    with pytest.raises(ArgumentError, match=r"axis 6 \(A6\) is 90 rad, more than 2 turns from zero "
+                                            r"\(the URDF states no limits\)"):
+        rt.position(np.array([0.1, -0.5, 0.5, 0.0, 0.3, 90.0]))
+
+
+def test_another_arm_takes_the_folders_dh_values(arm: ap.Arm, small_cal: ap.Calibration,
+                                                 tmp_path) -> None:
+    """load_calibrated(folder, arm=...) reads parameters.json (the arm's error frames take its DH
+    values); compact.json with another arm is refused in one line (its geometry is its URDF's)."""
+    ap.write_calibration(small_cal, arm, tmp_path / "cal")
+    q = _readouts(arm, 10, 11)
+    ref = ap.load_calibrated(tmp_path / "cal").position(q)
+    np.testing.assert_allclose(ap.load_calibrated(tmp_path / "cal", arm="aacmm7").position(q), ref,
+                               rtol=0, atol=1e-12)
+    with pytest.raises(ArgumentError, match=r"^arm: .*compact.json holds no DH values"):
+        ap.load_calibrated(tmp_path / "cal" / "compact.json", arm="aacmm7")

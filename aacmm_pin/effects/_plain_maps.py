@@ -27,11 +27,13 @@ class PlainMaps:
         upper: per axis, the highest value accepted, rad.
         refuse: called with the values and the argument's name when a value is out of bounds or
             not a number; it raises.
+        slack: how far true angles (:meth:`inverse`) may pass the bounds, rad.
     """
 
     def __init__(self, maps: dict[int, EncoderMap], n_axes: int, lower: list[float],
-                 upper: list[float], refuse: Callable[[list[float], str], None]):
+                 upper: list[float], refuse: Callable[[list[float], str], None], slack: float = 0.0):
         self._refuse = refuse
+        self._slack = slack
         self._axes: list[tuple[float, float, list[float] | None, float, list[float], list[float]]] = []
         for a in range(n_axes):
             emap = maps.get(a + 1)
@@ -66,8 +68,9 @@ class PlainMaps:
     def inverse(self, theta: list[float], name: str) -> list[float] | None:
         """Return the readouts of one sample's true angles (rad); None if a map has no inverse."""
         out = []
+        slack = self._slack
         for x, (lo, hi, values, step, nodes, breaks) in zip(theta, self._axes):
-            if not lo <= x <= hi:
+            if not lo - slack <= x <= hi + slack:
                 self._refuse(theta, name)
             if values is None:
                 out.append(x)

@@ -26,7 +26,7 @@ a value that is not finite, and readouts beyond an axis' limits by more than hal
 degrees given for radians): :class:`~aacmm_pin.errors.ArgumentError`.
 
 **Cost.** One sample without extension terms runs in plain Python floats and one Pinocchio forward
-kinematics call (a few microseconds, ``benchmarks/runtime.py``); batches run vectorised
+kinematics call (about 15 us, 6x Pinocchio's own, ``benchmarks/runtime.py``); batches run vectorised
 (:class:`~aacmm_pin.model.kinematics.JointKinematics`). Extension terms (gravity compliance,
 backlash, temperature, ...) are evaluated through the effect library on every call: slower, and
 some need per-sample inputs (``columns``: ``temp_c`` and the like; ``direction``: the direction each
@@ -50,7 +50,7 @@ from aacmm_pin.effects.registry import (
     terms_adjustment,
 )
 from aacmm_pin.errors import ArgumentError
-from aacmm_pin.model.arm import Arm, load_arm
+from aacmm_pin.model.arm import Arm, load_arm, resolve_arm_path
 from aacmm_pin.model.encoder_map import correct_with_slopes, readouts_of_angles
 from aacmm_pin.model.kinematics import Adjustment, JointKinematics, tool_rows
 from aacmm_pin.model.parameters import Parameters, check_against_arm
@@ -66,6 +66,12 @@ FULL_PARAMETERS = "parameters.json"
 DEGREE_MARGIN = math.pi
 """How far beyond an axis' limits (rad) a readout may lie before it is refused as degrees given for
 radians: half a turn (a readout of a table that wraps may pass a limit by less)."""
+UNLIMITED_TURNS = 2
+"""An axis whose URDF states no limits (a continuous joint) takes readouts within this many turns
+either way of zero; beyond, they are refused as degrees given for radians."""
+ANGLE_SLACK = 0.01
+"""True angles (:meth:`CalibratedArm.readouts`) may pass the readouts' bounds by the maps' largest
+value and this much more, rad (the extension terms' angle errors: a few arcminutes at most)."""
 INVERSE_TOLERANCE = 1e-13
 """The fixed-point iteration of :meth:`CalibratedArm.readouts` with extension terms stops when no
 readout moves by more than this, rad."""
@@ -103,10 +109,17 @@ class CalibratedArm:
         n = arm.n_axes
         self._axes = self._joints.axes
         self._direct = self.model.nq == n and bool(np.array_equal(self._axes, np.arange(n)))
-        lo, hi = (arm.joint_limits - [DEGREE_MARGIN, -DEGREE_MARGIN]).T
-        self._lo, self._hi = lo, hi
-        self._plain = PlainMaps(params.encoder_maps, n, lo.tolist(), hi.tolist(),
-                                lambda values, name: self._refuse(np.array([values]), name))
+        stated = arm.stated_limits
+        free = np.isnan(stated).any(axis=1)  # a continuous joint: no limits stated
+        lo = np.where(free, -UNLIMITED_TURNS * 2 * np.pi, stated[:, 0] - DEGREE_MARGIN)
+        hi = np.where(free, UNLIMITED_TURNS * 2 * np.pi, stated[:, 1] + DEGREE_MARGIN)
+        slack = ANGLE_SLACK + max((float(np.abs(m.values).max()) for m in params.encoder_maps.values()),
+                                  default=0.0)
+        self._bounds = {"readouts": (lo, hi), "angles": (lo - slack, hi + slack)}
+        """Per argument name, the lowest and highest value accepted per axis, rad."""
+        self._free = free
+        self._plain = PlainMaps(params.encoder_maps, n, lo.tolist(), hi.tolist(), self._refuse_one,
+                                slack)
         self._shape = (n,)
         self._fid = self.tool_frames[0]
         self._plain_ok = not arm.couplings and self._direct and arm.n_tools == 1
@@ -115,8 +128,13 @@ class CalibratedArm:
         """... and needs no extension term either."""
         self._terms = [(term_from_key(key), np.asarray(values, dtype=float))
                        for key, values in params.extensions.items()]
+        self._keys = list(params.extensions)
         self._rotation = params.rotation()
         self._translation = np.asarray(params.translation, dtype=float)
+
+    def __reduce__(self) -> tuple[type[CalibratedArm], tuple[Arm, Parameters]]:
+        """Pickle as the arm and the parameters (the model is rebuilt on the other side)."""
+        return (CalibratedArm, (self.arm, self.parameters))
 
     def copy(self) -> CalibratedArm:
         """Return a calibrated arm sharing this one's model, with its own Pinocchio data."""
@@ -225,7 +243,8 @@ class CalibratedArm:
 
         The encoder maps, the couplings (a coupled axis' readout is not read: its angle follows
         its coupling) and the extension terms' angle errors. Lateral tilts and scale terms are
-        not joint angles: :meth:`position` applies them.
+        not joint angles: :meth:`position` applies them. (A plain Pinocchio model of the URDF
+        holds a continuous joint as the cosine and sine of its angle; :attr:`model` the angle.)
 
         Args:
             readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
@@ -371,7 +390,9 @@ class CalibratedArm:
         j is d/d(readout j): the joint's column times the slope of its map and through the
         couplings (a coupled axis has no readout: a zero column). The extension terms' angle
         errors enter the angles at which it is taken, not its columns (their change with the
-        readouts is second order); a scale term scales the velocity rows.
+        readouts is second order); a scale term scales the velocity rows; lateral tilt terms,
+        which move the point (:meth:`position`), are left out (their change is of their size times
+        the rotation, second order too).
 
         Args:
             readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
@@ -424,9 +445,14 @@ class CalibratedArm:
                                 f"value per axis of the arm ({', '.join(self.arm.axis_names)}), in "
                                 f"rad; got shape {q.shape}")
         q = q.reshape(-1, self.n_axes)
-        if not ((q >= self._lo) & (q <= self._hi)).all():  # NaN fails too
+        lo, hi = self._bounds.get(name, self._bounds["readouts"])
+        if not ((q >= lo) & (q <= hi)).all():  # NaN fails too
             self._refuse(q, name)
         return q, one
+
+    def _refuse_one(self, values: list[float], name: str) -> None:
+        """Raise the one-line error for one sample's values (see :meth:`_refuse`)."""
+        self._refuse(np.array([values]), name)
 
     def _refuse(self, q: np.ndarray, name: str) -> None:
         """Raise the one-line error for the first bad value of q (not finite, or degrees)."""
@@ -435,12 +461,15 @@ class CalibratedArm:
             i, a = np.argwhere(bad)[0]
             raise ArgumentError(f"{name}: sample {i}, axis {a + 1} ({self.arm.axis_names[a]}) is "
                                 f"{q[i, a]}: every value must be a finite number in rad")
-        i, a = np.argwhere((q < self._lo) | (q > self._hi))[0]
-        limits = self.arm.joint_limits[a]
+        lo, hi = self._bounds.get(name, self._bounds["readouts"])
+        i, a = np.argwhere((q < lo) | (q > hi))[0]
+        limits = self.arm.stated_limits[a]
+        where = (f"more than {UNLIMITED_TURNS} turns from zero (the URDF states no limits)"
+                 if self._free[a] else f"beyond its limits [{limits[0]:.4g}, {limits[1]:.4g}] rad "
+                 "by more than half a turn")
         raise ArgumentError(f"{name}: sample {i}, axis {a + 1} ({self.arm.axis_names[a]}) is "
-                            f"{q[i, a]:.6g} rad, beyond its limits [{limits[0]:.4g}, "
-                            f"{limits[1]:.4g}] rad by more than half a turn: these look like "
-                            "degrees (multiply by pi/180)")
+                            f"{q[i, a]:.6g} rad, {where}: these look like degrees (multiply by "
+                            "pi/180)")
 
     def _check_frame(self, frame: str) -> None:
         if frame not in ("r", "mt"):
@@ -479,7 +508,7 @@ class CalibratedArm:
                 raise ArgumentError(f"columns: '{key}' needs one finite value per sample ({len(q)}), "
                                     f"got shape {np.shape(value)}")
             cols[key] = v
-        samples = Samples(self.arm, q, columns=cols, files=("columns",))
+        d = None
         if direction is not None:
             d = np.asarray(direction, dtype=float).reshape(-1, self.n_axes) if np.size(direction) \
                 else np.zeros(0)
@@ -487,8 +516,7 @@ class CalibratedArm:
                 raise ArgumentError(f"direction: need +1, -1 or 0 per axis and sample, shape "
                                     f"{q.shape if len(q) > 1 else (self.n_axes,)}; got shape "
                                     f"{np.shape(direction)}")
-            samples._direction = d
-        return samples
+        return Samples(self.arm, q, columns=cols, files=("columns",), direction=d)
 
     def _inverse_maps(self, theta: np.ndarray) -> np.ndarray:
         """Return the readouts of N samples' angles through the maps alone, shape (N, n_axes)."""
@@ -507,7 +535,13 @@ class CalibratedArm:
             return None
         samples = self._samples(q, columns, direction)
         assert samples is not None
-        return terms_adjustment(self._terms, samples, self.n_axes)
+        out = terms_adjustment(self._terms, samples, self.n_axes)
+        if samples.n == 1 and direction is None and samples.direction_known:
+            raise ArgumentError(f"direction: a term of this calibration ({', '.join(self._keys)}) "
+                                "reads the direction each axis last moved in, which one sample "
+                                "cannot show: pass direction= (rt.motion_direction(previous, "
+                                "readouts, direction) keeps it), or a batch in time order")
+        return out
 
     def _true(self, q: np.ndarray, change: Adjustment | None) -> np.ndarray:
         """Return the true joint angles of N readouts, shape (N, n_axes), rad."""
@@ -533,18 +567,30 @@ def load_calibrated(path: str | Path, arm: str | Path | None = None) -> Calibrat
 
     Args:
         path: a calibration folder (``aacmm-pin identify --out``) or a parameters file.
-        arm: the arm's URDF or embedded name instead of the one the parameters name.
+        arm: the arm's URDF or embedded name instead of the one the parameters name (with a
+            folder: its ``parameters.json``, whose DH values the arm's error frames take).
 
     Raises:
+        ArgumentError: for ``arm`` with parameters that hold no DH values (``compact.json``:
+            the geometry is its own URDF's).
         FileFormatError: for a missing or bad parameters file, or parameters that do not fit
             the arm (naming the file and the key).
         ArmModelError: if the URDF cannot be read.
     """
     file = Path(path)
-    if file.is_dir():
+    if file.is_dir():  # another arm takes the DH values of parameters.json
         compact = file / COMPACT_PARAMETERS
-        file = compact if compact.is_file() else file / FULL_PARAMETERS
+        file = compact if compact.is_file() and arm is None else file / FULL_PARAMETERS
     params = read_parameters(file)
+    if arm is not None and not params.dh and _urdf_path(arm) != _urdf_path(params.arm):
+        raise ArgumentError(f"arm: {file} holds no DH values (its calibrated geometry is in "
+                            f"{params.arm}); give another arm with the folder or its "
+                            f"{FULL_PARAMETERS}")
     # a compact URDF (compact.json: no DH values) is loaded as it is, without error frames
     return CalibratedArm(load_arm(arm if arm is not None else params.arm,
                                   error_frames=bool(params.dh)), params)
+
+
+def _urdf_path(arm: str | Path) -> Path:
+    """Return the resolved URDF path of an arm's path or embedded name."""
+    return Path(resolve_arm_path(arm)).resolve()

@@ -290,12 +290,15 @@ def readouts_of_angles(angles: np.ndarray, maps: dict[int, EncoderMap]) -> np.nd
         ``angles`` back to rounding).
 
     Raises:
-        ArgumentError: for ``angles`` without a column for every mapped axis, or not finite.
-        ValueError: if a map is not invertible (:attr:`EncoderMap.invertible`).
+        ArgumentError: for ``angles`` without a column for every mapped axis, or not finite, or a
+            map that is not invertible (:attr:`EncoderMap.invertible`), naming its axis.
     """
     angles = _checked(angles, maps, "angles")
     out: np.ndarray = angles.copy()
     for axis, emap in maps.items():
+        if not emap.invertible:
+            raise ArgumentError(f"maps: the map of A{axis} has no inverse (its corrected angle "
+                                "falls on some segment: an error slope below -1)")
         out[..., axis - 1] = emap.inverse(angles[..., axis - 1])
     return out
 

@@ -39,12 +39,15 @@ class Samples:
         columns: per-sample columns by file name, each shape (N,), SI (``temp`` and ``t``, when
             given, override its ``temp_c`` and ``t_s``).
         files: the files the samples were read from, named when a column is missing.
+        direction: the direction each axis last moved in, shape (N, n_axes), +1, -1 or 0; None:
+            from the time order (:attr:`direction`).
     """
 
     def __init__(self, arm: Arm, q: np.ndarray, temp: np.ndarray | None = None,
                  t: np.ndarray | None = None, displacement: np.ndarray | None = None,
                  tool: np.ndarray | None = None, location: np.ndarray | None = None, *,
-                 columns: Mapping[str, np.ndarray] | None = None, files: Sequence[str] = ()):
+                 columns: Mapping[str, np.ndarray] | None = None, files: Sequence[str] = (),
+                 direction: np.ndarray | None = None):
         self.arm = arm
         self.location = None if location is None else np.asarray(location, dtype=np.int64)
         self.tool = None if tool is None else np.asarray(tool, dtype=np.int64)
@@ -59,7 +62,8 @@ class Samples:
         self.displacement = displacement
         self._gravity: np.ndarray | None = None
         self._lateral_gravity: np.ndarray | None = None
-        self._direction: np.ndarray | None = None
+        self._direction: np.ndarray | None = None if direction is None else np.asarray(
+            direction, dtype=float)
 
     @classmethod
     def of_log(cls, arm: Arm, log: SpatLog | LengthBarLog | PointLog) -> Samples:
@@ -199,6 +203,11 @@ class Samples:
                 moment[i] = [data.f[j].angular for j in ids]
             self._lateral_gravity = -np.einsum("aij,nai->naj", lateral, moment)
         return self._lateral_gravity
+
+    @property
+    def direction_known(self) -> bool:
+        """Whether :attr:`direction` was given or has been read (e.g. by a backlash term)."""
+        return self._direction is not None
 
     @property
     def direction(self) -> np.ndarray:
