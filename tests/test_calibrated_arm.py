@@ -70,6 +70,8 @@ def test_extension_terms_are_predict(arm: ap.Arm, extended: ap.Parameters, tilte
     ref = ap.predict(arm, extended, q, samples)
     got = rt.position(q, columns={"temp_c": temp})
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rt.placement(q, columns={"temp_c": temp})[:, :3, 3], ref, rtol=0,
+                               atol=1e-12)  # the placement's point is predict's too
     one = np.array([rt.position(q[i], columns={"temp_c": temp[i]}, direction=samples.direction[i])
                     for i in range(len(q))])
     np.testing.assert_allclose(one, ref, rtol=0, atol=1e-12)

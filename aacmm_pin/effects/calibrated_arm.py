@@ -367,14 +367,16 @@ class CalibratedArm:
             return placement
         q, one = self._readouts(readouts, "readouts")
         self._check_frame(frame)
-        angles = self._true(q, self._change(q, columns, direction))
-        fids = np.asarray(self.tool_frames)[self._tool(tool, len(q))]
+        change = self._change(q, columns, direction)
+        angles = self._true(q, change)
+        rows = self._tool(tool, len(q))
         out = np.empty((len(q), 4, 4))
-        for i, (theta, fid) in enumerate(zip(self._configurations(angles), fids)):
+        for i, (theta, fid) in enumerate(zip(self._configurations(angles),
+                                             np.asarray(self.tool_frames)[rows])):
             pin.forwardKinematics(self.model, self.data, theta)
             out[i] = pin.updateFramePlacement(self.model, self.data, int(fid)).homogeneous
-        if self.parameters.extensions:  # tilts and scale move the point: predict's
-            out[:, :3, 3] = self.position(q, tool=tool, columns=columns, direction=direction)
+        if change is not None:  # tilts and scale move the point: predict's, on the same change
+            out[:, :3, 3] = self._joints.positions(q, rows, change)
         if frame == "mt":
             out[:, :3, :] = self._rotation @ out[:, :3, :]
             out[:, :3, 3] += self._translation
@@ -413,9 +415,9 @@ class CalibratedArm:
         q, one = self._readouts(readouts, "readouts")
         self._check_frame(frame)
         change = self._change(q, columns, direction)
-        _, slope = correct_with_slopes(q, self.parameters.encoder_maps)
+        corrected, slope = correct_with_slopes(q, self.parameters.encoder_maps)
         slope[:, self.arm.coupled] = 0.0
-        angles = self._true(q, change)
+        angles = self.arm.joint_angles(corrected, None if change is None else change.offsets)
         fids = np.asarray(self.tool_frames)[self._tool(tool, len(q))]
         out = np.empty((len(q), 6, self.n_axes))
         for i, (theta, fid) in enumerate(zip(self._configurations(angles), fids)):
