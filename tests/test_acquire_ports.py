@@ -104,7 +104,7 @@ def read_events(config: PortConfig, port: ScriptedPort, until: Callable[[list[Po
 
 
 def values(events: list[PortEvent]) -> list[Any]:
-    return [value for what, _, _, payload in events if what == "data" for _, value, _ in payload]
+    return [value for what, _, _, payload in events if what == "data" for _, value, *_ in payload]
 
 
 def faults(events: list[PortEvent]) -> list[str]:
