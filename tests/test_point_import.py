@@ -58,7 +58,7 @@ def test_columns_and_units_by_options(tmp_path: Path) -> None:
     np.testing.assert_allclose(campaign.points.point, p, rtol=0, atol=ROUNDING_MM * 1e-3)
     assert campaign.noise is not None and campaign.noise.point == pytest.approx(35e-6)
     provenance = json.loads((out / "campaign.json").read_text())["provenance"]
-    assert provenance["files"][0]["file"] == str(source.absolute())
+    assert provenance["files"][0]["file"] == "../mocap.csv"  # relative to the campaign folder
     assert provenance["files"][0]["rows"] == len(q)
 
 

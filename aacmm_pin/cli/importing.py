@@ -12,14 +12,27 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from aacmm_pin.cli._options import add_command, force_option, input_path, noise_um
+from aacmm_pin.cli._options import (
+    ARM_HELP,
+    add_command,
+    arm_details,
+    arm_source,
+    force_option,
+    input_path,
+    load_given_arm,
+    noise_um,
+)
 
 AUTO = "auto"
 """``--format`` value: the preset the header is, unless ``--joints`` and ``--point`` are given."""
 
 
-def _format(args: argparse.Namespace) -> Any:
-    """Return the PointFormat the options give, or None (a preset from each file's header)."""
+def _format(args: argparse.Namespace, arm: Any = None) -> Any:
+    """Return the PointFormat the options give, or None (a preset from each file's header).
+
+    ``arm``: the arm ``--arm`` names, or None; without ``--joints`` its independent joints' names
+    are the joint columns.
+    """
     from aacmm_pin.data.point_import import (
         PRESETS,
         PointFormat,
@@ -31,12 +44,16 @@ def _format(args: argparse.Namespace) -> Any:
     if by_columns and args.format != AUTO:
         raise ValueError("--format: give either a preset or --joints and --point, not both")
     if by_columns:
-        if args.joints is None or args.point is None:
-            raise ValueError("--joints, --point: give both (e.g. --joints q1..q6 --point x,y,z)")
+        if args.point is None or (args.joints is None and arm is None):
+            raise ValueError("--joints, --point: give both (e.g. --joints q1..q6 --point x,y,z; "
+                             "with --arm, --joints defaults to the arm's joint names)")
         point = _point_columns(args.point, [Path(s) for s in args.sources])
-        return PointFormat(parse_columns(args.joints), point,
-                           args.units or "mm", args.angles or "deg",
-                           angles_stated=args.angles is not None)
+        joints = (parse_columns(args.joints) if args.joints is not None else
+                  tuple(arm.axis_names[k] for k in range(arm.n_axes) if not arm.coupled[k]))
+        return PointFormat(joints, point, args.units or "mm", args.angles or "deg",
+                           angles_stated=args.angles is not None, tool=args.tool, pose=args.pose)
+    if args.tool is not None or args.pose is not None:
+        raise ValueError("--tool, --pose: they go with --point (a preset names its columns)")
     if args.units is not None or args.angles is not None:
         raise ValueError("--units, --angles: they go with --joints and --point (a preset states "
                          "its units)")
@@ -78,10 +95,11 @@ def _import_points(args: argparse.Namespace) -> int:
 
     sources = [Path(s) for s in args.sources]
     with claim_output(args.out, args.force, sources):  # the folder held before any reading
-        result = import_points(sources, args.out, _format(args),
+        arm = None if args.arm is None else load_given_arm(args)
+        result = import_points(sources, args.out, _format(args, arm),
                                sigma=None if args.sigma_um is None else args.sigma_um * UM,
                                one_frame=args.one_frame, force=args.force,
-                               instrument=args.instrument)
+                               instrument=args.instrument, arm=arm)
     for f in result.files:
         print(f"read {len(f.log.q)} points of {f.log.q.shape[1]} axes from {f.path}")
     print(f"format {result.format.describe()}")
@@ -99,7 +117,7 @@ def _import_points(args: argparse.Namespace) -> int:
              "pose" if "pose" in points.columns else "")
     print(f"wrote {args.out}: points.csv ({len(points.q)} points, {groups} instrument "
           f"set-up{'s' if groups > 1 else ''}{poses}), campaign.json ({stated}, provenance)")
-    print(f"next: aacmm-pin identify {args.out} --arm URDF")
+    print(f"next: aacmm-pin identify {args.out} --arm {args.arm or 'URDF'}")
     return 0
 
 
@@ -143,6 +161,18 @@ def add_parsers(subparsers: Any) -> None:
                    help="the kind of instrument, written to campaign.json: its stated point noise "
                         "(20 um a laser tracker, 100 um motion capture) unless --sigma-um or the "
                         "preset states one")
+    p.add_argument("--tool", default=None, metavar="COLUMN",
+                   help="the column naming the tool (marker) each row measures, one of the arm's "
+                        "tools (aacmm-pin axes ARM lists them); written as points.csv's tool")
+    p.add_argument("--pose", default=None, metavar="COLUMN",
+                   help="the column naming each row's pose (rows with one label are one pose, "
+                        "e.g. two markers; default: identical readouts in consecutive rows); "
+                        "written as points.csv's pose, numbered 1, 2, ...")
+    p.add_argument("--arm", type=arm_source, default=None, metavar="URDF",
+                   help=ARM_HELP + "; given, --joints are its independent joints in order (default: "
+                        "their names; a coupled joint needs no column), points.csv names its "
+                        "columns <joint>_deg and the tools are checked")
+    arm_details(p)
     p.add_argument("--one-frame", action="store_true",
                    help="the files share one instrument frame (one set-up) instead of one each")
     p.set_defaults(handler=_import_points)

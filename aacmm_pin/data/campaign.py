@@ -464,13 +464,18 @@ def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
 
 def _file_columns(log: SpatLog | LengthBarLog | PointLog,
                   before: Mapping[str, list[int] | list[float] | list[str]],
-                  after: Mapping[str, list[int] | list[float] | list[str]]) -> dict[str, Any]:
+                  after: Mapping[str, list[int] | list[float] | list[str]],
+                  arm: ArmNames | None = None) -> dict[str, Any]:
     """Return a log's file columns: ``before``, q1_deg..qn_deg, ``after``, per-sample columns.
 
     The per-sample columns in their file units: ``sigma_um``, ``t_s``, ``temp_c``, then the others
-    in the log's order.
+    in the log's order. With the arm: ``<joint name>_deg`` readout columns, a coupled joint's
+    left out (the readers fill it from its coupling).
     """
-    q_deg = dict(zip(q_names(log.q.shape[1]), np.degrees(log.q).T.tolist()))
+    names = q_names(log.q.shape[1]) if arm is None else [f"{n}_deg" for n in arm.axis_names]
+    coupled = {c.axis for c in couplings_of(arm)}
+    q_deg = {name: values for k, (name, values) in enumerate(zip(names, np.degrees(log.q).T.tolist()))
+             if k not in coupled}
     extra = {name: _cells(name, column(name).from_si(log.columns[name]).tolist())
              for name in file_order(list(log.columns))}
     return {**before, **q_deg, **after, **extra}
@@ -494,12 +499,13 @@ def _mm(names: tuple[str, ...], xyz: Any) -> dict[str, list[float]]:
     return dict(zip(names, (np.asarray(xyz, dtype=float).reshape(-1, 3) * 1e3).T.tolist()))
 
 
-def write_campaign(campaign: Campaign, folder: str | Path) -> None:
+def write_campaign(campaign: Campaign, folder: str | Path, arm: ArmNames | None = None) -> None:
     """Write ``campaign`` into ``folder`` (created if needed): the files of the parts present.
 
     Lengths are written in mm and angles in degrees, with 9 decimals; every per-sample column of a
     log (t_s, temp_c, sigma_um, any other) in its file unit; the stated noise, when set, in
-    ``campaign.json``.
+    ``campaign.json``. Readout columns are ``q1_deg..qn_deg``, or, with ``arm``, ``<joint
+    name>_deg`` without the coupled joints' (read back with the arm).
 
     Raises:
         FileExistsError: if the folder holds a campaign file for a part that ``campaign`` lacks
@@ -515,13 +521,13 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     if (spat := campaign.spat) is not None:
         _write_csv(folder / "spat.csv", _file_columns(spat, {"location": spat.location.tolist()},
-                                                      _mm(_XYZ["spat"], spat.displacement)))
+                                                      _mm(_XYZ["spat"], spat.displacement), arm))
         ids = sorted(campaign.locations)
         _write_csv(folder / "locations.csv", {"location": ids, **_mm(
             _XYZ["loc"], [campaign.locations[k] for k in ids])})
     if (log := campaign.lengthbar) is not None:
         before = {"placement": log.placement.tolist(), "socket": log.socket.tolist()}
-        _write_csv(folder / "lengthbar.csv", _file_columns(log, before, {}))
+        _write_csv(folder / "lengthbar.csv", _file_columns(log, before, {}, arm))
         _write_csv(folder / "bar.csv", {"from": [a for a, _ in campaign.bar],
                                         "to": [b for _, b in campaign.bar],
                                         "length_mm": [v * 1e3 for v in campaign.bar.values()]})
@@ -529,7 +535,7 @@ def write_campaign(campaign: Campaign, folder: str | Path) -> None:
         first: dict[str, Any] = {"group": pts.group.tolist()}
         if pts.tool is not None:
             first["tool"] = pts.tool.tolist()
-        _write_csv(folder / "points.csv", _file_columns(pts, first, _mm(_XYZ["loc"], pts.point)))
+        _write_csv(folder / "points.csv", _file_columns(pts, first, _mm(_XYZ["loc"], pts.point), arm))
     if campaign.noise is not None:
         instrument = {"instrument": campaign.noise.instrument} if campaign.noise.instrument else {}
         (folder / NOISE_FILE).write_text(json.dumps({**instrument, "noise_um":

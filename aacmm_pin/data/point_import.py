@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -25,8 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from aacmm_pin.data.campaign import write_campaign
+from aacmm_pin.data.campaign import ArmNames, couplings_of, write_campaign
 from aacmm_pin.data.columns import MAX_ANGLE_DEG
+from aacmm_pin.data.couplings import fill_coupled
 from aacmm_pin.data.csv_table import radian_like_column, read_table
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
 from aacmm_pin.data.output_folder import output_folder
@@ -68,6 +70,11 @@ class PointFormat:
     """The instrument and its stated accuracy, as its maker states them."""
     source: str = ""
     """Where the data come from (publication, repository, licence)."""
+    tool: str | None = None
+    """Column naming the tool (marker) each row measures, or None (the arm's only tool)."""
+    pose: str | None = None
+    """Column naming the pose of each row (rows with one label are one pose: several markers), or
+    None (identical readouts in consecutive rows are one pose)."""
 
     def __post_init__(self) -> None:
         if not self.joints:
@@ -81,9 +88,14 @@ class PointFormat:
 
     @property
     def columns(self) -> tuple[str, ...]:
-        """Every column the format reads, without repeats, joints first."""
+        """Every numeric column the format reads, without repeats, joints first."""
         named = [*self.joints, *(c for pair in self.point for c in pair if c is not None)]
         return tuple(dict.fromkeys(named))
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The text columns the format reads: the tool's and the pose's, those given."""
+        return tuple(c for c in (self.tool, self.pose) if c is not None)
 
     def describe(self) -> str:
         """Return one line: the joint and point columns and their units."""
@@ -91,7 +103,10 @@ class PointFormat:
                   else ",".join(self.joints))
         point = ",".join(a if b is None else f"{a}-{b}" for a, b in self.point)
         name = f"{self.name}: " if self.name else ""
-        return f"{name}joints {joints} ({self.angle_unit}), point {point} ({self.length_unit})"
+        labels = "".join(f", {what} {c}" for what, c in (("tool", self.tool), ("pose", self.pose))
+                         if c is not None)
+        return (f"{name}joints {joints} ({self.angle_unit}), point {point} ({self.length_unit})"
+                f"{labels}")
 
 
 _RANGE_END = re.compile(r"(.*?)(\d+)(\D*)")
@@ -188,7 +203,7 @@ def _missing(path: Path, header: list[str], fmt: PointFormat) -> list[Problem]:
     """Return a problem per column of the format the header lacks, with the name it likely means."""
     problems: list[Problem] = []
     shown = ", ".join(header[:16]) + (f" and {len(header) - 16} more" if len(header) > 16 else "")
-    for name in (n for n in fmt.columns if n not in header):
+    for name in (n for n in (*fmt.columns, *fmt.labels) if n not in header):
         meant = close_match(name, header)
         hint = f"; did you mean {meant}?" if meant else ""
         listing = f" (the header has: {shown})" if not problems else ""  # the header once
@@ -238,6 +253,8 @@ class PointFile:
     offset: np.ndarray | None
     """Length of each subtracted vector (``x_dif, y_dif, z_dif``: nominal minus measured), (N,)
     m, or None when the format subtracts nothing."""
+    labels: dict[str, list[str]] = field(default_factory=dict)
+    """The text columns read (:attr:`PointFormat.labels`), each cell as written, by column."""
 
 
 def read_point_file(path: str | Path, fmt: PointFormat | None = None) -> tuple[PointFile,
@@ -286,11 +303,30 @@ def read_point_file(path: str | Path, fmt: PointFormat | None = None) -> tuple[P
               if len(subtracted) == 3 else None)
     log = PointLog(np.ones(len(q), dtype=np.int64), q, point,
                    lines=np.array(table.lines, dtype=np.int64))
-    return PointFile(path, log, offset), fmt
+    return PointFile(path, log, offset, _text_columns(path, fmt.labels, table.lines)), fmt
 
 
-def licence_note(path: Path) -> str | None:
-    """Return ``<LICENSE file>: <its first line>`` found beside a data file or up to 2 folders up."""
+def _text_columns(path: Path, names: Sequence[str], lines: Sequence[int]) -> dict[str, list[str]]:
+    """Return the cells of text columns ``names`` on the file's ``lines`` (1-based), stripped."""
+    if not names:
+        return {}
+    wanted = set(lines)
+    out: dict[str, list[str]] = {name: [] for name in names}
+    with path.open(newline="", encoding="utf-8-sig") as f:
+        rows = csv.reader(f)
+        index = {c.strip(): k for k, c in enumerate(next(rows))}
+        for row in rows:
+            if rows.line_num in wanted:  # the rows read_table kept (lines as it numbers them)
+                for name in names:
+                    out[name].append(row[index[name]].strip())
+    return out
+
+
+def licence_note(path: Path, folder: Path | None = None) -> str | None:
+    """Return ``<LICENSE file>: <its first line>`` found beside a data file or up to 2 folders up.
+
+    ``folder``: the LICENSE file's path is given relative to it (:func:`relative_to`); None: absolute.
+    """
     for folder in [path.absolute().parent, *path.absolute().parent.parents][:3]:
         for candidate in sorted(folder.glob("LICEN[CS]E*")):
             if candidate.is_file():
@@ -299,7 +335,7 @@ def licence_note(path: Path) -> str | None:
                         first = next((line.strip() for line in f if line.strip()), "")
                 except OSError:
                     continue
-                return f"{candidate}: {first}"
+                return f"{candidate if folder is None else relative_to(candidate, folder)}: {first}"
     return None
 
 
@@ -328,7 +364,7 @@ class ImportResult:
 def import_points(sources: Sequence[str | Path], folder: str | Path,
                   fmt: PointFormat | None = None, *, sigma: float | None = None,
                   one_frame: bool = False, force: bool = False,
-                  instrument: str | None = None) -> ImportResult:
+                  instrument: str | None = None, arm: ArmNames | None = None) -> ImportResult:
     """Convert instrument point files into a points campaign folder (written whole or not at all).
 
     Args:
@@ -343,6 +379,12 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
         instrument: the kind of instrument (``laser tracker``, ``motion capture``: a key of
             :data:`aacmm_pin.units.INSTRUMENT_NOISE`), written to ``campaign.json``; its noise is
             the stated one unless ``sigma`` or the preset's is given. None: not named.
+        arm: the arm the points are of (an :class:`~aacmm_pin.model.arm.Arm`, or any
+            :class:`~aacmm_pin.data.campaign.ArmNames`): the joint columns are its independent
+            axes in order (a coupled joint has no column; it is set by its coupling), may be one
+            per axis (a coupled one then checked when read), ``points.csv`` names its readout
+            columns ``<joint name>_deg`` (coupled ones left out) and the tool column's values
+            are checked against its tools. None: the columns are axes 1..n (``q<k>_deg``).
 
     Returns:
         What was read and written; ``campaign.points.lines`` are the lines of ``points.csv``.
@@ -370,23 +412,31 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
         raise CampaignFormatError(problems)
     if len(axes := {f.log.q.shape[1] for f in files}) > 1:
         raise ValueError(f"sources: the files have {sorted(axes)} axes; one arm's files expected")
+    q = np.concatenate([f.log.q for f in files])
+    if arm is not None:
+        q = _arm_readouts(q, arm)
+        _check_tools(files, formats, arm)
     noise = sigma if sigma is not None else formats[0].noise
     group = np.concatenate([np.full(len(f.log.q), 1 if one_frame else k, dtype=np.int64)
                             for k, f in enumerate(files, start=1)])
-    q = np.concatenate([f.log.q for f in files])
+    tools = [f.labels.get(fmt_.tool) for f, fmt_ in zip(files, formats) if fmt_.tool is not None]
+    if tools and len(tools) < len(files):
+        raise ValueError("sources: some files have a tool column and some none; one format expected")
     points = PointLog(group, q, np.concatenate([f.log.point for f in files]),
                       lines=np.arange(2, 2 + len(group), dtype=np.int64),
-                      columns=_pose_column(files))
+                      tool=np.array([t for cells in tools for t in cells or []], dtype=str)
+                      if tools else None,
+                      columns=_pose_column(files, formats))
     given = {} if noise is None else {"point": noise}
     stated = (StatedNoise.of_instrument(instrument, **given) if instrument is not None
               else None if noise is None else StatedNoise(point=noise))
     campaign = Campaign(None, {}, None, {}, points=points, noise=stated)
-    provenance = _provenance(files, formats, "none stated: the package's default applies"
+    provenance = _provenance(files, formats, Path(folder), "none stated: the package's default applies"
                              if stated is None else f"the {stated.instrument}'s default"
                              if noise is None else "as given" if sigma is not None
                              else "the preset's instrument accuracy")
     with output_folder(folder, force, [f.path for f in files]) as tmp:
-        write_campaign(campaign, tmp)
+        write_campaign(campaign, tmp, arm)
         content: dict[str, Any] = {} if stated is None else {"noise_um": {"point": stated.point / UM}}
         if stated is not None and stated.instrument:
             content = {"instrument": stated.instrument, **content}
@@ -395,25 +445,85 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
     return ImportResult(campaign, tuple(files), formats[0], provenance)
 
 
-def _pose_column(files: list[PointFile]) -> dict[str, np.ndarray]:
+def _arm_readouts(q: np.ndarray, arm: ArmNames) -> np.ndarray:
+    """Return readouts (N, n_axes) of the arm from the joint columns read (N, k), rad.
+
+    k = the arm's independent axes: placed in axis order, the coupled ones set by their couplings;
+    k = every axis: as read (the reader checks a coupled column against its coupling).
+
+    Raises:
+        ValueError: for another number of joint columns, naming the arm's axes.
+    """
+    names = list(arm.axis_names)
+    coupled = {c.axis for c in couplings_of(arm)}
+    free = [k for k in range(len(names)) if k not in coupled]
+    if q.shape[1] == len(names):
+        return q
+    if q.shape[1] != len(free):
+        left = f" (its coupled {', '.join(names[k] for k in sorted(coupled))} need no column)"
+        raise ValueError(f"--joints: {q.shape[1]} joint columns for the arm's {len(free)} "
+                         f"independent axes {', '.join(names[k] for k in free)}"
+                         f"{left if coupled else ''}")
+    out = np.zeros((len(q), len(names)))
+    out[:, free] = q
+    return fill_coupled(out, couplings_of(arm))
+
+
+def _check_tools(files: list[PointFile], formats: list[PointFormat], arm: ArmNames) -> None:
+    """Raise CampaignFormatError for a tool column cell that names none of the arm's tools."""
+    known = list(arm.tool_names)
+    problems = []
+    for f, fmt in zip(files, formats):
+        cells = f.labels.get(fmt.tool) if fmt.tool is not None else None
+        lines = f.log.lines if f.log.lines is not None else np.arange(2, 2 + len(f.log.q))
+        bad = [(int(line), c) for line, c in zip(lines, cells or []) if c not in known]
+        if bad:
+            meant = close_match(bad[0][1], known)
+            hint = f"; did you mean {meant}?" if meant else ""
+            problems.append(Problem(f.path, bad[0][0], fmt.tool, f"unknown tool {bad[0][1]!r} "
+                                    f"({len(bad)} rows){hint}; the arm's tools: {', '.join(known)}"))
+    if problems:
+        raise CampaignFormatError(problems)
+
+
+def _pose_column(files: list[PointFile], formats: list[PointFormat]) -> dict[str, np.ndarray]:
     """Return the ``pose`` column (1, 2, ... over all files) where a pose has several points.
 
-    Several points of one pose: identical readouts in consecutive rows (several markers). Without
-    any, nothing (``{}``).
+    Several points of one pose: the rows of one label in the format's pose column, else
+    identical readouts in consecutive rows (several markers). Without any, nothing (``{}``).
     """
     ids, first = [], 1
-    for f in files:
-        own = pose_ids(f.log.q)
+    for f, fmt in zip(files, formats):
+        if fmt.pose is not None:  # labels numbered in the order they first appear
+            labels = f.labels[fmt.pose]
+            order = {label: k for k, label in enumerate(dict.fromkeys(labels))}
+            own = np.array([order[label] for label in labels], dtype=np.int64)
+        else:
+            own = pose_ids(f.log.q)
         ids.append(own + first)
         first += int(own.max()) + 1 if own.size else 0
     pose = np.concatenate(ids)
     return {POSE_COLUMN: pose.astype(float)} if len(np.unique(pose)) < len(pose) else {}
 
 
-def _provenance(files: list[PointFile], formats: list[PointFormat], noise: str) -> dict[str, Any]:
+def relative_to(path: Path, folder: Path) -> str:
+    """Return ``path`` relative to ``folder`` (``../data/tracker.csv``), else as given.
+
+    A campaign folder moved with its sources, or read on another machine, still names them; a
+    path that has no relative form (another drive) is kept as the user gave it.
+    """
+    try:
+        return Path(os.path.relpath(path.absolute(), folder.absolute())).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _provenance(files: list[PointFile], formats: list[PointFormat], folder: Path, noise: str
+                ) -> dict[str, Any]:
     """Return campaign.json's ``provenance``: per source file its rows, format and licence.
 
-    ``noise``: where the stated noise comes from, in a few words.
+    ``folder``: the campaign folder, which the source paths are relative to; ``noise``: where the
+    stated noise comes from, in a few words.
     """
     out: list[dict[str, Any]] = []
     first = 2
@@ -421,14 +531,14 @@ def _provenance(files: list[PointFile], formats: list[PointFormat], noise: str) 
         n = len(f.log.q)
         lines = f.log.lines if f.log.lines is not None else np.arange(2, 2 + n)
         entry: dict[str, Any] = {
-            "file": str(f.path.absolute()), "rows": n,
+            "file": relative_to(f.path, folder), "rows": n,
             "source_lines": f"{int(lines[0])}..{int(lines[-1])}",
             "points_csv_lines": f"{first}..{first + n - 1}", "format": fmt.describe()}
         if fmt.instrument:
             entry["instrument"] = fmt.instrument
         if fmt.source:
             entry["source"] = fmt.source
-        if (note := licence_note(f.path)) is not None:
+        if (note := licence_note(f.path, folder)) is not None:
             entry["licence_file"] = note
         out.append(entry)
         first += n

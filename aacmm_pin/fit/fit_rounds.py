@@ -240,7 +240,7 @@ def decision_point(problem: Problem, jacobian: DataJacobian | None,
 
 def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
                     reweight: Callable[[Fit, np.ndarray], Fit], base_w: np.ndarray,
-                    spent: Callable[[], bool] = lambda: False
+                    files: list[str], spent: Callable[[], bool] = lambda: False
                     ) -> tuple[np.ndarray, bool, Fit]:
     """Reject outliers from a least-squares fit (see :mod:`aacmm_pin.fit.robust`).
 
@@ -249,12 +249,14 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
     the samples within ``OUTLIER_K`` robust sigmas, the structure (unvisited nodes, gauges, held
     directions) decided on them, until the rejected set no longer changes. ``fit(keep)``
     identifies from the start values with the samples of ``keep``; ``reweight(fit, w)`` solves
-    the same structure again from its solution with sample weights ``w``. Returns the mask of
+    the same structure again from its solution with sample weights ``w``; ``files``: every
+    sample's campaign file, its kind, whose own robust scale (at least the stated noise) judges
+    it. Returns the mask of
     samples kept, whether the set settled and the final fit (its ``nfev`` counts every solve).
     ``spent()``: whether the fit's evaluations are spent (the loop ends, not settled).
     """
     now, nfev = first, first.nfev
-    n = len(base_w)
+    n, sigma = len(base_w), first.problem.sigma_class
 
     def norms_of(f: Fit) -> np.ndarray:
         return rob.whitened_norms(f.problem.data_residuals(f.x), base_w)
@@ -268,7 +270,7 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
     for _ in range(rob.MAX_HUBER_ITERATIONS):
         if spent():
             return np.ones(n, bool), False, now._replace(nfev=nfev)
-        new = rob.huber_weights(norms, rob.robust_scale(norms, fraction(now, n)))
+        new = rob.huber_weights(norms, rob.kind_scales(norms, files, fraction(now, n), sigma))
         if np.max(np.abs(new - weight)) < rob.WEIGHT_TOL:
             break
         weight = new
@@ -283,14 +285,14 @@ def reject_outliers(first: Fit, fit: Callable[[np.ndarray | None], Fit],
         sensitivity = rob.node_sensitivity(first.unknowns.jacobian(x_arm, q)[1].nodes, n)
     node_size = float(first.unknowns.arm.sizes.map_node)
     for _ in range(rob.MAX_REJECT_ITERATIONS):
-        scale = rob.robust_scale(norms, fraction(now, n - int(mask.sum())))
+        scale = rob.kind_scales(norms, files, fraction(now, n - int(mask.sum())), sigma)
         unseen = rob.unseen_of_sensitivity(sensitivity, ~mask, node_size) * base_w ** 2
         out = rob.flag_unseen(norms, scale, unseen)
         if refitted and np.array_equal(out, mask):
             return ~mask, True, now._replace(nfev=nfev)
         if not out.any():  # nothing to reject: the least-squares fit stands, if it agrees
             norms = norms_of(first)
-            if not rob.flag(norms, rob.robust_scale(norms, fraction(first, n))).any():
+            if not rob.flag(norms, rob.kind_scales(norms, files, fraction(first, n), sigma)).any():
                 return ~out, True, first._replace(nfev=nfev)
         if spent():
             break

@@ -353,6 +353,8 @@ class _Setup(NamedTuple):
     """What each entry after the arm's is."""
     settings: SolverSettings
     """How every solve minimises."""
+    sources: tuple[list[str], np.ndarray, np.ndarray]
+    """The campaign file (the kind), line and log row of every sample (:func:`rob.sample_sources`)."""
 
 
 def _identify(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
@@ -401,7 +403,7 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | N
     settings = SolverSettings(loss=options.loss, f_scale=options.f_scale or 3 * sigma_class,
                               max_nfev=options.solve_nfev, budget=budget)
     return _Setup(meas, full_u, start, has_spat, sigma_class, stated, base_w, nuisance, measured,
-                  nuisance_keys, settings)
+                  nuisance_keys, settings, rob.sample_sources(campaign, options.use_bar))
 
 
 def _fits(setup: _Setup, options: FitOptions) -> tuple[Fit, np.ndarray | None, bool]:
@@ -435,7 +437,7 @@ def _fits(setup: _Setup, options: FitOptions) -> tuple[Fit, np.ndarray | None, b
             return now, None, True
         # the first fit's Jacobian is not held through the refits
         inlier, settled, now = reject_outliers(now._replace(jac=None), fit, reweight, s.base_w,
-                                               lambda: s.settings.budget is not None
+                                               s.sources[0], lambda: s.settings.budget is not None
                                                and s.settings.budget.spent)
         return now, inlier, settled
 
@@ -451,9 +453,10 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     dof_fraction = max(3 * int(kept.sum()) + problem.n_lengths - n_det, 1) / (3 * int(kept.sum()))
     residual = problem.data_residuals(x_full)
     norms = rob.whitened_norms(residual, setup.base_w)
-    scale = rob.robust_scale(norms, dof_fraction)  # as the IRLS judged: median over all samples
+    # as the IRLS judged: each kind's median over all its samples
+    scale = rob.kind_scales(norms, setup.sources[0], dof_fraction, setup.sigma_class)
     flagged = rob.describe(residual, norms, scale, ~kept if robust else rob.flag(norms, scale),
-                           rob.sample_sources(campaign, options.use_bar))
+                           setup.sources)
     data_res = res.fun[:3 * n][np.repeat(kept, 3)]  # weighted: the noise in units of sigma_class
     dof = data_res.size + problem.n_lengths - n_det
     enough = dof >= MIN_DOF_FRACTION * data_res.size
@@ -472,7 +475,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     outliers = flagged if robust else ()
     suspects = () if robust else flagged
     rms = float(np.sqrt(np.mean(residual[kept] ** 2)))
-    success, message = _verdict(res, robust, settled, outliers, suspects, scale, enough,
+    success, message = _verdict(res, robust, settled, outliers, suspects, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
     if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm],
@@ -488,6 +491,9 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
         judged = _judgement(campaign, setup, residual, kept, n_det, options.sigma)
         success, message = _judged(success, message, judged, robust, campaign, setup,
                                    _points_rms(campaign, setup, residual, kept))
+    if robust and (whole := rob.whole_kind(norms, setup.sources[0], setup.sigma_class,
+                                           dof_fraction)) is not None:
+        success, message = False, f"robust fit refused: {whole}; {message}"
     return Calibration(parameters=unknowns.parameters(x_full[:problem.n_arm]), model=options.model,
                        use_rtest=options.use_rtest,
                        names=unknowns.names + [str(k) for k in setup.nuisance_keys],
@@ -515,7 +521,7 @@ def _budget_message(options: FitOptions) -> str:
 
 
 def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[Outlier, ...],
-             suspects: tuple[Outlier, ...], scale: float, enough: bool,
+             suspects: tuple[Outlier, ...], enough: bool,
              counts: tuple[int, int, int, float], spat_rms: float | None) -> tuple[bool, str]:
     """Return ``success`` and ``message``: the last solve's, then outliers, too few samples, RMS.
 
@@ -524,7 +530,7 @@ def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[O
     """
     success = bool(res.success)  # the last round's: earlier ones only set the held directions
     message = res.message if success else f"did not converge: {res.message}"
-    limit = f"{rob.OUTLIER_K:g} robust sigmas ({rob.OUTLIER_K * scale * 1e6:.3g} um whitened norm)"
+    limit = f"{rob.OUTLIER_K:g} robust sigmas of their kind"
     if robust:
         message = (f"{message}; robust fit: {len(outliers)} outlier samples beyond {limit} "
                    f"rejected" + (_where(outliers) if outliers else ""))

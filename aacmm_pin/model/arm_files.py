@@ -11,9 +11,11 @@ from pathlib import Path
 
 from aacmm_pin.errors import ArmModelError
 
-EMBEDDED = ("aacmm7", "ur5", "wam7")
-"""Arms shipped with the package, loadable by name: the default AACMM and the two robots of the
-public laser-tracker data (``urdf/make_serial_dh.py`` writes them from the makers' DH tables)."""
+EMBEDDED = ("aacmm7", "ur5", "wam7", "torso", "torso_coupled")
+"""Arms shipped with the package (``pyproject.toml``'s wheel ``force-include``, each URDF with its
+sizes file), loadable by name: the default AACMM, the two robots of the public laser-tracker data
+(``urdf/make_serial_dh.py`` writes them from the makers' DH tables), and the two-armed torsos of
+the docs, one with a coupled joint (``urdf/make_torso.py``, ``urdf/make_torso_coupled.py``)."""
 
 
 def resolve_arm_path(arm: str | Path) -> Path:
