@@ -158,7 +158,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
               report: tuple[StartReport, StepReport]) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
-    meas = measurements(campaign, arm, use_rtest)
+    meas = measurements(campaign, arm, use_rtest, noise=noise)
     samples = meas.samples
     spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
@@ -174,7 +174,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                        use_rtest=model.use_rtest, map_axes=model.map_axes or None,
                        extensions=model.terms, max_nfev=left,
                        nests="estimate",  # one treatment for every model
-                       sigma_location=noise.location)
+                       noise=noise)
         left -= cal.nfev
         if _capped(cal):  # the caller ends the loop
             raise _CapReached
