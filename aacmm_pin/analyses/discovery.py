@@ -77,6 +77,10 @@ class _CapReached(Exception):
     """A fit of a step spent the rest of discovery's evaluation budget (the loop ends)."""
 
 
+class _FitFailed(Exception):
+    """A fit was refused or did not converge (the loop ends; the message says which and why)."""
+
+
 def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
     if campaign.lengthbar is None or not campaign.bar:
         return None
@@ -179,9 +183,9 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         if _capped(cal):  # the caller ends the loop
             raise _CapReached
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined
-            raise AacmmError(f"discovery: the fit with "
-                             f"{', '.join(t.key for t in model.terms) or start} did not converge: "
-                             f"{cal.message}")
+            what = "did not converge" if cal.status <= 0 else "was refused"  # scipy: > 0 converged
+            raise _FitFailed(f"the fit with {', '.join(t.key for t in model.terms) or start} "
+                             f"{what}: {cal.message}")
         return cal
 
     try:
@@ -190,6 +194,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         raise FitCapReached(f"discover: the fit of the start model ({start}) reached the cap of "
                             f"{max_nfev} evaluations before converging: raise --max-nfev "
                             "(max_nfev)") from None
+    except _FitFailed as exc:  # nothing found yet to keep
+        raise AacmmError(f"discover: {exc}") from None
     bar_now = _linear_bar(arm, cal, campaign)
     lin = LinearScorer(cal, samples, bar_now)
     steps: list[Step] = []
@@ -198,7 +204,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     report[0](lin.heldout_rms, cal.fit_rms, None if bar_now is None else bar_now.rms,
               lin.size_factors)
     n_candidates: list[int] = []
-    stopped, missing, capped = "", [], False
+    stopped, missing, capped, failed = "", [], False, False
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
     named_in: dict[str, int] = {}  # term key -> step that named it
     def candidates() -> list[Term]:  # a term dropped as not earned is not tried again
@@ -242,6 +248,13 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                        "--max-nfev (max_nfev)")
             spec = spec_before  # the model of the steps that stand
             break
+        except _FitFailed as exc:
+            failed = True
+            stopped = (f"the fit of step {len(steps) + 1} "
+                       f"({', '.join(t.key for t in new_terms)}) failed, the {len(steps)} steps "
+                       f"before it stand: {exc}")
+            spec = spec_before
+            break
         new_terms = [t for t in new_terms if t.in_model(spec)]
         new_bar = _linear_bar(arm, new_cal, campaign)
         new_lin = LinearScorer(new_cal, samples, new_bar)
@@ -282,7 +295,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
                      noise=cal.sigma, n_candidates=n_candidates,
                      runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
-                     stated_noise=noise, capped=capped)
+                     stated_noise=noise, capped=capped, failed=failed)
 
 
 def _capped(cal: Calibration) -> bool:

@@ -208,6 +208,9 @@ class Discovery:
     capped: bool = False
     """Whether a fit reached its evaluation cap (``max_nfev``) and ended the loop there
     (:attr:`stopped_because` names the fit); the steps before it stand."""
+    failed: bool = False
+    """Whether a step's fit failed (refused, or not converged) and ended the loop there
+    (:attr:`stopped_because` names the step and why); the steps before it stand."""
 
     @property
     def unexplained(self) -> dict[str, Any] | None:
@@ -230,7 +233,7 @@ class Discovery:
         return {
             "start": self.start, "steps": [s.to_dict() for s in self.steps],
             "missing": self.missing, "stopped_because": self.stopped_because,
-            "capped": self.capped,
+            "capped": self.capped, "failed": self.failed,
             "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
                     "fit_rms_um": [v * 1e6 for v in self.fit_rms],
                     "bar_rms_um": [_um(v) for v in self.bar_rms],

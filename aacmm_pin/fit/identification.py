@@ -503,8 +503,9 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     success, message = _verdict(res, robust, settled, outliers, suspects, scale, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
-    if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm],
-                                                  obs.scale)) is not None:
+    if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm], obs.scale,
+                                                  unknowns.arm.sizes_label,
+                                                  unknowns.arm.source)) is not None:
         success, message = False, f"{units}; {message}"
     if not success and setup.settings.budget is not None and setup.settings.budget.spent:
         message = _budget_message(options) + message.removeprefix(
