@@ -17,6 +17,7 @@ from aacmm_pin.analyses import discovery
 from aacmm_pin.cli import main
 from aacmm_pin.fit import solver
 from aacmm_pin.model.sizes import DEFAULT, read_sizes, write_sizes
+from tests.helpers import SHARED
 
 ROOT = Path(__file__).resolve().parents[1]
 UR5_GRID = (ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker" / "UR5"
@@ -249,3 +250,53 @@ def test_identify_prints_and_reports_its_sizes_file(tmp_path, capsys):
         assert [line for line in out if line.startswith("sizes: ")] == [f"sizes: {want}"]
         report = json.loads((tmp_path / f"cal_{camp}" / "report.json").read_text())
         assert report["sizes"] == want
+
+
+def test_a_failed_step_keeps_the_steps_before_it(tmp_path, monkeypatch):
+    """A step whose fit is refused ends discover with the steps so far written, exit 1, the step
+    and the reason named; "did not converge" is said only of a fit that did not converge."""
+    import dataclasses
+
+    sim = ap.simulate_campaign(ap.load_arm(), ap.SimulationConfig(
+        seed=0, effects=("dh", "encoder", "rtest", "compliance"), samples_per_location=60,
+        bar_placements=1))
+    ap.write_simulation(sim, tmp_path / "camp")
+    calls = {"n": 0}
+    original = discovery.identify
+
+    def refuse_third(*args: object, **kwargs: object) -> ap.Calibration:
+        cal = original(*args, **kwargs)  # type: ignore[arg-type]
+        calls["n"] += 1
+        if calls["n"] == 3:  # the start, step 1, then step 2's fit: converged, but refused
+            return dataclasses.replace(cal, success=False, judged=False, status=1,
+                                       message="units? refused for the test")
+        return cal
+
+    monkeypatch.setattr(discovery, "identify", refuse_third)
+    code = main(["discover", str(tmp_path / "camp"), "--out", str(tmp_path / "disc")])
+    assert code == 1 and calls["n"] == 3
+    written = json.loads((tmp_path / "disc" / "discovery.json").read_text())
+    why = written["stopped_because"]
+    assert written["failed"] and len(written["steps"]) == 1, why
+    assert "step 2" in why and "was refused" in why and "units? refused for the test" in why
+    assert "did not converge" not in why
+    assert (tmp_path / "disc" / "parameters.json").is_file()
+
+
+SHARED_WAM = SHARED / "real-data" / "jacobi2025-laser-tracker" / "WAM"
+
+
+@pytest.mark.skipif(not SHARED_WAM.is_dir(), reason="needs ../shared/real-data")
+def test_a_robot_without_a_sizes_file_is_told_to_write_one(tmp_path, capsys):
+    """The WAM's grid on its URDF without the sizes file: refused naming the file to write and
+    the built-in sizes' origin (a portable measuring arm's)."""
+    shutil.copy(ROOT / "urdf" / "wam7.urdf", tmp_path / "wam7.urdf")
+    assert main(["import-points", str(SHARED_WAM / "3D_WAM_uncalibrated_grid_cleaned.csv"),
+                 "--out", str(tmp_path / "camp")]) == 0
+    capsys.readouterr()
+    code = main(["identify", str(tmp_path / "camp"), "--arm", str(tmp_path / "wam7.urdf"),
+                 "--model", "dh", "--out", str(tmp_path / "cal")])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert f"write its sizes into {tmp_path / 'wam7.sizes.json'}" in out
+    assert "portable measuring arm's" in out and "--sizes FILE" in out

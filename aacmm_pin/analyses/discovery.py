@@ -41,7 +41,7 @@ from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
 from aacmm_pin.analyses.linear_scorer import LinearScorer
-from aacmm_pin.analyses.residual_scan import TIME, scan_residuals
+from aacmm_pin.analyses.residual_scan import TIME, Scan, scan_residuals
 from aacmm_pin.analyses.term_elimination import Dropped, eliminate
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, ModelSpec, Term
@@ -49,7 +49,7 @@ from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.fit.measurements import measurements, stated_noise
+from aacmm_pin.fit.measurements import Measurements, measurements, stated_noise
 from aacmm_pin.model.arm import Arm, load_arm
 from aacmm_pin.model.samples import Samples
 from aacmm_pin.progress import Progress
@@ -77,6 +77,10 @@ class _CapReached(Exception):
     """A fit of a step spent the rest of discovery's evaluation budget (the loop ends)."""
 
 
+class _FitFailed(Exception):
+    """A fit was refused or did not converge (the loop ends; the message says which and why)."""
+
+
 def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | None:
     if campaign.lengthbar is None or not campaign.bar:
         return None
@@ -102,7 +106,10 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         start: ``"dh"`` (DH errors, tool) or ``"proposed"`` (also every axis' encoder map).
         effects: names of library effects to try (default: every registered effect tried by
             default, :attr:`aacmm_pin.effects.Effect.by_default`, i.e. all but
-            ``lateral_compliance``; ``["all"]``: every registered effect).
+            ``lateral_compliance`` and plugins' opt-in effects, and, when none of them is
+            significant and the residual is still larger than the stated noise, those others
+            too, by the same tests (:attr:`Discovery.widened`); ``["all"]``: every registered
+            effect).
         use_rtest: whether the start model uses each sample's R-Test displacement.
         max_steps: most effects to add.
         alpha: family-wise error rate of a step's significance tests (Bonferroni).
@@ -141,7 +148,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         budget = MAX_NFEV_PER_FIT * (max_steps + 1) if max_nfev is None else max_nfev
         return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, budget,
                          progress, noise or campaign.noise or StatedNoise(),
-                         (on_start or _quiet_start, on_step or _quiet_step))
+                         (on_start or _quiet_start, on_step or _quiet_step), effects is None)
 
 
 def _quiet_start(heldout_rms: float, fit_rms: float, bar_rms: float | None,
@@ -155,10 +162,10 @@ def _quiet_step(k: int, step: Step) -> None:
 
 def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
               max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise,
-              report: tuple[StartReport, StepReport]) -> Discovery:
+              report: tuple[StartReport, StepReport], widen: bool = False) -> Discovery:
     tic = time.perf_counter()
     arm = arm or load_arm()
-    meas = measurements(campaign, arm, use_rtest)
+    meas = measurements(campaign, arm, use_rtest, noise=noise)
     samples = meas.samples
     spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
     effects = [library()[n] for n in names if not library()[n].in_start]
@@ -174,14 +181,14 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                        use_rtest=model.use_rtest, map_axes=model.map_axes or None,
                        extensions=model.terms, max_nfev=left,
                        nests="estimate",  # one treatment for every model
-                       sigma_location=noise.location)
+                       noise=noise)
         left -= cal.nfev
         if _capped(cal):  # the caller ends the loop
             raise _CapReached
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined
-            raise AacmmError(f"discovery: the fit with "
-                             f"{', '.join(t.key for t in model.terms) or start} did not converge: "
-                             f"{cal.message}")
+            what = "did not converge" if cal.status <= 0 else "was refused"  # scipy: > 0 converged
+            raise _FitFailed(f"the fit with {', '.join(t.key for t in model.terms) or start} "
+                             f"{what}: {cal.message}")
         return cal
 
     try:
@@ -190,6 +197,8 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         raise FitCapReached(f"discover: the fit of the start model ({start}) reached the cap of "
                             f"{max_nfev} evaluations before converging: raise --max-nfev "
                             "(max_nfev)") from None
+    except _FitFailed as exc:  # nothing found yet to keep
+        raise AacmmError(f"discover: {exc}") from None
     bar_now = _linear_bar(arm, cal, campaign)
     lin = LinearScorer(cal, samples, bar_now)
     steps: list[Step] = []
@@ -198,7 +207,7 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
     report[0](lin.heldout_rms, cal.fit_rms, None if bar_now is None else bar_now.rms,
               lin.size_factors)
     n_candidates: list[int] = []
-    stopped, missing, capped = "", [], False
+    stopped, missing, capped, failed = "", [], False, False
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
     named_in: dict[str, int] = {}  # term key -> step that named it
     def candidates() -> list[Term]:  # a term dropped as not earned is not tried again
@@ -207,66 +216,84 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
         n_candidates.append(len(out))
         return out
 
-    for _ in range(max_steps):
-        terms_now = candidates()
-        if not terms_now:
-            stopped = ("no candidate to try: every effect asked for is in the model or has no "
-                       "term these data can show")
+    widened: list[str] = []
+    while True:
+        for _ in range(max_steps - len(steps)):
+            terms_now = candidates()
+            if not terms_now:
+                stopped = ("no candidate to try: every effect asked for is in the model or has no "
+                           "term these data can show")
+                break
+            threshold = alpha / len(terms_now)
+            scores = _scored(lin, terms_now, threshold)
+            good = [s for s in scores if s.significant]
+            if not good:
+                best = scores[0]
+                stopped = (f"no candidate is significant against the noise "
+                           f"({lin.sigma * 1e6:.2f} um): the best, {best.term.key}, changes the held-out "
+                           f"RMS by {(best.heldout_rms - lin.heldout_rms) * 1e6:+.3f} um, "
+                           f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
+                           f"{best.bic_gain:.1f}")
+                break
+            chosen = _forward(lin, good[0], terms_now, threshold)
+            new_terms = [s.term for s in chosen]
+            spec_before = spec
+            for t in new_terms:
+                spec = t.added_to(spec)
+                named_in[t.key] = len(steps) + 1
+            # every term of the model earned given all the others (a term may have stood in for an
+            # effect named later): the least significant dropped and the model refitted, until none
+            try:
+                new_cal, spec, dropped = eliminate(fit(), spec, fit, alpha, named_in)
+            except _CapReached:
+                capped = True
+                stopped = (f"the fit of step {len(steps) + 1} ({', '.join(t.key for t in new_terms)}) "
+                           f"reached the cap of {max_nfev} evaluations of all the discovery's fits "
+                           f"before converging: the {len(steps)} steps before it stand; raise "
+                           "--max-nfev (max_nfev)")
+                spec = spec_before  # the model of the steps that stand
+                break
+            except _FitFailed as exc:
+                failed = True
+                stopped = (f"the fit of step {len(steps) + 1} "
+                           f"({', '.join(t.key for t in new_terms)}) failed, the {len(steps)} steps "
+                           f"before it stand: {exc}")
+                spec = spec_before
+                break
+            new_terms = [t for t in new_terms if t.in_model(spec)]
+            new_bar = _linear_bar(arm, new_cal, campaign)
+            new_lin = LinearScorer(new_cal, samples, new_bar)
+            step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
+                         samples, (chosen, dropped))
+            steps.append(step)
+            report[1](len(steps), step)
+            cal, lin, bar_now = new_cal, new_lin, new_bar
+            held.append(lin.heldout_rms)
+            factors.append(lin.size_factors)
+            fits.append(cal.fit_rms)
+            bars.append(bar_now)
+            ticker.update(1)
+        else:
+            terms_now = candidates()
+            still = _scored(lin, terms_now, alpha / max(len(terms_now), 1))
+            missing = [s.to_dict() for s in still if s.significant]
+            stopped = (f"reached max_steps = {max_steps}" + (
+                f"; {len(missing)} candidates are still significant (see missing)" if missing else
+                "; nothing else is significant"))
+        if not widen or widened or capped or failed or len(steps) >= max_steps or missing:
             break
-        threshold = alpha / len(terms_now)
-        scores = _scored(lin, terms_now, threshold)
-        good = [s for s in scores if s.significant]
-        if not good:
-            best = scores[0]
-            stopped = (f"no candidate is significant against the noise "
-                       f"({lin.sigma * 1e6:.2f} um): the best, {best.term.key}, changes the held-out "
-                       f"RMS by {(best.heldout_rms - lin.heldout_rms) * 1e6:+.3f} um, "
-                       f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
-                       f"{best.bic_gain:.1f}")
+        others = [e for e in library().values() if e.name not in names and not e.in_start]
+        if not others or _residual_scan(arm, cal, lin, samples, campaign, meas, noise, names
+                                        ).noise_consistent:
             break
-        chosen = _forward(lin, good[0], terms_now, threshold)
-        new_terms = [s.term for s in chosen]
-        spec_before = spec
-        for t in new_terms:
-            spec = t.added_to(spec)
-            named_in[t.key] = len(steps) + 1
-        # every term of the model earned given all the others (a term may have stood in for an
-        # effect named later): the least significant dropped and the model refitted, until none
-        try:
-            new_cal, spec, dropped = eliminate(fit(), spec, fit, alpha, named_in)
-        except _CapReached:
-            capped = True
-            stopped = (f"the fit of step {len(steps) + 1} ({', '.join(t.key for t in new_terms)}) "
-                       f"reached the cap of {max_nfev} evaluations of all the discovery's fits "
-                       f"before converging: the {len(steps)} steps before it stand; raise "
-                       "--max-nfev (max_nfev)")
-            spec = spec_before  # the model of the steps that stand
-            break
-        new_terms = [t for t in new_terms if t.in_model(spec)]
-        new_bar = _linear_bar(arm, new_cal, campaign)
-        new_lin = LinearScorer(new_cal, samples, new_bar)
-        step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
-                     samples, (chosen, dropped))
-        steps.append(step)
-        report[1](len(steps), step)
-        cal, lin, bar_now = new_cal, new_lin, new_bar
-        held.append(lin.heldout_rms)
-        factors.append(lin.size_factors)
-        fits.append(cal.fit_rms)
-        bars.append(bar_now)
-        ticker.update(1)
-    else:
-        terms_now = candidates()
-        still = _scored(lin, terms_now, alpha / max(len(terms_now), 1))
-        missing = [s.to_dict() for s in still if s.significant]
-        stopped = (f"reached max_steps = {max_steps}" + (
-            f"; {len(missing)} candidates are still significant (see missing)" if missing else
-            "; nothing else is significant"))
+        # the residual is larger than the noise: the effects not offered by default may be what
+        # it asks for; scored by the same tests, named only if they pass them
+        widened = [e.name for e in others]
+        effects += others
+        names = [*names, *widened]
+
     ticker.close()
-    tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
-    scan = scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
-                          np.einsum("nij,j->ni", lin.stylus.tool, tools),
-                          [library()[n] for n in dict.fromkeys(default_effects() + names)])
+    scan = _residual_scan(arm, cal, lin, samples, campaign, meas, noise, names)
     if scan.structure:  # library terms on a variable the residual follows, not named
         followed = {s.variable for s in scan.structure}
         if TIME in followed:  # the scan reports time once: either of its two variables
@@ -282,7 +309,20 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
                      bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
                      noise=cal.sigma, n_candidates=n_candidates,
                      runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
-                     stated_noise=noise, capped=capped)
+                     stated_noise=noise, capped=capped, failed=failed, widened=tuple(widened))
+
+
+def _residual_scan(arm: Arm, cal: Calibration, lin: LinearScorer, samples: Samples,
+                   campaign: Campaign, meas: Measurements, noise: StatedNoise, names: list[str]
+                   ) -> Scan:
+    """Return the residual of ``cal`` scanned against the stated noise (:func:`scan_residuals`).
+
+    Every variable of the effects ``names`` and of the default ones is tested.
+    """
+    tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
+    return scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
+                          np.einsum("nij,j->ni", lin.stylus.tool, tools),
+                          [library()[n] for n in dict.fromkeys(default_effects() + names)])
 
 
 def _capped(cal: Calibration) -> bool:

@@ -208,6 +208,12 @@ class Discovery:
     capped: bool = False
     """Whether a fit reached its evaluation cap (``max_nfev``) and ended the loop there
     (:attr:`stopped_because` names the fit); the steps before it stand."""
+    widened: tuple[str, ...] = ()
+    """Effects not offered by default that the search took on because the residual was still
+    larger than the stated noise when none of the others was significant (empty: none)."""
+    failed: bool = False
+    """Whether a step's fit failed (refused, or not converged) and ended the loop there
+    (:attr:`stopped_because` names the step and why); the steps before it stand."""
 
     @property
     def unexplained(self) -> dict[str, Any] | None:
@@ -230,7 +236,7 @@ class Discovery:
         return {
             "start": self.start, "steps": [s.to_dict() for s in self.steps],
             "missing": self.missing, "stopped_because": self.stopped_because,
-            "capped": self.capped,
+            "capped": self.capped, "failed": self.failed, "widened": list(self.widened),
             "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
                     "fit_rms_um": [v * 1e6 for v in self.fit_rms],
                     "bar_rms_um": [_um(v) for v in self.bar_rms],

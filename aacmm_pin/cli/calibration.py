@@ -270,6 +270,9 @@ def _discover_into(args: argparse.Namespace) -> int:
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
+    if result.widened:
+        print(f"  with the default effects the residual stayed larger than the stated noise: "
+              f"also tried {', '.join(result.widened)} (not offered by default), by the same tests")
     if result.scan is not None:
         print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
     sys.stdout.flush()
@@ -281,7 +284,7 @@ def _discover_into(args: argparse.Namespace) -> int:
     if no_figures:
         print(f"  {no_figures}")
     _print_urdf_loss(args.out)
-    if result.capped:  # the steps so far are written; the loop ended at a fit's cap
+    if result.capped or result.failed:  # the steps so far are written; a fit ended the loop
         print(f"discover: {result.stopped_because}", file=sys.stderr)
         return 1
     return 0
@@ -297,9 +300,9 @@ def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: 
     print(f"start {start}: held-out RMS {heldout_rms * 1e6:.2f} um, fit RMS "
           f"{fit_rms * 1e6:.2f} um")
     print(f"  stated noise per coordinate: {noise}")
-    if size_factors:
+    if widened := {g: f for g, f in size_factors.items() if round(f, 2) > 1.0}:  # x1: no word
         print("  the fit rejects the arm's sizes of " + ", ".join(
-            f"{g} (x{f:.3g})" for g, f in size_factors.items()) + ": held-out priors widened")
+            f"{g} (x{f:.3g})" for g, f in widened.items()) + ": held-out priors widened")
     sys.stdout.flush()
 
 

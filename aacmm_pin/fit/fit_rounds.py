@@ -127,7 +127,7 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
         # with it, but not the start's: the inputs disagree only if the start's bulk does too
         scale = min(scale, _median_scale(now.problem.data_residuals(x_start), keep))
     plausibility.check_agreement(scale, plausible, sigma_class, nfev,
-                                 unknowns.arm.sizes_label)
+                                 unknowns.arm.sizes_label, unknowns.arm.source)
     if z_now.any():  # the step lowered the cost: check the decision where it landed
         del jac_now  # one Jacobian in memory at a time
         jac_now = landed.pop() if landed else jacobian(x_now)

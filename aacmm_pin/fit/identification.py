@@ -52,9 +52,6 @@ from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.progress import Progress
 from aacmm_pin.units import (
     SIGMA_BAR,
-    SIGMA_LOCATION,
-    SIGMA_POINT,
-    SIGMA_RTEST,
     STEP_DEG,
     noise_problem,
 )
@@ -98,9 +95,15 @@ class FitOptions:
     f_scale: float | None = None
     """Residual scale of a robust loss, m (None: 3 x the solve's sigma)."""
     sigma: float | None = None
-    """R-Test noise per coordinate, m; None: estimated from the residuals."""
-    sigma_location: float = SIGMA_LOCATION
-    """Prior standard deviation of each R-Test zero position per coordinate, m."""
+    """Noise per coordinate of the campaign's main kind (R-Test readings, else points without a
+    ``sigma_um`` column), m; None: :attr:`noise`'s."""
+    sigma_location: float | None = None
+    """Prior standard deviation of each R-Test zero position per coordinate, m; None:
+    :attr:`noise`'s."""
+    noise: StatedNoise | None = None
+    """The stated noise per kind of measurement; None: the campaign's (``campaign.json``: its
+    ``noise_um``, else its instrument's), else the defaults. Every solve weighs its rows and
+    priors with it and the residual is judged against it (:func:`solve_noise`)."""
     max_nfev: int | None = None
     """Most residual evaluations of the whole fit (every solve of it together); None: each solve
     stops after :data:`MAX_NFEV_PER_SOLVE` (see :attr:`solve_nfev`)."""
@@ -217,7 +220,8 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
              use_rtest: bool = True, *, start: Parameters | None = None, step_deg: float = STEP_DEG,
              map_axes: tuple[int, ...] | None = None, loss: str = "linear",
              f_scale: float | None = None, sigma: float | None = None,
-             sigma_location: float = SIGMA_LOCATION, max_nfev: int | None = None,
+             sigma_location: float | None = None, noise: StatedNoise | None = None,
+             max_nfev: int | None = None,
              jac: str = "analytic",
              progress: bool = False, extensions: tuple[Term, ...] = (),
              use_bar: bool = False, robust: bool = False, nests: str = "auto") -> Calibration:
@@ -242,7 +246,11 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
         f_scale: residual scale of a scipy robust loss, m (default 3 x sigma).
         sigma: R-Test noise per coordinate, m; None estimates it from the residuals.
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
-            (paper Section 5: 3 um); each nest's offset is estimated with this prior.
+            (default: ``noise``'s, paper Section 5: 3 um); each nest's offset is estimated with
+            this prior.
+        noise: the stated noise per kind of measurement (default: the campaign's
+            ``campaign.json``, else the defaults); ``sigma`` and ``sigma_location`` override its
+            R-Test (or point) and nest values.
         max_nfev: most residual evaluations of the whole fit (the rounds, the robust passes and
             the refit with fixed nests together: ``nfev`` reports what was used; not converged
             within it: ``success`` False, ``status`` 0, the message names the cap). None: no cap
@@ -282,7 +290,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     """
     options = FitOptions(model=model, use_rtest=use_rtest, start=start, step_deg=step_deg,
                          map_axes=map_axes, loss=loss, f_scale=f_scale, sigma=sigma,
-                         sigma_location=sigma_location, max_nfev=max_nfev, jac=jac,
+                         sigma_location=sigma_location, noise=noise, max_nfev=max_nfev, jac=jac,
                          progress=progress, extensions=extensions, use_bar=use_bar,
                          robust=robust, nests=nests)
     # every evaluation of every fit below (none given: each solve's own cap only)
@@ -295,7 +303,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             return cal
         if nests != "auto":
             return replace(cal, nests=f"{nests} (asked)")
-        p_value, ratio = _noise_consistency(cal, sigma or SIGMA_RTEST)
+        p_value, ratio = _noise_consistency(cal, solve_noise(campaign, options).rtest)
         if p_value >= NOISE_P:
             return replace(cal, nests=f"estimated: the fit's residual matches the stated R-Test "
                                       f"noise (RMS {ratio:.2f} x, p = {p_value:.2g})")
@@ -355,6 +363,8 @@ class _Setup(NamedTuple):
     """How every solve minimises."""
     sources: tuple[list[str], np.ndarray, np.ndarray]
     """The campaign file (the kind), line and log row of every sample (:func:`rob.sample_sources`)."""
+    noise: StatedNoise
+    """The stated noise per kind the solves use (:func:`solve_noise`)."""
 
 
 def _identify(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
@@ -369,10 +379,29 @@ def _identify(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget 
     return _calibration(campaign, options, setup, now, inlier, settled, tic)
 
 
+def solve_noise(campaign: Campaign, options: FitOptions) -> StatedNoise:
+    """Return the stated noise per kind that every solve of an identification uses.
+
+    The one policy, from the sources :func:`aacmm_pin.data.logs.noise_summary` prints: the
+    options' ``sigma`` (the campaign's main kind: R-Test readings, else points) and
+    ``sigma_location``, over ``options.noise`` (a caller's, e.g. discover's ``--sigma-*-um``),
+    over the campaign's ``campaign.json`` (``noise_um``, else its instrument's), over the defaults.
+    Points with a ``sigma_um`` column keep it (:func:`~aacmm_pin.fit.measurements.stated_noise`).
+    """
+    noise = options.noise or campaign.noise or StatedNoise()
+    if options.sigma is not None:
+        spat = campaign.spat is not None or campaign.points is None
+        noise = replace(noise, rtest=options.sigma) if spat else replace(noise, point=options.sigma)
+    if options.sigma_location is not None:
+        noise = replace(noise, location=options.sigma_location)
+    return noise
+
+
 def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | None,
            fixed_nests: bool) -> _Setup:
     """Return the measurements, unknowns, noise and nuisance shared by the fits."""
-    meas = measurements(campaign, arm, options.use_rtest, options.use_bar)
+    noise = solve_noise(campaign, options)
+    meas = measurements(campaign, arm, options.use_rtest, options.use_bar, noise)
     if fixed_nests:
         meas = _without_rtest_nests(meas)
     q, group, samples, stated = meas.q, meas.group, meas.samples, meas.sigma
@@ -393,17 +422,16 @@ def _setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget | N
     full_u = Unknowns.full(arm, start, axes if options.model == "proposed" else (),
                            tuple(t for t in options.extensions if t.is_extension), samples)
     has_spat = campaign.spat is not None or campaign.points is None
-    sigma_class = options.sigma or (SIGMA_RTEST if has_spat else SIGMA_POINT if stated is None
-                                    else float(np.median(stated)))
-    if stated is not None:  # per-sample noise stated: SPAT rows have the solve's R-Test noise
-        stated = stated_noise(campaign, meas, StatedNoise(rtest=sigma_class, point=SIGMA_POINT))
-    nuisance, measured, nuisance_keys = _nuisance(arm, start, meas, sigma_class,
-                                                  options.sigma_location)
+    sigma_class = (noise.rtest if has_spat else noise.point if stated is None
+                   else float(np.median(stated)))
+    if stated is not None:  # per-sample noise stated
+        stated = stated_noise(campaign, meas, noise)
+    nuisance, measured, nuisance_keys = _nuisance(arm, start, meas, sigma_class, noise.location)
     base_w = np.ones(len(q)) if stated is None else sigma_class / stated
     settings = SolverSettings(loss=options.loss, f_scale=options.f_scale or 3 * sigma_class,
                               max_nfev=options.solve_nfev, budget=budget)
     return _Setup(meas, full_u, start, has_spat, sigma_class, stated, base_w, nuisance, measured,
-                  nuisance_keys, settings, rob.sample_sources(campaign, options.use_bar))
+                  nuisance_keys, settings, rob.sample_sources(campaign, options.use_bar), noise)
 
 
 def _fits(setup: _Setup, options: FitOptions) -> tuple[Fit, np.ndarray | None, bool]:
@@ -478,8 +506,9 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     success, message = _verdict(res, robust, settled, outliers, suspects, enough,
                                 (n_det, data_res.size, dof, sig),
                                 rms if setup.has_spat else None)
-    if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm],
-                                                  obs.scale)) is not None:
+    if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm], obs.scale,
+                                                  unknowns.arm.sizes_label,
+                                                  unknowns.arm.source)) is not None:
         success, message = False, f"{units}; {message}"
     if not success and setup.settings.budget is not None and setup.settings.budget.spent:
         message = _budget_message(options) + message.removeprefix(
@@ -488,7 +517,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     if enough and success:
         success, message = _parts_dof(success, message, problem, x_full, setup, kept)
     if enough:
-        judged = _judgement(campaign, setup, residual, kept, n_det, options.sigma)
+        judged = _judgement(campaign, setup, residual, kept, n_det)
         success, message = _judged(success, message, judged, robust, campaign, setup,
                                    _points_rms(campaign, setup, residual, kept))
     if robust and (whole := rob.whole_kind(norms, setup.sources[0], setup.sigma_class,
@@ -511,7 +540,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
                                                     ("points", campaign.points is not None),
                                                     ("bar", options.use_bar)) if on),
                        robust=robust, outliers=outliers, suspects=suspects, inlier=inlier,
-                       judged=checked and not success)
+                       stated_noise=setup.noise, judged=checked and not success)
 
 
 def _budget_message(options: FitOptions) -> str:
@@ -616,17 +645,13 @@ def _point_rows(campaign: Campaign, meas: Measurements) -> np.ndarray:
 
 
 def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np.ndarray,
-               n_det: int, given: float | None) -> Judgement:
+               n_det: int) -> Judgement:
     """Return the kept residual judged against the stated noise (:mod:`~aacmm_pin.fit.noise_judgement`).
 
-    ``residual``: every sample's residual, shape (N, 3), m; ``kept``: the samples fitted, (N,);
-    ``given``: the noise the user gave (``--sigma-um``), m. Without it, the noise the campaign
-    states (``campaign.json``, per kind; ``sigma_um`` cells) is what the residual is judged by.
+    ``residual``: every sample's residual, shape (N, 3), m; ``kept``: the samples fitted, (N,).
+    The noise is the one the solves used (:func:`solve_noise`; ``sigma_um`` cells per sample).
     """
-    if given is None and campaign.noise is not None:
-        stated = stated_noise(campaign, setup.meas, campaign.noise)
-    else:
-        stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
+    stated = setup.stated if setup.stated is not None else np.full(len(kept), setup.sigma_class)
     white = residual[kept] / stated[kept, None]
     time = setup.meas.samples.t
     variables = [values for name, values in setup.meas.samples.columns.items()

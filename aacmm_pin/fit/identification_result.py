@@ -15,6 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import OptimizeResult
 
+from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Problem, SolverSettings
@@ -89,6 +90,9 @@ class Calibration:
     (named in ``message`` too)."""
     inlier: np.ndarray | None = field(default=None, repr=False)
     """Samples kept in the fit, shape (N,), bool; None: all."""
+    stated_noise: StatedNoise | None = None
+    """The stated noise per kind every solve used and the residual was judged against (points
+    with a ``sigma_um`` column: theirs); see :func:`aacmm_pin.fit.identification.solve_noise`."""
     judged: bool = False
     """Whether ``success`` is False only by the residual's judgement against the stated noise or a
     tool's or group's degrees of freedom (:mod:`aacmm_pin.fit.noise_judgement`): the solver
@@ -214,7 +218,9 @@ class Calibration:
             "fit_rms_um": self.fit_rms * 1e6,
             "fit_rms_um_by_location": {self.group_label(k): v * 1e6 for k, v in
                                        self.fit_rms_by_location().items()},
-            "sigma_um": self.sigma * 1e6, "runtime_s": self.runtime_s, "success": self.success,
+            "sigma_um": self.sigma * 1e6,
+            "stated_noise_um": None if self.stated_noise is None else self.stated_noise.to_um(),
+            "runtime_s": self.runtime_s, "success": self.success,
             "status": self.status, "message": self.message, "nfev": self.nfev,
             "unidentifiable": list(self.unidentifiable),
             "std": {n: float(s) for n, s in self.std.items()},

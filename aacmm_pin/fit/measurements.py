@@ -20,7 +20,7 @@ from aacmm_pin.data.campaign import Campaign, PointLog, SpatLog, StatedNoise
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.samples import Samples
-from aacmm_pin.units import SIGMA_POINT, SIGMA_SOCKET, SOCKET_PRIOR
+from aacmm_pin.units import SIGMA_POINT, SOCKET_PRIOR
 
 BAR_ID = 100_000
 """A length-bar socket used as a nest has id ``BAR_ID * placement + socket index`` (sorted names)."""
@@ -71,7 +71,7 @@ def check_campaign(campaign: Campaign, arm: Arm) -> SpatLog:
     return spat
 
 
-def check_points(campaign: Campaign, arm: Arm) -> PointLog:
+def check_points(campaign: Campaign, arm: Arm, noise: float | None = None) -> PointLog:
     """Return the campaign's absolute points, or raise IdentificationError if they cannot be used.
 
     Every instrument frame (``group``) is identified with the arm: one as X0 and the translation
@@ -87,7 +87,8 @@ def check_points(campaign: Campaign, arm: Arm) -> PointLog:
         raise IdentificationError("non-finite values (NaN or inf) in the points or readouts")
     _check_point_tools(points, arm, "points.csv" if campaign.source is None
                        else str(campaign.source / "points.csv"))
-    noise = campaign.noise.point if campaign.noise is not None else SIGMA_POINT
+    if noise is None:  # the stated noise of points without a sigma_um column, m
+        noise = campaign.noise.point if campaign.noise is not None else SIGMA_POINT
     for g in np.unique(points.group):
         rows = points.group == g
         pts = points.point[rows]
@@ -180,7 +181,7 @@ def _spat_part(campaign: Campaign, arm: Arm, use_rtest: bool) -> Measurements:
                         np.zeros(ids.size), tuple((int(m), "") for m in ids))
 
 
-def _bar_part(campaign: Campaign, arm: Arm) -> Measurements:
+def _bar_part(campaign: Campaign, arm: Arm, sigma: float) -> Measurements:
     """The bar readouts: one nest per (placement, socket), lengths between a placement's sockets."""
     log = campaign.lengthbar
     if log is None or not campaign.bar:
@@ -197,7 +198,6 @@ def _bar_part(campaign: Campaign, arm: Arm) -> Measurements:
     lengths = [(index[(p, a)], index[(p, b)], length) for (a, b), length in campaign.bar.items()
                for p in dict.fromkeys(int(v) for v in log.placement)
                if (p, a) in index and (p, b) in index]
-    sigma = campaign.noise.socket if campaign.noise else SIGMA_SOCKET
     return Measurements(log.q, np.full((len(nest), 3), np.nan), ids[nest],
                         Samples.of_log(arm, log), np.full(len(nest), sigma), nest,
                         np.full(len(keys), SOCKET_PRIOR),
@@ -205,7 +205,7 @@ def _bar_part(campaign: Campaign, arm: Arm) -> Measurements:
                         lengths=np.array(lengths, dtype=float).reshape(-1, 3))
 
 
-def _join(parts: list[Measurements], arm: Arm) -> Measurements:
+def _join(parts: list[Measurements], arm: Arm, point_noise: float) -> Measurements:
     """One measurement set of several kinds: rows stacked, nests and frames renumbered."""
     n = [len(p.q) for p in parts]
     nest, lengths, offset = [], [], 0
@@ -222,7 +222,7 @@ def _join(parts: list[Measurements], arm: Arm) -> Measurements:
         f_off += len(p.frame_groups)
     # stated noise: the R-Test's (NaN, set by identify) for SPAT, the default for points without
     sigma = np.concatenate([p.sigma if p.sigma is not None else
-                            np.full(k, np.nan if p.nest is not None else SIGMA_POINT)
+                            np.full(k, np.nan if p.nest is not None else point_noise)
                             for k, p in zip(n, parts)])
     q = np.concatenate([p.q for p in parts])
     return Measurements(q, np.concatenate([p.measured for p in parts]),
@@ -233,8 +233,8 @@ def _join(parts: list[Measurements], arm: Arm) -> Measurements:
                         tuple(frames), np.concatenate(lengths))
 
 
-def measurements(campaign: Campaign, arm: Arm, use_rtest: bool, use_bar: bool = False
-                 ) -> Measurements:
+def measurements(campaign: Campaign, arm: Arm, use_rtest: bool, use_bar: bool = False,
+                 noise: StatedNoise | None = None) -> Measurements:
     """Return what an identification of ``campaign`` fits (checked; see :class:`Measurements`).
 
     SPAT: the measured sphere centres (Eq. 3), the R-Test locations, whose nest offsets are
@@ -242,12 +242,15 @@ def measurements(campaign: Campaign, arm: Arm, use_rtest: bool, use_bar: bool = 
     first group's frame is the main one (X0 and translation), every other group has a frame of
     its own. ``use_bar``: the length-bar readouts too, each socket a nest whose position is
     estimated, the calibrated distances between a placement's sockets as length rows.
+    ``noise``: the stated noise per kind (default: the campaign's, else the defaults): points
+    without a ``sigma_um`` column and the bar's sockets get theirs.
     """
+    noise = noise or campaign.noise or StatedNoise()
     parts = []
     if campaign.spat is not None or campaign.points is None:
         parts.append(_spat_part(campaign, arm, use_rtest))
     if campaign.points is not None:
-        points = check_points(campaign, arm)
+        points = check_points(campaign, arm, noise.point)
         ids = np.unique(points.group)
         own = ids if parts else ids[1:]  # groups with a frame of their own
         frame = np.where(np.isin(points.group, own), np.searchsorted(own, points.group), -1)
@@ -256,13 +259,13 @@ def measurements(campaign: Campaign, arm: Arm, use_rtest: bool, use_bar: bool = 
                                   points.sigma, frame=frame if own.size else None,
                                   frame_groups=tuple(int(g) for g in own)))
     if use_bar:
-        parts.append(_bar_part(campaign, arm))
+        parts.append(_bar_part(campaign, arm, noise.socket))
     if len(parts) == 1 and not use_bar:
         part = parts[0]
         if part.frame is None and part.nest is not None:  # SPAT alone: as before
             return part._replace(sigma=None)
         return part
-    return _join(parts, arm)
+    return _join(parts, arm, noise.point)
 
 
 

@@ -30,6 +30,7 @@ import numpy as np
 from aacmm_pin.fit.chunked_jacobian import DataJacobian
 from aacmm_pin.fit.measurements import IdentificationError
 from aacmm_pin.fit.unknowns import BASE_NAMES, Unknowns
+from aacmm_pin.model.sizes import sizes_path
 
 UNIT_FACTOR = 3.0
 """Largest ratio of the nominal arm's point spread to the measured one (either way) accepted."""
@@ -42,6 +43,25 @@ _UNITS = ((1000.0, "m in mm columns?"), (25.4, "inches in mm columns?"), (10.0, 
 ADVICE = ("check the arm (--arm: its geometry, axis order and tools), the units of the point "
           "columns (mm) and readouts (deg), and which column is which")
 """What to check when the inputs disagree with the arm."""
+
+BUILT_IN = "built-in defaults"
+""":attr:`aacmm_pin.model.arm.Arm.sizes_label` of an arm without a sizes file."""
+
+
+def sizes_remedy(sizes: str, urdf: object = None) -> str:
+    """Return where an arm's sizes come from and where larger ones go (for a refusal).
+
+    Args:
+        sizes: :attr:`aacmm_pin.model.arm.Arm.sizes_label`.
+        urdf: the arm's URDF (:attr:`aacmm_pin.model.arm.Arm.source`), to name its sizes file.
+    """
+    if sizes == BUILT_IN:
+        where = "<urdf>.sizes.json beside its URDF" if urdf is None else \
+            f"{sizes_path(str(urdf))}"
+        return ("the arm has no sizes file: the built-in sizes are a portable measuring arm's "
+                "(tens of um, 0.01 deg); a robot's errors are larger: write its sizes into "
+                f"{where} or give --sizes FILE (docs/real-robots.md)")
+    return f"widen them in its sizes file {sizes}"
 
 
 class InputsDisagree(IdentificationError):
@@ -111,7 +131,7 @@ def agrees(rms: float, plausible: float, sigma: float) -> bool:
 
 
 def check_agreement(rms: float, plausible: float, sigma: float, evaluations: int,
-                    sizes: str) -> None:
+                    sizes: str, urdf: object = None) -> None:
     """Raise :class:`InputsDisagree` when the residual is far beyond noise and plausible errors.
 
     Args:
@@ -121,26 +141,33 @@ def check_agreement(rms: float, plausible: float, sigma: float, evaluations: int
         sigma: stated noise per coordinate, m.
         evaluations: evaluations made so far (for the message).
         sizes: which sizes file the arm uses (for the message).
+        urdf: the arm's URDF (for the message).
     """
     if agrees(rms, plausible, sigma):
         return
+    # the factor on every size that would make this residual plausible: K hypot(sigma, f m) = rms
+    need = np.sqrt(max((rms / DISAGREE_K) ** 2 - sigma ** 2, 0.0)) / plausible if plausible > 0 \
+        else np.inf
     raise InputsDisagree(
         f"the inputs disagree: after {evaluations} evaluations the residual is "
         f"{rms * 1e3:.4g} mm per coordinate (median-based), "
         f"{rms / np.hypot(sigma, plausible):.3g} x what the stated noise "
         f"({sigma * 1e6:.3g} um) and errors of plausible size in every parameter "
-        f"({plausible * 1e3:.3g} mm, sizes: {sizes}) leave; {ADVICE}; if they are right, "
-        "the sizes file or the stated noise understates this arm's errors")
+        f"({plausible * 1e3:.3g} mm, sizes: {sizes}) leave; {ADVICE}; if they are right, the "
+        f"arm's sizes understate its errors: sizes {need:.3g} x larger would make this residual "
+        f"plausible ({sizes_remedy(sizes, urdf)})")
 
 
-def implausible_values(unknowns: Unknowns, x_arm: np.ndarray, scale: np.ndarray
-                       ) -> str | None:
+def implausible_values(unknowns: Unknowns, x_arm: np.ndarray, scale: np.ndarray,
+                       sizes: str = BUILT_IN, urdf: object = None) -> str | None:
     """Return a "units?" message when an identified error exceeds :data:`IMPLAUSIBLE_K` sizes.
 
     Args:
         unknowns: the layout (free entries as ``x_arm``).
         x_arm: identified free arm entries, shape (n_free,), SI.
         scale: plausible size of every free entry, shape (n_free,), SI.
+        sizes: which sizes the arm uses (:attr:`aacmm_pin.model.arm.Arm.sizes_label`).
+        urdf: the arm's URDF (for the message).
 
     Returns:
         None when every error but X0 and the translation is within the bound, else one clause
@@ -156,4 +183,5 @@ def implausible_values(unknowns: Unknowns, x_arm: np.ndarray, scale: np.ndarray
     worst = int(np.argmax(ratio))
     return (f"units? {over.size} identified errors exceed {IMPLAUSIBLE_K:g} x their plausible "
             f"size, the largest {keys[worst]} by {ratio[worst]:.3g} x ({error[worst]:.4g} SI "
-            f"against {scale[worst]:.3g}): no arm has such errors; {ADVICE}")
+            f"against {scale[worst]:.3g}, sizes: {sizes}): no arm of these sizes has such "
+            f"errors; {ADVICE}; if they are right, {sizes_remedy(sizes, urdf)}")
