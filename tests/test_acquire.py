@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import queue
 import re
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -375,3 +377,52 @@ def test_pairer_memory_is_bounded():
             pairer.pop(now=t)
     assert max(len(s) for s in (pairer._arm, *pairer._gauge.values())) < 4096 + 200
     assert pairer.paired > 19000 and pairer.moving == 0
+
+
+def test_a_gauge_dithering_by_its_resolution_is_steady():
+    """A 1 um gauge (3 decimals of mm) flicking one count at rest: every sample paired (the
+    tolerance of 1 um holds a change of one count, however its text rounds)."""
+    from aacmm_pin.acquire.protocols import parse_mitutoyo
+
+    pairer = Pairer((1, 2, 3), 0.01, steady_rad=math.radians(0.5), steady_m=1e-6)
+    for i in range(500):
+        t = i * 1e-3
+        pairer.add_arm(t, [0.1] * 7, 0.0002)
+        if i % 5 == 0:
+            for c in (1, 2, 3):
+                _, value = parse_mitutoyo(f"{c:02d}A+0000.{8 + (i // 5) % 2:03d}".encode())
+                pairer.add_gauge(c, t + 0.0001, value, 0.0002)
+    pairer.pop()
+    assert pairer.moving == 0 and pairer.paired > 480
+
+
+@pytest.mark.parametrize("early", [False, True])
+def test_a_change_in_a_wide_window_is_seen_whenever_pop_runs(early):
+    """A sample stamped late in a wide read interval, its reading early: the change between them
+    is seen whether or not an earlier pop trimmed the streams (it was not, after one)."""
+    pairer = Pairer((1,), 0.01, steady_rad=math.radians(0.5), steady_m=1e-6)
+    q = [0.1] * 3
+    pairer.add_arm(-0.0005, q, span=(-0.001, 0.0))
+    pairer.add_arm(0.0174, q, span=(0.0, 0.018))  # the last of several lines read at once
+    pairer.add_arm(0.0185, q, span=(0.018, 0.019))
+    pairer.add_gauge(1, 0.00055, 0.0, span=(0.0005, 0.0006))
+    pairer.add_gauge(1, 0.00305, 1e-4, span=(0.0030, 0.0031))  # 100 um: the posture changed
+    pairer.add_gauge(1, 0.0090, 1e-4, span=(0.0085, 0.0095))
+    pairer.add_gauge(1, 0.03005, 1e-4, span=(0.030, 0.0301))
+    pairs = pairer.pop(0.0174 + 0.01) if early else []
+    pairs += pairer.pop()
+    assert [p.t for p in pairs if abs(p.t - 0.0174) < 1e-9] == []
+
+
+def test_stamps_and_intervals_never_go_back():
+    """A read that leaves input waiting shares its start with the next read: the next read's
+    stamps still follow the earlier ones, and its interval starts no earlier."""
+    from aacmm_pin.acquire.ports import PortConfig, PortReader
+
+    config = PortConfig("g", "none", "gauge", lambda line: (1, float(line)))
+    reader = PortReader(config, queue.Queue(), threading.Event(), port=object())
+    first, _ = reader._lines(bytearray(), b"".join(b"1\n" for _ in range(10)), 0.010, 0.0)
+    second, _ = reader._lines(bytearray(), b"".join(b"2\n" for _ in range(40)), 0.011, 0.0)
+    stamps = [t for t, *_ in first + second]
+    assert np.all(np.diff(stamps) > 0) and stamps[-1] < 0.011
+    assert all(lo >= 0.0 for _, _, lo, _ in second)

@@ -92,3 +92,33 @@ def test_import_refuses_an_unknown_marker_and_a_misnumbered_joint_list(torso: ap
     short = PointFormat(free[:-1], fmt.point, tool="marker")
     with pytest.raises(ValueError, match="16 joint columns for the arm's 17 independent axes"):
         import_points([src], tmp_path / "out2", short, arm=torso)
+
+
+def test_a_coupled_joints_column_is_checked_not_dropped(torso: ap.Arm, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """Every joint given, the coupled T4 among them: kept if it follows its coupling, else refused
+    in one line naming the joint, the row and the coupling (it was dropped without a check)."""
+    src = tmp_path / "mocap.csv"
+    write_export(torso, src)
+    rows = list(csv.reader(src.open()))
+    header, body = rows[0], rows[1:]
+    names = torso.axis_names
+    t2, t3 = header.index("T2"), header.index("T3")
+    for wrong in (False, True):
+        out = [header[:4] + ["T4"] + header[4:]]
+        for r in body:
+            t4 = 55.0 if wrong else -(float(r[t2]) + float(r[t3]))
+            out.append(r[:4] + [f"{t4:.9f}"] + r[4:])
+        path = tmp_path / f"all{int(wrong)}.csv"
+        with path.open("w", newline="") as f:
+            csv.writer(f).writerows(out)
+        assert names.index("T4") == 3
+        code = main(["import-points", str(path), "--arm", str(TORSO), "--point", "X,Y,Z",
+                     "--joints", ",".join(names), "--tool", "marker", "--pose", "frame",
+                     "--out", str(tmp_path / f"c{int(wrong)}")])
+        err = capsys.readouterr().err.strip().splitlines()
+        if not wrong:
+            assert code == 0, err
+            continue
+        assert code == 2 and len(err) == 1, err
+        assert "coupled joint T4" in err[0] and "data row 1" in err[0] and "T4 = -T2 - T3" in err[0]

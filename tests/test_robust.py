@@ -181,3 +181,21 @@ def test_tracker_outliers_are_rejected_and_named_in_points_csv(seed: int) -> Non
     assert [(o.file, o.row) for o in sorted(cal.outliers, key=lambda o: o.row)] == [
         ("points.csv", int(r)) for r in rows]
     assert validate_points(arm, cal.parameters, fresh).rms <= 1.2 * clean
+
+
+def test_a_spat_alone_is_judged_by_its_own_scale():
+    """One kind of samples: its scale is its residuals' own, never the stated noise. A SPAT of
+    0.3 um R-Test noise (stated at 2 um) with 8 rows 4 um off: those 8 suspected, and rejected by
+    the robust fit (with the stated noise as a floor, none was)."""
+    arm = ap.load_arm()
+    sim = ap.simulate_campaign(arm, ap.SimulationConfig(seed=0, sigma_rtest=0.3e-6,
+                                                        samples_per_location=100))
+    spat = sim.campaign.spat
+    rows = np.sort(np.random.default_rng(5).choice(len(spat.q), 8, replace=False))
+    d = spat.displacement.copy()
+    d[rows, 0] += 4e-6
+    bad = sim.campaign.with_spat(displacement=d)
+    plain, robust = ap.identify(bad, arm), ap.identify(bad, arm, robust=True)
+    suspects = sorted(o.row for o in plain.suspects)
+    assert len(suspects) == 8 and sorted(o.row for o in robust.outliers) == suspects
+    assert robust.fit_rms < 0.3e-6 < plain.fit_rms

@@ -98,3 +98,14 @@ def test_discover_fits_with_the_noise_it_is_given(points_campaign):
                          noise=StatedNoise(point=100e-6))
     for cal in (result.start_calibration, result.calibration):
         assert cal.problem.sigma_class == pytest.approx(100e-6)
+
+
+def test_an_option_never_overrides_a_column_in_the_covariance(points_campaign):
+    """--sigma-um applies to points without a sigma_um column: with one on every point the
+    calibration's noise and std are the column's, with or without the option."""
+    points = points_campaign.points
+    campaign = replace(points_campaign, points=replace(points, sigma=np.full(len(points.q), 40e-6)))
+    arm = ap.load_arm()
+    plain, given = ap.identify(campaign, arm, "dh"), ap.identify(campaign, arm, "dh", sigma=70e-6)
+    assert given.sigma == pytest.approx(40e-6)
+    assert all(given.std[k] <= plain.std[k] * 1.1 for k in plain.std)  # plain's is estimated

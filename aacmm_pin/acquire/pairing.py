@@ -35,6 +35,9 @@ from typing import Generic, NamedTuple, TypeVar
 
 HOLD = 0.25
 """Longest wait for a stream's first value after a pair's window, s."""
+SLACK = 1.0 + 1e-9
+"""A change of exactly a tolerance is within it: readings parsed from text (0.008 and 0.009 mm, 1e-6
+m apart) differ by a rounding more or less than their decimal step."""
 
 V = TypeVar("V")
 
@@ -211,14 +214,14 @@ class Pairer:
         if self.steady_rad is not None:
             values, ends = arm.around(i, lo, hi)
             q = arm.v[i]
-            if any(abs(a - b) > self.steady_rad for v in values for a, b in zip(v, q)):
+            if any(abs(a - b) > self.steady_rad * SLACK for v in values for a, b in zip(v, q)):
                 return False
             known = ends
         if self.steady_m is not None:
             for c, k in zip(self.channels, found):
                 stream = self._gauge[c]
                 values_g, ends = stream.around(k, lo, hi)
-                if any(abs(v - stream.v[k]) > self.steady_m for v in values_g):
+                if any(abs(v - stream.v[k]) > self.steady_m * SLACK for v in values_g):
                     return False
                 known = known and ends
         return True if known or final else None
@@ -263,12 +266,12 @@ class Pairer:
     def _trim(self, ready: float) -> None:
         """Drop what no later pair can need (bounded memory while a device is silent)."""
         arm = self._arm
-        # every later window starts after t_next - max_skew (a pair's intervals lie within
-        # max_skew of its arm sample); later arm samples arrive after the latest one, or after
-        # `ready` if none is held
-        pending = self._next < len(arm)
-        t_next = arm.t[self._next] if pending else min(arm.t[-1], ready) if len(arm) else ready
-        cutoff = t_next - self.max_skew
+        # the arrival spans of a stream start and end later and later (its reader's intervals):
+        # a later window starts after the next sample's start, and after its end less max_skew
+        # (a reading paired with it may reach back that far); none held: after `ready`
+        k = self._next if self._next < len(arm) else len(arm) - 1
+        cutoff = min(arm.lo[k], arm.hi[k] - self.max_skew) if len(arm) else \
+            ready - 2 * self.max_skew
         self._next -= arm.trim(cutoff)
         for stream in self._gauge.values():
             stream.trim(cutoff)

@@ -30,6 +30,7 @@ Every reader ends within about 0.05 s of its ``stop`` event.
 
 from __future__ import annotations
 
+import math
 import queue
 import threading
 import time
@@ -158,6 +159,7 @@ class PortReader(threading.Thread):
         self.out = out
         self.stop = stop
         self.port = port if port is not None else open_port(config.url, config.baudrate)
+        self._last_since = self._last_t = -math.inf  # of the lines read so far (see _lines)
 
     def _emit(self, *event: Any) -> None:
         self.out.put(event)
@@ -282,13 +284,21 @@ class PortReader(threading.Thread):
             self._emit("fault", cfg.name, "garbled", f"{len(buf)} bytes without a line end")
             buf.clear()
         lines = [line for line in lines if line.strip()]
+        # the lines arrived after those of earlier reads: their interval starts no earlier, and
+        # their stamps follow the earlier stamps (a read that did not empty the input shares its
+        # `since` with the next one)
+        since = max(since, self._last_since)
+        first = min(max(since, self._last_t), now)
         good = []
         for k, line in enumerate(lines):
-            t = spread_stamp(since, now, k, len(lines))
+            t = spread_stamp(first, now, k, len(lines))
             try:
                 good.append((t, cfg.parse(bytes(line)), since, now))
             except LineError as exc:
                 self._emit("fault", cfg.name, exc.kind, exc.reason)
+        if lines:
+            self._last_since, self._last_t = since, spread_stamp(first, now, len(lines) - 1,
+                                                                 len(lines))
         return good, bool(lines)
 
     def _close(self) -> None:

@@ -76,7 +76,7 @@ def points_only(campaign: Campaign) -> bool:
 
 def heldout_rms(cal: Calibration, campaign: Campaign, arm: Arm) -> float:
     """Return a calibration's held-out RMS per coordinate, m (``discover``'s start score)."""
-    meas = measurements(campaign, arm, cal.use_rtest, "bar" in cal.inputs)
+    meas = measurements(campaign, arm, cal.use_rtest, "bar" in cal.inputs, cal.stated_noise)
     return LinearScorer(cal, meas.samples).heldout_rms
 
 

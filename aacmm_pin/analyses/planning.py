@@ -171,7 +171,7 @@ def _map_std(info_inv_diag: np.ndarray, u: Unknowns) -> dict[int, np.ndarray]:
 
 
 def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = None,
-                    sigma_location: float = SIGMA_LOCATION) -> tuple[_Information, np.ndarray]:
+                    sigma_location: float | None = None) -> tuple[_Information, np.ndarray]:
     """Return the information model and the present information matrix of a calibration.
 
     Raises:
@@ -180,7 +180,7 @@ def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = 
     check_plannable(campaign)
     assert campaign.spat is not None
     model = _Information(cal.unknowns.arm, cal.parameters, cal.unknowns.map_axes,
-                         sigma or cal.sigma, sigma_location)
+                         sigma or cal.sigma, _location(cal, sigma_location))
     info = model.prior.copy()
     for m in np.unique(campaign.spat.location):
         info = model.add(info, campaign.spat.q[campaign.spat.location == m])
@@ -217,7 +217,7 @@ def _worst_ranges(std: np.ndarray, nodes_deg: np.ndarray, top: int = 2
 
 def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None,
          n_postures: int = 40, families: str = "auto", seed: int = 0,
-         sigma_location: float = SIGMA_LOCATION, progress: bool = False) -> Plan:
+         sigma_location: float | None = None, progress: bool = False) -> Plan:
     """Rank candidate SPATs by how much they would shrink the worst-axis map uncertainty.
 
     Args:
@@ -229,7 +229,8 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
         families: ``"auto"`` (any posture, plus one family per worst angular range of the worst
             axes) or ``"any"``.
         seed: seed of the IK starts.
-        sigma_location: prior std of a nest position per coordinate, m.
+        sigma_location: prior std of a nest position per coordinate, m (default: the stated
+            noise the calibration's fit used, else 3 um).
         progress: show the candidates evaluated (log lines when stderr is not a terminal).
     """
     check_plannable(campaign)
@@ -317,3 +318,10 @@ def map_uncertainty(cal: Calibration, campaign: Campaign) -> dict[int, float]:
     model, info = information_now(cal, campaign)
     std = _map_std(np.diag(np.linalg.inv(info)), model.u)
     return {a: float(np.sqrt(np.mean(s ** 2))) for a, s in std.items()}
+
+
+def _location(cal: Calibration, given: float | None) -> float:
+    """Return the nest positions' prior std: ``given``, else the fit's stated one, m."""
+    if given is not None:
+        return given
+    return cal.stated_noise.location if cal.stated_noise is not None else SIGMA_LOCATION

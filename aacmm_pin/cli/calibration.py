@@ -374,20 +374,24 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
     import numpy as np
 
     from aacmm_pin.analyses.uncertainty import monte_carlo, uncertainty_report
-    from aacmm_pin.data.campaign import read_campaign
+    from aacmm_pin.data.campaign import StatedNoise, read_campaign
     from aacmm_pin.data.output_folder import output_folder
     from aacmm_pin.extras import skipped
     from aacmm_pin.fit.identification import identify
     from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
     from aacmm_pin.outputs.plots import plot_encoder_maps
+    from aacmm_pin.units import UM
 
     arm = load_given_arm(args)
     _print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
                    max_nfev=args.max_nfev, progress=True)
-    mc = monte_carlo(cal, campaign, args.trials, sigma_rtest=args.sigma_rtest_um * 1e-6,
-                     sigma_location=args.sigma_location_um * 1e-6, workers=args.workers,
+    stated = cal.stated_noise or campaign.noise or StatedNoise()  # what the fit stated
+    rtest_um = stated.rtest / UM if args.sigma_rtest_um is None else args.sigma_rtest_um
+    location_um = stated.location / UM if args.sigma_location_um is None else args.sigma_location_um
+    mc = monte_carlo(cal, campaign, args.trials, sigma_rtest=rtest_um * UM,
+                     sigma_location=location_um * UM, workers=args.workers,
                      seed=args.seed, progress=True)
     out = Path(args.out)
     axes = sorted(cal.node_identifiable)
@@ -405,8 +409,8 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
                               std=std, reached=cal.node_reached)
     ratio = mc.ratio()
     ratio = ratio[np.isfinite(ratio)]
-    shaken = "" if campaign.spat is None else (f", sigma R-Test {args.sigma_rtest_um} um, sigma "
-                                               f"location {args.sigma_location_um} um")
+    shaken = "" if campaign.spat is None else (f", sigma R-Test {rtest_um:g} um, sigma "
+                                               f"location {location_um:g} um")
     if campaign.points is not None:
         shaken += ", points by their stated noise"
     print(f"{mc.trials} Monte Carlo trials ({mc.converged} converged){shaken} -> {out}")
@@ -682,10 +686,12 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
     p.add_argument("--trials", type=positive(int), default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=positive(int), default=None,
                    help="local processes (default: all cores)")
-    p.add_argument("--sigma-rtest-um", type=noise_um_or_zero, default=2.0,
-                   help="R-Test reading sigma, um")
-    p.add_argument("--sigma-location-um", type=noise_um_or_zero, default=3.0,
-                   help="R-Test location sigma, um")
+    p.add_argument("--sigma-rtest-um", type=noise_um_or_zero, default=None,
+                   help="R-Test reading sigma, um (default: the stated noise the fit used: "
+                        "campaign.json's, else 2)")
+    p.add_argument("--sigma-location-um", type=noise_um_or_zero, default=None,
+                   help="R-Test location sigma, um (default: the stated noise the fit used: "
+                        "campaign.json's, else 3)")
     p.set_defaults(handler=_uncertainty)
 
     p = add_command(subparsers, "plan", "where to measure next: rank candidate SPATs",

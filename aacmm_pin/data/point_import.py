@@ -327,8 +327,8 @@ def licence_note(path: Path, folder: Path | None = None) -> str | None:
 
     ``folder``: the LICENSE file's path is given relative to it (:func:`relative_to`); None: absolute.
     """
-    for folder in [path.absolute().parent, *path.absolute().parent.parents][:3]:
-        for candidate in sorted(folder.glob("LICEN[CS]E*")):
+    for where in [path.absolute().parent, *path.absolute().parent.parents][:3]:
+        for candidate in sorted(where.glob("LICEN[CS]E*")):
             if candidate.is_file():
                 try:
                     with candidate.open(encoding="utf-8", errors="replace") as f:
@@ -457,7 +457,16 @@ def _arm_readouts(q: np.ndarray, arm: ArmNames) -> np.ndarray:
     names = list(arm.axis_names)
     coupled = {c.axis for c in couplings_of(arm)}
     free = [k for k in range(len(names)) if k not in coupled]
-    if q.shape[1] == len(names):
+    if q.shape[1] == len(names):  # a coupled joint's column too: it must follow its coupling
+        for c in couplings_of(arm):
+            off = np.abs(q[:, c.axis] - c.values(q))
+            if (bad := np.flatnonzero(~(off <= c.tolerance))).size:
+                raise ValueError(
+                    f"--joints: the column of the coupled joint {names[c.axis]} is "
+                    f"{np.degrees(q[bad[0], c.axis]):.6g} deg in data row {bad[0] + 1}, its coupling "
+                    f"{c.coupling.formula()} gives {np.degrees(c.values(q)[bad[0]]):.6g} deg "
+                    f"({bad.size} rows beyond {np.degrees(c.tolerance):.3g} deg): leave the column "
+                    "out (the coupling fills it) or check which column is which")
         return q
     if q.shape[1] != len(free):
         left = f" (its coupled {', '.join(names[k] for k in sorted(coupled))} need no column)"

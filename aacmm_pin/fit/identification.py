@@ -244,7 +244,9 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
             scipy's ``"soft_l1"`` / ``"huber"`` weigh coordinates, not samples, with a fixed
             scale, and do not reach their tolerance on these problems.
         f_scale: residual scale of a scipy robust loss, m (default 3 x sigma).
-        sigma: R-Test noise per coordinate, m; None estimates it from the residuals.
+        sigma: noise per coordinate of the campaign's main kind (R-Test readings, else points
+            without a ``sigma_um`` column), m, stated (not estimated); None: ``noise``'s, and the
+            noise is estimated from the residuals.
         sigma_location: standard uncertainty of each R-Test zero position per coordinate, m
             (default: ``noise``'s, paper Section 5: 3 um); each nest's offset is estimated with
             this prior.
@@ -475,7 +477,10 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     """Return the calibration of the final fit: its noise, covariance, outliers and verdict."""
     unknowns, unvisited, gauges, obs = now.unknowns, now.unvisited, now.gauges, now.obs
     problem, res, x_full = now.problem, now.res, now.x
-    n, robust, sigma = len(setup.meas.q), options.robust, options.sigma
+    n, robust = len(setup.meas.q), options.robust
+    # a noise given (not estimated) is the one a row of weight 1 has: the solve's, which holds
+    # the option (and a sigma_um column where the rows state their own)
+    sigma = None if options.sigma is None else setup.sigma_class
     n_det = problem.n_arm - obs.hold.shape[0] - len(gauges) + problem.n_frame
     kept = np.ones(n, bool) if inlier is None else inlier
     dof_fraction = max(3 * int(kept.sum()) + problem.n_lengths - n_det, 1) / (3 * int(kept.sum()))

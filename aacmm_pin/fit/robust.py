@@ -128,9 +128,11 @@ def kind_scales(norms: np.ndarray, files: list[str], dof_fraction: float = 1.0, 
                 ) -> np.ndarray:
     """Return every sample's robust scale: :func:`robust_scale` of the samples of its kind, shape (N,), m.
 
-    A kind that scatters less than its stated noise is judged by the stated noise (``floor``): a
-    residual the declared noise explains is no outlier (a simulated bar, exact and stated at 2 um,
-    scatters 0.3 um by the model's own error, with tails of 1.8 um).
+    With several kinds, a kind that scatters less than its stated noise is judged by the stated
+    noise (``floor``): a residual the declared noise explains is no outlier (a simulated bar,
+    exact and stated at 2 um, scatters 0.3 um by the model's own error, with tails of 1.8 um). A
+    campaign of one kind is judged by its residuals' own scale, not the stated noise (a SPAT of
+    0.3 um noise stated at 2 um keeps its 4 um outliers flagged).
 
     Args:
         norms: whitened residual norms of the samples, shape (N,), m.
@@ -139,8 +141,11 @@ def kind_scales(norms: np.ndarray, files: list[str], dof_fraction: float = 1.0, 
         floor: the stated noise in the whitened units (the solve's sigma), m; 0: none.
     """
     kind = np.asarray(files)
+    kinds = list(dict.fromkeys(files))
+    if len(kinds) < 2:  # one kind: its scale is the residuals' own, as it always was
+        floor = 0.0
     out = np.zeros(norms.size)
-    for name in dict.fromkeys(files):
+    for name in kinds:
         sel = kind == name
         out[sel] = max(robust_scale(norms[sel], dof_fraction), floor)
     return out
