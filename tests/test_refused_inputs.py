@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 import aacmm_pin as ap
+from aacmm_pin import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 COUPLED = ROOT / "urdf" / "torso_coupled.urdf"
@@ -41,3 +42,29 @@ def test_a_mimic_on_a_fixed_joint_is_refused_with_its_line(tmp_path):
     with pytest.raises(ap.ArmModelError, match=rf"arm\.urdf: line {line}: joint 'dx1': a <mimic> "
                                                "on a fixed joint"):
         ap.load_arm(path)
+
+
+# ----------------------------------------------------------------------------- term keys and axes
+@pytest.fixture(scope="module")
+def ur5_points(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A simulated points campaign of the embedded UR5 (6 axes), 60 points."""
+    out = tmp_path_factory.mktemp("ur5") / "pts"
+    assert cli.main(["simulate", "--arm", "ur5", "--points", "60", "--effects", "dh",
+                     str(out)]) == 0
+    return out
+
+
+@pytest.mark.parametrize("key, axis", [
+    ("compliance[A7]", 7), ("lateral_compliance[A7]", 7), ("backlash[A8]", 8),
+    ("encoder_harmonic[A9]", 9), ("encoder_harmonic5[A7]", 7), ("crosstalk[A2<-A9]", 9),
+    ("crosstalk[A7<-A2]", 7), ("compliance[A0]", 0)])
+def test_a_term_beyond_the_arms_axes_is_one_line(tmp_path, capsys, ur5_points, key, axis):
+    """`--terms` on an axis the 6-axis UR5 lacks: an IndexError's traceback (or numpy's matmul
+    message for A0) before; now exit 2 and one line naming the option, the term and the axes."""
+    status = cli.main(["identify", str(ur5_points), "--arm", "ur5", "--terms", key,
+                       "--out", str(tmp_path / "cal")])
+    err = capsys.readouterr().err.strip()
+    assert status == 2
+    assert err == (f"aacmm-pin identify: error: --terms: {key!r} acts on axis {axis}; the arm "
+                   "ur5 has 6 axes, A1..A6")
+    assert not (tmp_path / "cal").exists()

@@ -30,6 +30,7 @@ from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_positions
+from aacmm_pin.effects.registry import check_terms
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
@@ -279,6 +280,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     Raises:
         IdentificationError: for campaigns that cannot be identified.
         ValueError: for an unknown ``model``, or a ``sigma`` / ``sigma_location`` not > 0.
+        ArgumentError: for an extension term on an axis beyond the arm (one line naming it).
     """
     options = FitOptions(model=model, use_rtest=use_rtest, start=start, step_deg=step_deg,
                          map_axes=map_axes, loss=loss, f_scale=f_scale, sigma=sigma,
@@ -288,6 +290,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     # every evaluation of every fit below (none given: each solve's own cap only)
     budget = None if max_nfev is None else Budget(max_nfev)
     arm = arm or load_arm()
+    check_terms(extensions, arm, "extensions")
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
         cal = _identify(campaign, arm, options, budget, fixed_nests=nests == "fixed")
         rtest_nests = "spat" in cal.inputs
