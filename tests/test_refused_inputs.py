@@ -10,6 +10,7 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin import cli
+from aacmm_pin.errors import CampaignWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 COUPLED = ROOT / "urdf" / "torso_coupled.urdf"
@@ -68,3 +69,76 @@ def test_a_term_beyond_the_arms_axes_is_one_line(tmp_path, capsys, ur5_points, k
     assert err == (f"aacmm-pin identify: error: --terms: {key!r} acts on axis {axis}; the arm "
                    "ur5 has 6 axes, A1..A6")
     assert not (tmp_path / "cal").exists()
+
+
+# ----------------------------------------------------------------------------- misspelt columns
+def _with_column(source: Path, folder: Path, name: str, cells: list[str] | str) -> Path:
+    """Copy the points campaign ``source`` into ``folder`` with one more column of points.csv."""
+    folder.mkdir()
+    rows = (source / "points.csv").read_text().splitlines()
+    cells = [cells] * (len(rows) - 1) if isinstance(cells, str) else cells
+    (folder / "points.csv").write_text("\n".join(
+        [f"{rows[0]},{name}", *(f"{r},{c}" for r, c in zip(rows[1:], cells))]) + "\n")
+    return folder
+
+
+@pytest.mark.parametrize("name, meant, value", [
+    ("sigma_mm", "sigma_um", "0.035"), ("sigma", "sigma_um", "35"), ("Sigma_um", "sigma_um", "35"),
+    ("sigam_um", "sigma_um", "35"), ("tmp_c", "temp_c", "23.5"), ("temp", "temp_c", "23.5")])
+def test_a_misspelt_column_is_refused_naming_the_one_meant(tmp_path, ur5_points, name, meant,
+                                                            value):
+    """A name close to a column the package reads (case, unit suffix, a letter off) was carried
+    as an unknown column while the defaults stood in for the one meant (35 um points judged at
+    20 um, a temperature the thermal effect never saw): now the file, column and name meant."""
+    folder = _with_column(ur5_points, tmp_path / "c", name, value)
+    with pytest.raises(ap.CampaignFormatError) as caught:
+        ap.read_campaign(folder, arm=ap.load_arm("ur5"))
+    assert str(caught.value).splitlines()[1] == (
+        f"  {folder / 'points.csv'}:1: column '{name}': close to '{meant}' "
+        f"({ap.data.columns.column(meant).description}, in "
+        f"{ap.data.columns.column(meant).unit}), which is read; this one would be carried unused: "
+        f"rename it '{meant}', or a column of its own another name")
+
+
+def test_a_numbered_or_own_column_is_carried_with_one_note(tmp_path, ur5_points, recwarn):
+    """`temp2_c` (a second sensor) and `humidity_pct` are not misspellings: carried, named once
+    for the file as used by no effect."""
+    import aacmm_pin.effects.registry  # noqa: F401  (the readers learn the effects' columns)
+
+    folder = _with_column(ur5_points, tmp_path / "c", "temp2_c", "21.0")
+    rows = (folder / "points.csv").read_text().splitlines()
+    (folder / "points.csv").write_text("\n".join([rows[0] + ",humidity_pct",
+                                                  *(r + ",40" for r in rows[1:])]) + "\n")
+    campaign = ap.read_campaign(folder, arm=ap.load_arm("ur5"))
+    assert set(campaign.points.columns) == {"temp2_c", "humidity_pct"}
+    notes = [str(w.message) for w in recwarn if issubclass(w.category, CampaignWarning)]
+    assert notes == [f"{folder / 'points.csv'}: columns 'temp2_c', 'humidity_pct' carried, not used "
+                     "by any effect (discover tests it as a variable; an effect that reads it "
+                     "uses it)"]
+
+
+def test_a_column_an_effect_reads_is_not_noted(tmp_path, ur5_points, recwarn, monkeypatch):
+    """A plugin's effect that reads `humidity_pct` (Effect.reads) uses it: no note; a name one
+    letter off it is then refused as its misspelling."""
+    from aacmm_pin.effects import registry
+    from aacmm_pin.effects.builtin.thermal import Thermal
+
+    class Humidity(Thermal):
+        name = "humidity"
+        reads = ("humidity_pct",)
+
+    monkeypatch.setitem(registry.LIBRARY, "humidity", Humidity())
+    folder = _with_column(ur5_points, tmp_path / "c", "humidity_pct", "40")
+    ap.read_campaign(folder, arm=ap.load_arm("ur5"))
+    assert not [w for w in recwarn if issubclass(w.category, CampaignWarning)]
+    folder = _with_column(ur5_points, tmp_path / "d", "humidty_pct", "40")
+    with pytest.raises(ap.CampaignFormatError, match="column 'humidty_pct': close to "
+                                                     "'humidity_pct'"):
+        ap.read_campaign(folder, arm=ap.load_arm("ur5"))
+
+
+def test_a_misspelt_column_of_a_readouts_file_is_refused(tmp_path, ur5_points):
+    """predict's input: `tmp_c` was carried, the thermal term evaluated at 20 deg C."""
+    folder = _with_column(ur5_points, tmp_path / "c", "tmp_c", "30")
+    with pytest.raises(ap.CampaignFormatError, match="column 'tmp_c': close to 'temp_c'"):
+        ap.read_readouts(folder / "points.csv", ap.load_arm("ur5"))

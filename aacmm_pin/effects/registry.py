@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aacmm_pin.data.columns import set_effect_reads
 from aacmm_pin.effects.base import Adjustment, Effect, Term
 from aacmm_pin.effects.builtin.backlash import Backlash
 from aacmm_pin.effects.builtin.compliance import Compliance
@@ -101,6 +102,12 @@ def _module_of(cls: type) -> str:
     return cls.__module__
 
 
+def _columns_read() -> set[str]:
+    """Return the per-sample columns the registered effects read, installed plugins loaded."""
+    return {name for effect in library().values() for name in effect.reads}
+
+
+set_effect_reads(_columns_read)
 for _builtin in (Encoder, Compliance, LateralCompliance, Thermal, Backlash, Crosstalk, RTest, Tool):
     register_effect(_builtin, BUILTIN)
 
