@@ -142,3 +142,48 @@ def test_a_misspelt_column_of_a_readouts_file_is_refused(tmp_path, ur5_points):
     folder = _with_column(ur5_points, tmp_path / "c", "tmp_c", "30")
     with pytest.raises(ap.CampaignFormatError, match="column 'tmp_c': close to 'temp_c'"):
         ap.read_readouts(folder / "points.csv", ap.load_arm("ur5"))
+
+
+# ----------------------------------------------------------------------------- misspelt JSON keys
+def test_a_misspelt_campaign_json_key_is_refused(tmp_path, ur5_points):
+    """{"instrumnet": "motion capture"} was ignored: points judged at 20 um instead of 100 um."""
+    folder = tmp_path / "c"
+    folder.mkdir()
+    (folder / "points.csv").write_text((ur5_points / "points.csv").read_text())
+    (folder / "campaign.json").write_text('{"instrumnet": "motion capture", "noise_um": '
+                                          '{"Point": 90}, "notes": "lab 2"}')
+    with pytest.raises(ap.CampaignFormatError) as caught:
+        ap.read_campaign(folder)
+    path = folder / "campaign.json"
+    keys = "instrument, noise_um, provenance"
+    assert str(caught.value).splitlines()[1:] == [
+        f"  {path}: column 'instrumnet': unknown key; did you mean 'instrument'? (the keys: {keys})",
+        f"  {path}: column 'notes': unknown key (the keys: {keys})",
+        f"  {path}: column 'noise_um.Point': unknown key; did you mean 'point'? (the keys: rtest, "
+        "location, point, socket)"]
+
+
+def test_a_misspelt_parameters_json_key_is_refused(tmp_path):
+    """"extenions" was carried as an unknown key and the extensions left out of every prediction;
+    keys of one's own (not close to one the package reads) are still carried."""
+    import json
+
+    from aacmm_pin.model.parameters import read_parameters
+
+    params = ap.Parameters.nominal(ap.load_arm("ur5")).to_dict()
+    (tmp_path / "own.json").write_text(json.dumps({**params, "operator": "J. Doe"}))
+    assert read_parameters(tmp_path / "own.json").extra == {"operator": "J. Doe"}
+    (tmp_path / "p.json").write_text(json.dumps({**params, "extenions": {"thermal": [1e-6]}}))
+    with pytest.raises(ap.FileFormatError, match=r"p\.json: column 'extenions': unknown key; did "
+                                                 r"you mean 'extensions'\?"):
+        read_parameters(tmp_path / "p.json")
+
+
+def test_a_misspelt_nest_file_key_is_named(tmp_path):
+    """{"direction": ...}: the key meant is named (was: "three finite 3-vectors expected")."""
+    from aacmm_pin.acquire.nest import read_nest
+
+    (tmp_path / "nest.json").write_text('{"direction": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}')
+    with pytest.raises(ap.FileFormatError, match="column 'direction': unknown key; did you mean "
+                                                 "'directions'"):
+        read_nest(tmp_path / "nest.json")

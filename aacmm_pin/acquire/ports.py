@@ -3,9 +3,10 @@
 A reader opens its port with pyserial (a device path or any ``serial_for_url`` URL), discards what
 the port buffered before the run, splits the byte stream into lines, stamps each line with the
 host's monotonic clock, parses it with its protocol and puts batches of results on a queue for the
-acquisition loop. A line's stamp is the middle of the interval in which it surely arrived: since
-the reader last saw its input empty (and since the request of a polled device), with the
-half-width of that interval as its uncertainty. A reader that falls behind its device under load
+acquisition loop. The lines of one read surely arrived, in order, in one interval: since the reader
+last saw its input empty (and since the request of a polled device). Each line gets a time of its
+own within it (:func:`spread_stamp`: the n lines of a read spread evenly, never one time for all)
+and an uncertainty that covers the whole interval. A reader that falls behind its device under load
 reads a backlog of lines of unknown age (measured: 4 KB chunks with 4 KB more waiting, lines
 ~0.2 s old stamped as new, paired with readings of a later posture); their uncertainty grows until
 the backlog is drained, and the pairing (:mod:`aacmm_pin.acquire.pairing`) leaves them unpaired.
@@ -50,7 +51,8 @@ Parser = Callable[[bytes], Any]
 
 PortEvent = tuple[str, str, str, Any]
 """What a :class:`PortReader` puts on its queue: (what, port name, kind, payload); the payload is the
-list of (t, parsed value, u) for ``"data"`` (arrival ``t`` +- ``u`` s), else a str (see
+list of (t, parsed value, earliest, latest) for ``"data"`` (stamped ``t``, arrived between the
+earliest and the latest time, s), else a str (see
 :class:`PortReader`)."""
 
 
@@ -105,6 +107,16 @@ def gauge_port(name: str, url: str, fmt: str, channel: int | None, range_m: floa
     raise ValueError(f"fmt: choose heidenhain or mitutoyo, got {fmt!r}")
 
 
+def spread_stamp(since: float, now: float, k: int, n: int) -> float:
+    """Return the stamp of the ``k``-th of ``n`` lines read at once (s).
+
+    The lines surely arrived between ``since`` and ``now``, in order: line ``k`` is stamped at the
+    middle of the k-th of n equal parts of that interval, so that every line of a read has a time
+    of its own; its arrival is known only within the whole interval.
+    """
+    return since + (k + 0.5) / n * (now - since)
+
+
 def open_port(url: str, baudrate: int = 115200) -> Any:
     """Open a serial port (device path or pyserial URL) for line reading; drop its old input.
 
@@ -127,8 +139,8 @@ def open_port(url: str, baudrate: int = 115200) -> Any:
 class PortReader(threading.Thread):
     """Read one port in a daemon thread until ``stop`` is set or the port is gone.
 
-    Puts on ``out``: ``("data", name, kind, [(t, value, u), ...])`` for good lines (arrived at
-    ``t`` +- ``u``),
+    Puts on ``out``: ``("data", name, kind, [(t, value, earliest, latest), ...])`` for good lines
+    (stamped ``t``, arrived between ``earliest`` and ``latest``),
     ``("fault", name, kind_of_fault, reason)`` for faults, ``("reconnect", name, "", url)`` and, last,
     ``("gone", name, "", reason)`` if the reader gave up. ``t`` is the host monotonic time, s.
 
@@ -223,7 +235,7 @@ class PortReader(threading.Thread):
                 awaiting, t_empty = False, time.monotonic()
                 continue
             now = time.monotonic()
-            good: list[tuple[float, Any, float]] = []
+            good: list[tuple[float, Any, float, float]] = []
             if chunk:
                 # the lines arrived after the input was last seen empty (and after the request)
                 since = max(t_asked, t_empty) if awaiting else t_empty
@@ -255,10 +267,10 @@ class PortReader(threading.Thread):
         self._close()
 
     def _lines(self, buf: bytearray, chunk: bytes, now: float,
-               since: float) -> tuple[list[tuple[float, Any, float]], bool]:
+               since: float) -> tuple[list[tuple[float, Any, float, float]], bool]:
         """Add ``chunk`` to ``buf`` and take the complete lines out of it.
 
-        Returns the good lines as ``(t, value, u)``, arrived between ``since`` and ``now``
+        Returns the good lines as ``(t, value, since, now)``, arrived between ``since`` and ``now``
         (host monotonic time, s), and whether any line (good or not) came. A garbled line and a
         rest longer than :data:`MAX_LINE` without a line end are reported as faults.
         """
@@ -269,17 +281,15 @@ class PortReader(threading.Thread):
         if len(buf) > MAX_LINE:
             self._emit("fault", cfg.name, "garbled", f"{len(buf)} bytes without a line end")
             buf.clear()
-        t, u = (now + since) / 2, (now - since) / 2
-        good, answered = [], False
-        for line in lines:
-            if not line.strip():
-                continue
-            answered = True
+        lines = [line for line in lines if line.strip()]
+        good = []
+        for k, line in enumerate(lines):
+            t = spread_stamp(since, now, k, len(lines))
             try:
-                good.append((t, cfg.parse(bytes(line)), u))
+                good.append((t, cfg.parse(bytes(line)), since, now))
             except LineError as exc:
                 self._emit("fault", cfg.name, exc.kind, exc.reason)
-        return good, answered
+        return good, bool(lines)
 
     def _close(self) -> None:
         try:

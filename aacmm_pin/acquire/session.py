@@ -64,6 +64,14 @@ class AcquisitionConfig:
     """Write every n-th pair only."""
     max_skew: float = 0.01
     """Largest time difference between an arm sample and a gauge reading paired with it, s."""
+    steady_rad: float = math.radians(0.5)
+    """Largest change of a readout over a pair's time window, rad (more: dropped as moving).
+
+    A posture change in a SPAT moves the readouts by degrees; an operator's steady motion over a
+    window of a few ms by a small fraction of this. Within 0.5 deg the reading a posture gives
+    changes by the arm's error gradient times 0.5 deg (tens of um/rad: a fraction of a um)."""
+    steady_m: float = 1e-6
+    """Largest change of a gauge reading over a pair's time window, m (more: dropped as moving)."""
     timeout: float = 0.5
     """Silence of a port counted as a timeout, s."""
     give_up: float = 5.0
@@ -123,6 +131,12 @@ class AcquisitionSummary:
     """Port name -> device path or URL."""
     unpaired: int = 0
     """Arm samples without a gauge reading within max_skew on some channel (not written)."""
+    moving: int = 0
+    """Arm samples whose readouts or readings changed within the pair's time window (not written)."""
+    paired: int = 0
+    """Arm samples paired (written, or skipped by ``decimate``)."""
+    window_max: float = 0.0
+    """Widest time window of a pair made: how well the worst pair is timed, s."""
     missed_samples: int = 0
     """Arm samples missing from the counter sequence (lost in transit or dropped as faults)."""
     d_min: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
@@ -160,7 +174,7 @@ class AcquisitionSummary:
             "rows_written": self.rows_written, "rows_before": self.rows_before,
             "duration_s": round(self.duration_s, 3), "rate_hz": round(self.rate_hz, 1),
             "stop_reason": self.stop_reason, "status": self.status,
-            "faults": self.faults, "unpaired": self.unpaired,
+            "faults": self.faults, "unpaired": self.unpaired, "pairing": self.pairing(),
             "missed_samples": self.missed_samples,
             "ports": {name: {"port": self.port_urls.get(name, ""), **c.to_dict()}
                       for name, c in self.ports.items()},
@@ -169,6 +183,30 @@ class AcquisitionSummary:
             "locations": self.locations_message, "repaired_bytes": self.repaired_bytes,
             "lock": self.lock_message,
         }
+
+    def pairing(self) -> dict[str, Any]:
+        """Return how the arm samples were paired (JSON form: counts, shares, ms, um, deg)."""
+        cfg = self.config
+        total = self.paired + self.unpaired + self.moving
+        return {"arm_samples": total, "paired": self.paired,
+                "unpaired_no_reading_within_skew": self.unpaired,
+                "dropped_at_a_change": self.moving,
+                "paired_share": round(self.paired / total, 4) if total else None,
+                "window_max_ms": round(self.window_max * 1e3, 3),
+                "max_skew_ms": cfg.max_skew * 1e3, "steady_um": cfg.steady_m * 1e6,
+                "steady_deg": round(math.degrees(cfg.steady_rad), 4)}
+
+    def pairing_line(self) -> str:
+        """Return the pairing's quality in one line."""
+        cfg, total = self.config, self.paired + self.unpaired + self.moving
+        if not total:
+            return "pairing: no arm samples"
+        return (f"pairing: {self.paired} of {total} arm samples paired "
+                f"({100 * self.paired / total:.1f} %); {self.moving} dropped at a change (a readout "
+                f"or reading moved more than {math.degrees(cfg.steady_rad):.2g} deg or "
+                f"{cfg.steady_m * 1e6:.2g} um within the pair's time), {self.unpaired} without a "
+                f"reading within {cfg.max_skew * 1e3:g} ms; every pair written is steady within "
+                f"these over its time window (the widest {self.window_max * 1e3:.1f} ms)")
 
     def status_line(self, rate: float) -> str:
         """Return the one-line live status (rows, rate, last values, range, faults)."""
@@ -194,6 +232,7 @@ class AcquisitionSummary:
         for name, c in self.ports.items():
             where = f"{name} {self.port_urls.get(name, '')}"
             lines.append("  " + where.ljust(width) + "".join(f"{getattr(c, k):>13}" for k in kinds))
+        lines.append("  " + self.pairing_line())
         lines.append(f"  unpaired arm samples (not written): {self.unpaired}; "
                      f"missed arm samples (counter gaps): {self.missed_samples}")
         if self.repaired_bytes:
@@ -286,7 +325,8 @@ class _Recording:
 
     def __init__(self, cfg: AcquisitionConfig, writer: SpatWriter, summary: AcquisitionSummary):
         self.cfg, self.writer, self.summary = cfg, writer, summary
-        self.pairer = Pairer((1, 2, 3), cfg.max_skew)
+        self.pairer = Pairer((1, 2, 3), cfg.max_skew, steady_rad=cfg.steady_rad,
+                             steady_m=cfg.steady_m)
         self.t0, self.wall0 = time.monotonic(), time.time()
         self.last_counter: int | None = None
         self.n_pairs = 0
@@ -301,16 +341,16 @@ class _Recording:
         if what == "data":
             counts.lines += len(event[3])
             if event[2] == "arm":
-                for t, (counter, q), u in event[3]:
+                for t, (counter, q), lo, hi in event[3]:
                     if counter is not None and self.last_counter is not None:
                         gap = (counter - self.last_counter - 1) % COUNTER_MODULUS
                         # a counter that goes back (device restarted) is no gap of ~2**32
                         summary.missed_samples += gap if gap < COUNTER_MODULUS // 2 else 0
                     self.last_counter = counter if counter is not None else self.last_counter
-                    self.pairer.add_arm(t, q, u)
+                    self.pairer.add_arm(t, q, span=(lo, hi))
             else:
-                for t, (channel, value), u in event[3]:
-                    self.pairer.add_gauge(channel, t, value, u)
+                for t, (channel, value), lo, hi in event[3]:
+                    self.pairer.add_gauge(channel, t, value, span=(lo, hi))
         elif what == "fault":
             counts.add(event[2])
         elif what == "reconnect":
@@ -318,6 +358,12 @@ class _Recording:
         elif what == "gone":
             return f"{name} port gone: {event[3]}"
         return None
+
+    def count_pairing(self) -> None:
+        """Copy the pairer's counts to the summary."""
+        p, summary = self.pairer, self.summary
+        summary.unpaired, summary.moving, summary.paired = p.unpaired, p.moving, p.paired
+        summary.window_max = 2 * p.u_max
 
     def write(self, pairs: list[Pair]) -> None:
         """Write every ``decimate``-th pair as a SPAT row (time, readouts, displacement)."""
@@ -374,7 +420,7 @@ def _run(rec: _Recording, events: queue.Queue[PortEvent], stop: threading.Event,
             rec.reason = rec.reason or gone
         now = time.monotonic()
         rec.write(rec.pairer.pop(now))
-        summary.unpaired = rec.pairer.unpaired
+        rec.count_pairing()
         summary.duration_s = now - t0
         if rec.reason is not None:
             summary.status = 1
@@ -405,7 +451,7 @@ def _finish(rec: _Recording, events: queue.Queue[PortEvent], status: TextIO | No
         pass
     rec.write(rec.pairer.pop())
     rec.writer.close()
-    summary.unpaired = rec.pairer.unpaired
+    rec.count_pairing()
     summary.duration_s = time.monotonic() - rec.t0
     summary.stop_reason = rec.reason or "interrupted"
     _write_json(rec.cfg.summary_path, summary.to_dict())

@@ -7,6 +7,7 @@ on SIGINT/SIGTERM (the run loop sees a stop event; the campaign files stay consi
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import threading
@@ -83,7 +84,8 @@ def _acquire(args: argparse.Namespace) -> int:
             zero=None if args.zero is None else np.array(args.zero) * 1e-3,
             nest=read_nest(args.nest) if args.nest else Nest(), arm_format=args.arm_format,
             n_axes=args.axes, baudrate=args.baud, seconds=args.seconds, decimate=args.decimate,
-            max_skew=args.max_skew_ms * 1e-3, timeout=args.timeout_s, give_up=args.give_up_s,
+            max_skew=args.max_skew_ms * 1e-3, steady_rad=math.radians(args.steady_deg),
+            steady_m=args.steady_um * 1e-6, timeout=args.timeout_s, give_up=args.give_up_s,
             gauge_range=args.gauge_range_mm * 1e-3, heidenhain_request=args.heidenhain_request,
             mitutoyo_request=args.mitutoyo_request, poll_interval=1.0 / args.poll_hz
             if args.poll_hz else 0.0, fsync_interval=args.fsync_s, status_interval=args.status_s,
@@ -171,6 +173,12 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--decimate", type=positive(int), default=1, help="write every n-th sample")
     p.add_argument("--max-skew-ms", type=positive(), default=10.0,
                    help="largest time between an arm sample and its gauge readings, ms")
+    p.add_argument("--steady-deg", type=positive(zero=True), default=0.5,
+                   help="a readout that changes more than this within a pair's time window drops "
+                        "the pair (the arm was moving), deg")
+    p.add_argument("--steady-um", type=positive(zero=True), default=1.0,
+                   help="a gauge reading that changes more than this within a pair's time window "
+                        "drops the pair, um")
     p.add_argument("--timeout-s", type=positive(), default=0.5, help="silence counted as a timeout, s")
     p.add_argument("--give-up-s", type=positive(), default=5.0,
                    help="a port lost or silent this long ends the run (status 1), s")
