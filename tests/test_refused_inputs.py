@@ -187,3 +187,26 @@ def test_a_misspelt_nest_file_key_is_named(tmp_path):
     with pytest.raises(ap.FileFormatError, match="column 'direction': unknown key; did you mean "
                                                  "'directions'"):
         read_nest(tmp_path / "nest.json")
+
+
+# ----------------------------------------------------------------------------- stated noise
+@pytest.mark.parametrize("sigma_um", [1e5, 1e4])
+def test_a_noise_stated_far_above_the_residual_fails_with_numbers(arm, small_sim, sigma_um):
+    """sigma 100 mm (or 10 mm): "-3 parameters determined" (held rows counted twice) and
+    "residual matches the stated noise" with success true; now the determined count is the held
+    rows' rank (never below 0) and the fit fails naming both noises."""
+    cal = ap.identify(small_sim.campaign, arm, model="dh", sigma=sigma_um * 1e-6)
+    assert 0 <= cal.n_determined <= len(cal.unknowns.names)
+    assert not cal.success
+    found = re.search(re.escape(f"the stated noise {sigma_um:.4g} um is ") + r"([\d.e+]+) x the "
+                      r"residual's noise \(([\d.e+]+) um over (\d+) degrees of freedom\)",
+                      cal.message)
+    assert found is not None, cal.message
+    ratio, estimate = float(found.group(1)), float(found.group(2))
+    assert ratio > 10 and ratio * estimate == pytest.approx(sigma_um, rel=0.01)
+
+
+def test_a_noise_stated_near_the_residual_is_judged_as_before(arm, small_sim):
+    """30 um stated where the DH model leaves about 28 um: no such failure."""
+    cal = ap.identify(small_sim.campaign, arm, model="dh", sigma=30e-6)
+    assert "x the residual's noise" not in cal.message
