@@ -210,3 +210,23 @@ def test_a_noise_stated_near_the_residual_is_judged_as_before(arm, small_sim):
     """30 um stated where the DH model leaves about 28 um: no such failure."""
     cal = ap.identify(small_sim.campaign, arm, model="dh", sigma=30e-6)
     assert "x the residual's noise" not in cal.message
+
+
+# ----------------------------------------------------------------------------- a source twice
+@pytest.mark.parametrize("how", ["same file", "same content"])
+def test_a_source_imported_twice_is_refused(tmp_path, capsys, ur5_points, how):
+    """import-points A A (or A and a copy of it): two instrument set-ups of the same points,
+    the uncertainties shrunk to 0.71 x; now exit 2 and one line naming both."""
+    rows = (ur5_points / "points.csv").read_text().splitlines()
+    source = tmp_path / "tracker.csv"
+    source.write_text("\n".join(rows[0].split(",", 1)[1:] + [r.split(",", 1)[1] for r in rows[1:]])
+                      + "\n")
+    second = source if how == "same file" else tmp_path / "copy.csv"
+    second.write_bytes(source.read_bytes())
+    status = cli.main(["import-points", str(source), str(tmp_path / "." / second.name),
+                       "--joints", "q1_deg..q6_deg", "--point", "x_mm,y_mm,z_mm",
+                       "--out", str(tmp_path / "c")])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1, err
+    assert f"is the {how} as {source}: imported twice" in err
+    assert not (tmp_path / "c").exists()
