@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from aacmm_pin.data.json_file import read_json
+from aacmm_pin.data.problem_log import key_problems
 from aacmm_pin.errors import FileFormatError, Problem
 
 MIN_DETERMINANT = 0.1
@@ -72,12 +73,12 @@ def read_nest(path: str | Path) -> Nest:
 
     Raises:
         FileFormatError: for unreadable JSON, missing or malformed directions, zero or coplanar
-            vectors, each problem with the file.
+            vectors, a key other than ``directions``, each problem with the file.
     """
     path = Path(path)
     data = read_json(path, 2**20, "a nest file")  # a nest file is about 100 bytes
     raw = data.get("directions") if isinstance(data, dict) else None
-    problems: list[Problem] = []
+    problems = key_problems(path, data, ("directions",)) if isinstance(data, dict) else []
     try:
         u = np.array(raw, dtype=float)
     except (TypeError, ValueError):

@@ -156,13 +156,14 @@ def _identify_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.model_choice import AUTO, identify_model
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.logs import noise_summary
-    from aacmm_pin.effects.registry import term_from_key
+    from aacmm_pin.effects.registry import check_terms, term_from_key
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
     terms = tuple(term_from_key(k.strip()) for k in (args.terms or "").split(",") if k.strip())
     phase("loading the arm")
     arm = load_given_arm(args)
+    check_terms(terms, arm, "--terms")
     _print_sizes(arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)

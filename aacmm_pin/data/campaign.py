@@ -33,7 +33,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from aacmm_pin.data.columns import BUILT_IN, MAX_ANGLE_DEG, column, file_order
+from aacmm_pin.data.columns import BUILT_IN, MAX_ANGLE_DEG, check_names, column, file_order
 from aacmm_pin.data.couplings import AxisCoupling
 from aacmm_pin.data.csv_table import (
     MAX_COLUMNS,
@@ -293,6 +293,9 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
     if points is not None and tools is not None and points.lines:
         _check_tools(points, tools, checks)
     checks.close()
+    carried = [note for name, table in tables.items() if table is not None and name in _LOGS
+               and (note := check_names(table.path, table.per_sample, _FILES[name][2], problems))
+               is not None]
     for table in (spat, log, points):
         if table is not None:
             check_radians(table, problems)
@@ -309,7 +312,7 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
     noise = read_noise(folder / NOISE_FILE) if (folder / NOISE_FILE).is_file() else None
     notes = tuple(note for table in (spat, log, points) if usable(table)
                   and (note := _copies(table)) is not None)
-    for note in notes:
+    for note in (*notes, *carried):
         warnings.warn(note, CampaignWarning, stacklevel=2)
     for table in (spat, log, points):
         if usable(table) and (beyond := _limits_note(table, arm)) is not None:
@@ -366,10 +369,13 @@ def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | 
         checks = ProblemLogs(problems)
         _check_tools(table, tools, checks)
         checks.close()
+    carried = None if table is None else check_names(table.path, table.per_sample, optional,
+                                                     problems)
     if problems or table is None:
         raise CampaignFormatError(problems)
-    if (beyond := _limits_note(table, arm)) is not None:
-        warnings.warn(beyond, CampaignWarning, stacklevel=3)
+    for note in (carried, _limits_note(table, arm)):
+        if note is not None:
+            warnings.warn(note, CampaignWarning, stacklevel=3)
     return table
 
 

@@ -11,15 +11,23 @@ with :func:`register_column`, and for any other name its unit suffix (:data:`SUF
 ``_s`` s, ``_mm`` and ``_um`` m, ``_deg`` rad, ``_nm`` N m, ``_n`` N); a name without one of these
 suffixes is a plain number, kept as written. Temperatures stay in deg C inside the package (the
 thermal terms are relative to 20 deg C, :data:`aacmm_pin.units.REFERENCE_TEMPERATURE_C`).
+
+A carried column named close to one that is read (:func:`meant_column`: ``sigma_mm``, ``tmp_c``)
+is refused, and the carried columns no effect reads are named once per file
+(:func:`check_names`; the effects' columns come from the registry, :func:`set_effect_reads`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
+from aacmm_pin.data.poses import POSE_COLUMN
+from aacmm_pin.errors import Problem
 from aacmm_pin.units import MAX_COORDINATE, MM, NOISE_MAX, NOISE_MIN, TEMPERATURE_RANGE_C, UM
 
 MAX_ANGLE_DEG = 720.0
@@ -170,3 +178,111 @@ def file_order(names: list[str] | tuple[str, ...]) -> list[str]:
     """Return column names in the order they are written: the built-in ones first, then as given."""
     built_in = [c.name for c in BUILT_IN]
     return sorted(names, key=lambda n: built_in.index(n) if n in built_in else len(built_in))
+
+
+_EFFECT_READS: list[Callable[[], Iterable[str]]] = []
+
+
+def set_effect_reads(source: Callable[[], Iterable[str]]) -> None:
+    """Tell the readers how to learn the columns the registered effects read (``Effect.reads``).
+
+    The effect registry calls it once, at import (the readers never import the effects); the
+    source loads the installed plugins before answering.
+    """
+    _EFFECT_READS[:] = [source]
+
+
+def read_by_effects() -> frozenset[str] | None:
+    """Return the columns some registered effect reads, or None when no registry is loaded."""
+    return frozenset(_EFFECT_READS[0]()) if _EFFECT_READS else None
+
+
+def _split_unit(name: str) -> tuple[str, str]:
+    """Return ``(stem, unit suffix)`` of a lower-case column name; the suffix "" without one."""
+    for suffix in sorted(SUFFIXES, key=len, reverse=True):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[:-len(suffix)], suffix
+    return name, ""
+
+
+def _one_edit(a: str, b: str) -> bool:
+    """Tell whether ``a`` and ``b`` differ by one letter inserted, left out, changed or two swapped.
+
+    A difference in digits only (``temp2`` and ``temp``: a second sensor) is not a typo.
+    """
+    if abs(len(a) - len(b)) > 1 or a == b or a.translate(_NO_DIGITS) == b.translate(_NO_DIGITS):
+        return False
+    if len(a) == len(b):
+        diff = [k for k in range(len(a)) if a[k] != b[k]]
+        return len(diff) == 1 or (len(diff) == 2 and diff[1] == diff[0] + 1
+                                  and a[diff[0]] == b[diff[1]] and a[diff[1]] == b[diff[0]])
+    short, long = sorted((a, b), key=len)
+    return any(long[:k] + long[k + 1:] == short for k in range(len(long)))
+
+
+_NO_DIGITS = str.maketrans("", "", "0123456789")
+
+
+def meant_column(name: str, known: Iterable[str]) -> str | None:
+    """Return the known column a per-sample column's name most likely misspells, or None.
+
+    ``name`` means a known column ``k`` (and is not ``k``) when it is ``k`` in another case
+    (``Sigma_um``), ``k``'s quantity with another unit suffix or none (``sigma_mm``, ``sigma``),
+    or ``k`` with one letter off in a name part of 3 letters or more (``tmp_c``, ``sigam_um``);
+    numbered names are others (``temp2_c`` is a second temperature, not ``temp_c``).
+
+    Args:
+        name: a column header the file carries.
+        known: the column names the package and the effects read.
+    """
+    lower = name.lower()
+    stem, suffix = _split_unit(lower)
+    for k in known:
+        if k == name:
+            return None
+    for k in known:
+        k_stem, k_suffix = _split_unit(k.lower())
+        if k.lower() == lower or (stem == k_stem and suffix != k_suffix):
+            return k
+        if (suffix in (k_suffix, "") and min(len(stem), len(k_stem)) >= 3
+                and _one_edit(stem, k_stem)):
+            return k
+    return None
+
+
+def check_names(path: Path | str, names: Sequence[str], optional: Sequence[str],
+                problems: list[Problem]) -> str | None:
+    """Refuse carried columns whose names misspell a known one; return a note on the others.
+
+    A per-sample column the package does not read, named close to one it or a registered effect
+    reads (:func:`meant_column`: ``sigma_mm``, ``Sigma_um``, ``tmp_c``), would be carried while
+    the defaults stand in for the column meant: a problem naming the file, its header line, the
+    column and the known name. The other carried columns that no effect reads are named in one
+    note for the file (None if there is none, or no effect registry is loaded to say).
+
+    Args:
+        path: the file.
+        names: its per-sample columns, by header name.
+        optional: the file's optional columns (``group``, ``tool``, ``t_s`` ...).
+        problems: where a misspelt name is added.
+    """
+    effects = read_by_effects()
+    used = {c.name for c in BUILT_IN} | {POSE_COLUMN} | set(effects or ())
+    known = list(dict.fromkeys([*optional, *used, *_REGISTERED]))
+    carried = []
+    for name in names:
+        if name in known:
+            continue
+        if (meant := meant_column(name, known)) is not None:
+            what = column(meant)
+            unit = f", in {what.unit}" if what.unit else ""
+            problems.append(Problem(path, 1, name, f"close to '{meant}' ({what.description}{unit}), "
+                                    "which is read; this one would be carried unused: rename it "
+                                    f"'{meant}', or a column of its own another name"))
+        elif name not in used:
+            carried.append(name)
+    if not carried or effects is None:
+        return None
+    listing = ", ".join(f"'{n}'" for n in carried)
+    return (f"{path}: column{'s' if len(carried) > 1 else ''} {listing} carried, not used by any "
+            "effect (discover tests it as a variable; an effect that reads it uses it)")

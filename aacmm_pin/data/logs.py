@@ -19,6 +19,7 @@ import numpy as np
 
 from aacmm_pin.data.columns import BUILT_IN
 from aacmm_pin.data.json_file import read_json
+from aacmm_pin.data.problem_log import key_problems
 from aacmm_pin.errors import CampaignFormatError, FileFormatError, Problem
 from aacmm_pin.units import (
     INSTRUMENT_NOISE,
@@ -58,6 +59,8 @@ values), and/or its instrument, ``{"instrument": "motion capture"}`` (one of
 kinds ``noise_um`` does not give take."""
 NOISE_KINDS = ("rtest", "location", "point", "socket")
 """The kinds of measurement a campaign states a noise for (``campaign.json`` ``noise_um``)."""
+NOISE_KEYS = ("instrument", "noise_um", "provenance")
+"""The keys of ``campaign.json`` (``provenance``: what ``import-points`` read, not read back)."""
 KIND_NAMES = {"rtest": "R-Test", "location": "R-Test nest", "point": "points",
               "socket": "bar sockets"}
 """How output names each kind of :data:`NOISE_KINDS`."""
@@ -124,7 +127,8 @@ def read_noise(path: str | Path) -> StatedNoise:
     """Read a ``campaign.json``'s stated noise (see :data:`NOISE_FILE`).
 
     Raises:
-        CampaignFormatError: if the file is not JSON, or ``noise_um`` is not an object of positive
+        CampaignFormatError: if the file is not JSON, has a key not in :data:`NOISE_KEYS` (a
+            misspelt one named with the key meant), or ``noise_um`` is not an object of positive
             numbers with the keys rtest, location, point, socket (each one optional).
     """
     path = Path(path)
@@ -142,8 +146,8 @@ def read_noise(path: str | Path) -> StatedNoise:
         instrument) is not None) else [Problem(path, None, "instrument", f"unknown instrument "
                                                f"{instrument!r}; choose from "
                                                f"{', '.join(INSTRUMENT_NOISE)}")]
-    problems += [Problem(path, None, f"noise_um.{key}", f"unknown kind; choose from {', '.join(kinds)}")
-                for key in noise if key not in kinds]
+    problems += key_problems(path, content, NOISE_KEYS)
+    problems += key_problems(path, noise, kinds, "noise_um.")
     problems += [Problem(path, None, f"noise_um.{key}", f"a positive number (um) expected, got "
                          f"{value!r}") for key, value in noise.items() if key in kinds and not (
                              isinstance(value, (int, float)) and not isinstance(value, bool)

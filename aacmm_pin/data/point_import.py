@@ -15,6 +15,7 @@ their rows, the licence found beside them).
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import math
 import os
@@ -26,15 +27,16 @@ from typing import Any
 
 import numpy as np
 
+from aacmm_pin.data.bounded_read import read_bounded
 from aacmm_pin.data.campaign import ArmNames, couplings_of, write_campaign
 from aacmm_pin.data.columns import MAX_ANGLE_DEG
 from aacmm_pin.data.couplings import fill_coupled
-from aacmm_pin.data.csv_table import radian_like_column, read_table
+from aacmm_pin.data.csv_table import MAX_FILE_BYTES, radian_like_column, read_table
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
 from aacmm_pin.data.problem_log import ProblemLog, close_match
-from aacmm_pin.errors import CampaignFormatError, Problem
+from aacmm_pin.errors import ArgumentError, CampaignFormatError, Problem
 from aacmm_pin.units import MAX_COORDINATE, MM, RADIAN_MIN_ROWS, UM
 
 __all__ = ["JACOBI2025", "PRESETS", "ImportResult", "PointFormat", "detect_format",
@@ -361,6 +363,33 @@ class ImportResult:
         return float(np.mean(np.concatenate([o for o in offsets if o is not None])))
 
 
+def _refuse_repeated(sources: Sequence[str | Path]) -> None:
+    """Refuse a source given twice, by its resolved path or its content (SHA-256 of its bytes).
+
+    Imported twice, its points would count twice as another instrument set-up, and the fit's
+    uncertainties shrink as if they were independent measurements (by 0.71 x for a file doubled).
+
+    Raises:
+        ArgumentError: one line naming both sources.
+    """
+    seen: dict[object, Path] = {}
+    for source in sources:
+        path = Path(source)
+        try:
+            raw = read_bounded(path, MAX_FILE_BYTES)
+        except OSError:
+            continue  # the reader names a missing or unreadable file
+        digest = None if raw is None else hashlib.sha256(raw).hexdigest()  # too large: named later
+        for key, how in ((path.resolve(), "the same file"), (digest, "the same content")):
+            if key is None:
+                continue
+            if key in seen:
+                raise ArgumentError(f"sources: {path} is {how} as {seen[key]}: imported twice, its "
+                                    "points would count twice as another instrument set-up and "
+                                    "shrink the uncertainties; give each file once")
+            seen[key] = path
+
+
 def import_points(sources: Sequence[str | Path], folder: str | Path,
                   fmt: PointFormat | None = None, *, sigma: float | None = None,
                   one_frame: bool = False, force: bool = False,
@@ -397,6 +426,7 @@ def import_points(sources: Sequence[str | Path], folder: str | Path,
     """
     if not sources:
         raise ValueError("sources: give one or more point files")
+    _refuse_repeated(sources)
     files: list[PointFile] = []
     formats: list[PointFormat] = []
     problems: list[Problem] = []

@@ -121,6 +121,34 @@ def close_match(name: str, known: Iterable[str]) -> str | None:
     return found[0] if found else None
 
 
+def key_problems(path: Path | str, keys: Iterable[str], known: Iterable[str], prefix: str = "",
+                 *, strict: bool = True) -> list[Problem]:
+    """Return a problem for every key of a JSON object that is not one of the known keys.
+
+    A key close to a known one (:func:`close_match`: ``instrumnet``, ``Noise_um``) names it;
+    with ``strict`` False only such keys are problems (the object may carry keys of its own).
+
+    Args:
+        path: the file.
+        keys: the object's keys.
+        known: the keys the reader reads.
+        prefix: the object's path in the file, e.g. ``noise_um.`` (empty at the top level).
+        strict: whether a key neither known nor close to one is a problem too.
+    """
+    known = list(known)
+    listing = ", ".join(known)
+    out = []
+    for key in keys:
+        if key in known:
+            continue
+        meant = close_match(key, known)
+        if meant is not None or strict:
+            guess = f"; did you mean '{meant}'?" if meant else ""
+            out.append(Problem(path, None, f"{prefix}{key}",
+                               f"unknown key{guess} (the keys: {listing})"))
+    return out
+
+
 class ProblemLogs:
     """One :class:`ProblemLog` per file, for checks that span several files.
 

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aacmm_pin.data.columns import set_effect_reads
 from aacmm_pin.effects.base import Adjustment, Effect, Term
 from aacmm_pin.effects.builtin.backlash import Backlash
 from aacmm_pin.effects.builtin.compliance import Compliance
@@ -33,7 +34,7 @@ from aacmm_pin.effects.builtin.lateral_compliance import LateralCompliance
 from aacmm_pin.effects.builtin.rtest import RTest
 from aacmm_pin.effects.builtin.thermal import Thermal
 from aacmm_pin.effects.builtin.tool import Tool
-from aacmm_pin.errors import AacmmError, FileFormatError, Problem
+from aacmm_pin.errors import AacmmError, ArgumentError, FileFormatError, Problem
 
 if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm
@@ -101,6 +102,12 @@ def _module_of(cls: type) -> str:
     return cls.__module__
 
 
+def _columns_read() -> set[str]:
+    """Return the per-sample columns the registered effects read, installed plugins loaded."""
+    return {name for effect in library().values() for name in effect.reads}
+
+
+set_effect_reads(_columns_read)
 for _builtin in (Encoder, Compliance, LateralCompliance, Thermal, Backlash, Crosstalk, RTest, Tool):
     register_effect(_builtin, BUILTIN)
 
@@ -224,6 +231,37 @@ def term_from_key(key: str) -> Term:
 def terms_of(extensions: Iterable[str]) -> list[Term]:
     """Return the terms named by a parameters' extensions (keys of ``Parameters.extensions``)."""
     return [term_from_key(k) for k in extensions]
+
+
+def axes_problem(term: Term, arm: Arm) -> str | None:
+    """Return why a term does not fit the arm's axes (an axis beyond it), or None if it does.
+
+    One line naming the term and the arm's axes, e.g. ``'compliance[A7]' acts on axis 7; the arm
+    ur5 has 6 axes, A1..A6 (shoulder_pan_joint .. wrist_3_joint)``.
+    """
+    beyond = [a for a in term.axes if not 1 <= a <= arm.n_axes]
+    if not beyond:
+        return None
+    plain = list(arm.axis_names) == [f"A{a}" for a in range(1, arm.n_axes + 1)]
+    names = "" if plain else f" ({arm.axis_names[0]} .. {arm.axis_names[-1]})"
+    return (f"{term.key!r} acts on axis {beyond[0]}; the arm {arm.name} has {arm.n_axes} axes, "
+            f"A1..A{arm.n_axes}{names}")
+
+
+def check_terms(terms: Iterable[Term], arm: Arm, where: str) -> None:
+    """Check that every term acts on axes of the arm.
+
+    Args:
+        terms: the terms (e.g. ``identify``'s ``extensions``, ``--terms``).
+        arm: the arm they are to be estimated on.
+        where: what gave them, named first in the message (``--terms``, ``extensions``).
+
+    Raises:
+        ArgumentError: one line naming ``where``, the first term beyond the arm and its axes.
+    """
+    for term in terms:
+        if (why := axes_problem(term, arm)) is not None:
+            raise ArgumentError(f"{where}: {why}")
 
 
 def effect_names(terms: Iterable[Term]) -> list[str]:
@@ -376,9 +414,8 @@ def check_extensions(params: Parameters, arm: Arm | None = None, path: str | Pat
         if values.size != len(term.names):
             problems.append(Problem(where, None, f"extensions.{key}",
                                     f"needs {len(term.names)} finite numbers, got {values.tolist()!r}"))
-        elif arm is not None and any(not 1 <= a <= arm.n_axes for a in term.axes):
-            problems.append(Problem(where, None, f"extensions.{key}",
-                                    f"the arm has axes 1..{arm.n_axes}"))
+        elif arm is not None and (why := axes_problem(term, arm)) is not None:
+            problems.append(Problem(where, None, f"extensions.{key}", why))
     if unloaded:
         raise EffectNotFound(_missing_plugins(needed, unloaded, where))
     if problems:

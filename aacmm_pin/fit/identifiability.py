@@ -198,6 +198,23 @@ def held_count(unknowns: Unknowns, jac: DataJacobian, extra: sp.csr_matrix, sigm
     return int(np.sum(np.sqrt(np.clip(eigval, 0.0, None)) < DETERMINED_K * sigma))
 
 
+def held_rank(constraints: sp.csr_matrix) -> int:
+    """Return how many independent directions constraint rows hold (their rank; rows normalised).
+
+    The gauge rows and the held directions may overlap (a map's constant held both ways, every
+    direction held under a noise stated far too large): their count would overstate the directions
+    held, down to fewer determined parameters than zero.
+
+    Args:
+        constraints: rows over the free arm entries, shape (k, n_free).
+    """
+    rows = constraints.toarray()
+    if not rows.size:
+        return 0
+    norms = np.linalg.norm(rows, axis=1)
+    return int(np.linalg.matrix_rank(rows[norms > 0] / norms[norms > 0, None]))
+
+
 def _scaled_information(jac: DataJacobian, extra: sp.csr_matrix, scale: np.ndarray) -> np.ndarray:
     """Return (J^T J + extra^T extra) with rows and columns scaled by ``scale``, (n_free, n_free)."""
     out: np.ndarray = (jac.normal() + (extra.T @ extra).toarray()) * np.outer(scale, scale)

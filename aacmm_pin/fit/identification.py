@@ -30,6 +30,7 @@ from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_positions
+from aacmm_pin.effects.registry import check_terms
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob
@@ -67,6 +68,11 @@ NESTS = ("auto", "estimate", "fixed")
 MIN_DOF_FRACTION = 0.1
 """An identification whose degrees of freedom are fewer than this fraction of its residual
 coordinates reports ``success`` False: its residual cannot estimate the noise."""
+MIN_NOISE_RATIO = 0.1
+"""A fit with a stated noise (``sigma``) whose residual's noise estimate is below this fraction
+of it reports ``success`` False: a noise stated ten times what the measurements scatter lets the
+plausible sizes outweigh them (fewer parameters determined) and widens every uncertainty as
+many times."""
 MAX_FIT_RMS = 0.2e-3
 """A fit of R-Test SPATs whose RMS residual exceeds this (m) reports ``success`` False: no
 articulated arm CMM leaves that after calibration, so the inputs disagree (units, R-Test zero
@@ -289,6 +295,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     Raises:
         IdentificationError: for campaigns that cannot be identified.
         ValueError: for an unknown ``model``, or a ``sigma`` / ``sigma_location`` not > 0.
+        ArgumentError: for an extension term on an axis beyond the arm (one line naming it).
     """
     options = FitOptions(model=model, use_rtest=use_rtest, start=start, step_deg=step_deg,
                          map_axes=map_axes, loss=loss, f_scale=f_scale, sigma=sigma,
@@ -298,6 +305,7 @@ def identify(campaign: Campaign, arm: Arm | None = None, model: str = "proposed"
     # every evaluation of every fit below (none given: each solve's own cap only)
     budget = None if max_nfev is None else Budget(max_nfev)
     arm = arm or load_arm()
+    check_terms(extensions, arm, "extensions")
     with single_threaded_blas():  # products of a few hundred columns: BLAS threads only spin
         cal = _identify(campaign, arm, options, budget, fixed_nests=nests == "fixed")
         rtest_nests = "spat" in cal.inputs
@@ -481,7 +489,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     # a noise given (not estimated) is the one a row of weight 1 has: the solve's, which holds
     # the option (and a sigma_um column where the rows state their own)
     sigma = None if options.sigma is None else setup.sigma_class
-    n_det = problem.n_arm - obs.hold.shape[0] - len(gauges) + problem.n_frame
+    n_det = max(problem.n_arm - ident.held_rank(now.constraints), 0) + problem.n_frame
     kept = np.ones(n, bool) if inlier is None else inlier
     dof_fraction = max(3 * int(kept.sum()) + problem.n_lengths - n_det, 1) / (3 * int(kept.sum()))
     residual = problem.data_residuals(x_full)
@@ -510,7 +518,7 @@ def _calibration(campaign: Campaign, options: FitOptions, setup: _Setup, now: Fi
     rms = float(np.sqrt(np.mean(residual[kept] ** 2)))
     success, message = _verdict(res, robust, settled, outliers, suspects, enough,
                                 (n_det, data_res.size, dof, sig),
-                                rms if setup.has_spat else None)
+                                rms if setup.has_spat else None, (data_res, sigma))
     if (units := plausibility.implausible_values(unknowns, x_full[:problem.n_arm], obs.scale,
                                                   unknowns.arm.sizes_label,
                                                   unknowns.arm.source)) is not None:
@@ -556,11 +564,14 @@ def _budget_message(options: FitOptions) -> str:
 
 def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[Outlier, ...],
              suspects: tuple[Outlier, ...], enough: bool,
-             counts: tuple[int, int, int, float], spat_rms: float | None) -> tuple[bool, str]:
+             counts: tuple[int, int, int, float], spat_rms: float | None,
+             noise: tuple[np.ndarray, float | None]) -> tuple[bool, str]:
     """Return ``success`` and ``message``: the last solve's, then outliers, too few samples, RMS.
 
     ``counts``: determined parameters, residual coordinates kept, degrees of freedom, the noise
-    used (m); ``spat_rms``: the fit RMS of a fit with SPATs (m), None without.
+    used (m); ``spat_rms``: the fit RMS of a fit with SPATs (m), None without; ``noise``: the
+    kept data residuals (m) and the stated noise (m, None when estimated), judged against
+    :data:`MIN_NOISE_RATIO`.
     """
     success = bool(res.success)  # the last round's: earlier ones only set the held directions
     message = res.message if success else f"did not converge: {res.message}"
@@ -577,6 +588,7 @@ def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[O
                    f"model that misses an effect{_where(suspects)}; refit with robust=True "
                    "(aacmm-pin identify --robust) to reject them")
     n_det, n_res, dof, sig = counts
+    data_res, stated = noise
     if not enough:
         more = int(np.ceil((n_det / (1 - MIN_DOF_FRACTION) - n_res) / 3))
         success = False
@@ -585,6 +597,14 @@ def _verdict(res: OptimizeResult, robust: bool, settled: bool, outliers: tuple[O
                    f"{MIN_DOF_FRACTION:.0%} of the residuals), so neither the noise nor the "
                    f"uncertainty can be estimated from the fit (the stated noise "
                    f"{sig * 1e6:.2g} um is used); measure at least about {more} more postures")
+    estimate = _sigma(data_res, n_det, None)
+    if enough and stated is not None and estimate < MIN_NOISE_RATIO * stated:
+        success = False
+        message = (f"the stated noise {stated * 1e6:.4g} um is {stated / estimate:.3g} x the "
+                   f"residual's noise ({estimate * 1e6:.3g} um over {dof} degrees of freedom): "
+                   f"the plausible sizes outweigh the measurements ({n_det} parameters "
+                   f"determined) and every uncertainty is as many times too wide; state the "
+                   f"instrument's noise (sigma, --sigma-um); " + message)
     if enough and spat_rms is not None and spat_rms > MAX_FIT_RMS:
         success = False
         message = (f"fit RMS {spat_rms * 1e6:.4g} um is beyond {MAX_FIT_RMS * 1e6:.3g} um, more "

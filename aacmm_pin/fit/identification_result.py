@@ -159,7 +159,7 @@ class Calibration:
     @property
     def n_determined(self) -> int:
         """Number of arm parameter directions the data determines (unknowns less held rows)."""
-        return int(len(self.unknowns.names) - self.constraints.shape[0])
+        return max(len(self.unknowns.names) - ident.held_rank(self.constraints), 0)
 
     @property
     def fit_rms(self) -> float:

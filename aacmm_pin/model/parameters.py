@@ -29,7 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.data.json_file import read_json
-from aacmm_pin.data.problem_log import ProblemLog, close_match
+from aacmm_pin.data.problem_log import ProblemLog, close_match, key_problems
 from aacmm_pin.errors import FileFormatError, Problem
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import DEFAULT_STEP_DEG, EncoderMap
@@ -158,6 +158,9 @@ class Parameters:
 
 
 _KNOWN = ("arm", "units", "dh", "tool", "tools", "base_to_mt", "encoder_maps", "extensions")
+_WRITTEN = ("plugins", "effects")
+"""Keys the package writes beside :data:`_KNOWN`, carried in ``extra`` (the effects' plugins, a
+simulation's hidden effects)."""
 
 
 def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parameters:
@@ -247,6 +250,8 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
             if np.any(np.abs(maps[int(key)].values) > MAX_PARAMETER):
                 bad(f"encoder_maps.axes.{key}", f"a value {_IMPLAUSIBLE}")
     extensions = _extensions(data.get("extensions") or {}, bad)
+    for problem in key_problems(path, data, (*_KNOWN, *_WRITTEN), strict=False):
+        bad(str(problem.column), problem.reason)  # a misspelt key; others are carried (extra)
     log.close()
     if problems:
         raise FileFormatError(problems)

@@ -164,8 +164,15 @@ class UrdfTree:
             node = element.find("limit")
             lower = None if node is None else _number(node, "lower", where, path)
             upper = None if node is None else _number(node, "upper", where, path)
-            node = element.find("mimic")
-            mimic = None
+            mimics = element.findall("mimic")
+            node, mimic = (mimics[0] if mimics else None), None
+            if len(mimics) > 1:
+                raise ArmModelError(path, f"line {mimics[1].sourceline}: joint '{name}': a second "
+                                          f"<mimic> (the first is on line {mimics[0].sourceline}); a "
+                                          "joint follows one other joint")
+            if node is not None and kind == "fixed":
+                raise ArmModelError(path, f"line {node.sourceline}: joint '{name}': a <mimic> on a "
+                                          "fixed joint, which has no angle to couple")
             if node is not None:
                 if not node.get("joint"):
                     raise ArmModelError(path, f"{where}: <mimic> without joint=\"...\"")
