@@ -219,3 +219,52 @@ def test_import_stays_lazy_with_the_extension_point() -> None:
     done = subprocess.run([sys.executable, "-c", code], env=ENV, cwd=ROOT, capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+BAD_BASIS = {
+    "nan": "return np.full((samples.n, 1), np.nan)",
+    "shape": "return np.ones(3)",
+    "raises": "raise ZeroDivisionError('division by zero in the user\\'s code')",
+}
+
+
+@pytest.mark.parametrize("fault, why", [("nan", "not finite"), ("shape", "shape (3,)"),
+                                        ("raises", "raised ZeroDivisionError")])
+def test_a_plugins_bad_output_is_one_line_naming_it(campaign: Path, tmp_path: Path, fault: str,
+                                                    why: str) -> None:
+    """A plugin's basis that gives NaN, a wrong shape or raises: one line naming the term, its
+    effect and the plugin's file, exit 2; no file written (a NaN reached predict's file, a raise
+    printed 60 lines of traceback)."""
+    source = EFFECT_SOURCE.format(name="bent", cls="Bent").replace(
+        "    return samples.gravity[:, axis - 1:axis]", "    " + BAD_BASIS[fault])
+    path = tmp_path / "bent_effect.py"
+    path.write_text(source + "\n\nfrom aacmm_pin import register_effect\n\nregister_effect(Bent)\n")
+    out = tmp_path / "cal"
+    line = _error_line(_cli("identify", str(campaign), "--model", "dh", "--terms", "bent[A2]",
+                            "--effects-file", str(path), "--out", str(out)))
+    assert "term bent[A2]" in line and "effect 'bent'" in line and str(path.resolve()) in line
+    assert why in line
+    assert not out.exists()
+
+
+def test_a_replaced_built_in_is_not_read_back_as_the_built_in(campaign: Path, tmp_path: Path) -> None:
+    """A calibration made with a plugin that replaced the built-in compliance names the plugin;
+    read without it, the built-in (another model) is refused in one line naming both."""
+    path = tmp_path / "my_compliance.py"
+    path.write_text(EFFECT_SOURCE.format(name="compliance", cls="MyCompliance").replace(
+        "samples.gravity[:, axis - 1:axis]", "2.0 * samples.gravity[:, axis - 1:axis]")
+        + "\n\nfrom aacmm_pin import register_effect\n\nregister_effect(MyCompliance, "
+          "replace=True)\n")
+    cal = tmp_path / "cal"
+    done = _cli("identify", str(campaign), "--model", "dh", "--terms", "compliance[A2]",
+                "--effects-file", str(path), "--out", str(cal))
+    assert done.returncode == 0, done.stderr
+    params = json.loads((cal / "parameters.json").read_text())
+    assert params["plugins"] == {str(path.resolve()): ["compliance[A2]"]}
+    line = _error_line(_cli("predict", str(cal), str(campaign / "spat.csv"), "--out",
+                            str(tmp_path / "p.csv")))
+    assert "compliance[A2]" in line and str(path.resolve()) in line and "aacmm_pin" in line
+    assert not (tmp_path / "p.csv").exists()
+    done = _cli("predict", str(cal), str(campaign / "spat.csv"), "--effects-file", str(path),
+                "--out", str(tmp_path / "p.csv"))
+    assert done.returncode == 0, done.stderr

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
+from aacmm_pin.errors import AacmmError
 from aacmm_pin.model.kinematics import Adjustment as Adjustment  # re-exported: terms fill it
 
 if TYPE_CHECKING:
@@ -227,6 +228,19 @@ def _angle_along(axis: int, residuals: np.ndarray, stylus: StylusDerivatives
     return f"A{axis} angle residual (arcsec)", np.degrees(angle) * 3600
 
 
+SOURCE_OF: list[Callable[[str], str]] = []
+"""Where an effect comes from (set by :mod:`aacmm_pin.effects.registry`: its ``plugin_of``)."""
+
+
+class PluginOutputError(AacmmError):
+    """A term's output (its basis) is not usable: raised, wrong shape, or not finite."""
+
+    def __init__(self, term: Term, why: str):
+        source = SOURCE_OF[0](term.effect) if SOURCE_OF else ""
+        where = f" of {source!r}" if source else ""
+        super().__init__(f"term {term.key} (effect {term.effect!r}{where}): {why}")
+
+
 Basis = Callable[["Samples"], np.ndarray]
 VariableOf = Callable[["Samples"], "tuple[str, np.ndarray]"]
 
@@ -242,8 +256,27 @@ class BasisTerm(Term):
     """Samples -> (label with unit, per-sample values) of the term's variable (figures)."""
 
     def basis(self, samples: Samples) -> np.ndarray:
-        """Return the basis on these samples (see :attr:`basis_of`)."""
-        return self.basis_of(samples)
+        """Return the basis on these samples (see :attr:`basis_of`), checked.
+
+        Raises:
+            PluginOutputError: one line naming the term, its effect and where the effect comes
+                from, for a basis that raises (other than the package's own errors, e.g. a missing
+                column), is not an array of N rows or holds a value that is not finite.
+        """
+        try:
+            out = np.asarray(self.basis_of(samples), dtype=float)
+        except AacmmError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a plugin's code: named, in one line
+            raise PluginOutputError(self, f"its basis raised {type(exc).__name__}: {exc}") from None
+        if out.ndim not in (2, 3) or out.shape[0] != samples.n:
+            raise PluginOutputError(self, f"its basis has shape {out.shape}, expected ({samples.n}, "
+                                          "k) or (N, 2 or 3, k) for these samples")
+        if not np.all(np.isfinite(out)):
+            bad = int(np.flatnonzero(~np.isfinite(out).reshape(samples.n, -1).all(axis=1))[0])
+            raise PluginOutputError(self, f"its basis is not finite (NaN or inf) at sample "
+                                          f"{bad + 1} of {samples.n}")
+        return out
 
     def variable(self, samples: Samples) -> tuple[str, np.ndarray]:
         """Return the label and per-sample values of the term's variable."""

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from aacmm_pin.data.columns import set_effect_reads
-from aacmm_pin.effects.base import Adjustment, Effect, Term
+from aacmm_pin.effects.base import SOURCE_OF, Adjustment, Effect, Term
 from aacmm_pin.effects.builtin.backlash import Backlash
 from aacmm_pin.effects.builtin.compliance import Compliance
 from aacmm_pin.effects.builtin.crosstalk import Crosstalk
@@ -108,6 +108,7 @@ def _columns_read() -> set[str]:
 
 
 set_effect_reads(_columns_read)
+SOURCE_OF.append(lambda name: _SOURCE.get(name, ""))  # a term's error names its effect's plugin
 for _builtin in (Encoder, Compliance, LateralCompliance, Thermal, Backlash, Crosstalk, RTest, Tool):
     register_effect(_builtin, BUILTIN)
 
@@ -369,6 +370,15 @@ def write_parameters(params: Parameters, path: str | Path) -> None:
     write_file(with_plugins(params), path)
 
 
+def _registered(key: str) -> bool:
+    """Whether a registered effect knows the term ``key``."""
+    try:
+        term_from_key(key)
+    except EffectNotFound:
+        return False
+    return True
+
+
 def _missing_plugins(needed: dict[str, str], keys: Iterable[str], where: object) -> str:
     """Return one line naming the extension keys whose plugin is not loaded, and the plugins."""
     by_plugin: dict[str, list[str]] = {}
@@ -378,8 +388,11 @@ def _missing_plugins(needed: dict[str, str], keys: Iterable[str], where: object)
     for plugin, its in by_plugin.items():
         how = (f"pass --effects-file {plugin}" if plugin.endswith(".py") else
                f"install the package {plugin} (or pass --effects-file FILE)")
+        here = [plugin_of(term_from_key(k).effect) for k in its if _registered(k)]
+        other = (f" (the effect registered here is {here[0]!r}'s, another model: the calibration "
+                 f"was made with the plugin's, which replaced it)" if here else "")
         parts.append(f"extensions {', '.join(its)} need the effect plugin {plugin!r}, not loaded "
-                     f"here: {how}")
+                     f"here{other}: {how}")
     return f"{where}: " + "; ".join(parts)
 
 
@@ -402,6 +415,10 @@ def check_extensions(params: Parameters, arm: Arm | None = None, path: str | Pat
     for key, values in params.extensions.items():
         try:
             term = term_from_key(key)
+            if key in needed and plugin_of(term.effect) != needed[key]:
+                # made with a plugin's effect that replaced this one: another model, not it
+                unloaded.append(key)
+                continue
         except EffectNotFound:
             if key in needed:
                 unloaded.append(key)
