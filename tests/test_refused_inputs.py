@@ -230,3 +230,17 @@ def test_a_source_imported_twice_is_refused(tmp_path, capsys, ur5_points, how):
     assert status == 2 and len(err.splitlines()) == 1, err
     assert f"is the {how} as {source}: imported twice" in err
     assert not (tmp_path / "c").exists()
+
+
+def test_a_campaign_files_own_columns_are_not_called_carried(recwarn):
+    """A readouts file cut from a campaign (lengthbar.csv, points.csv given to predict) carries its
+    placement, socket and group columns without a note: they are the campaign's, not unknowns."""
+    import aacmm_pin as ap
+    from aacmm_pin.data.campaign import read_sample_columns
+    from tests.helpers import SHARED
+
+    bar = SHARED / "sample-campaign" / "lengthbar.csv"
+    if not bar.is_file():
+        pytest.skip("needs ../shared/sample-campaign")
+    read_sample_columns(bar, ap.load_arm())
+    assert not [w for w in recwarn if "carried" in str(w.message)]

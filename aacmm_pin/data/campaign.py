@@ -78,6 +78,9 @@ _FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
     "points.csv": (_XYZ["loc"], True, ("group", "tool", "sigma_um", *_OPTIONAL)),
 }
 _LOGS = ("spat.csv", "lengthbar.csv", "points.csv")  # files whose extra numeric columns are read
+_CAMPAIGN_COLUMNS = tuple(dict.fromkeys(c for required, _, optional in _FILES.values()
+                                        for c in (*required, *optional)))
+"""Every column a campaign file has: a readouts file cut from one carries them, not as unknowns."""
 
 
 class ArmNames(Protocol):
@@ -369,8 +372,8 @@ def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | 
         checks = ProblemLogs(problems)
         _check_tools(table, tools, checks)
         checks.close()
-    carried = None if table is None else check_names(table.path, table.per_sample, optional,
-                                                     problems)
+    carried = None if table is None else check_names(
+        table.path, table.per_sample, (*optional, *_CAMPAIGN_COLUMNS), problems)
     if problems or table is None:
         raise CampaignFormatError(problems)
     for note in (carried, _limits_note(table, arm)):
