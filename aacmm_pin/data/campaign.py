@@ -109,6 +109,20 @@ def couplings_of(arm: ArmNames | None) -> Sequence[AxisCoupling]:
     return tuple(getattr(arm, "axis_couplings", ()))
 
 
+def _first_lines(lines: Sequence[int], values: Any) -> tuple[dict[Any, int], Counter[Any]]:
+    """Return the first line of each value of a column and how many rows hold it.
+
+    A typed column (an ``array``: every cell good) is counted without a Python object per row
+    (1.6M samples: a list of (line, value) tuples took 150 MB); a list (bad cells are None) as is.
+    """
+    if not isinstance(values, list):
+        uniq, first, count = np.unique(np.asarray(values), return_index=True, return_counts=True)
+        at = np.asarray(lines)[first]
+        return (dict(zip(uniq.tolist(), at.tolist())),
+                Counter(dict(zip(uniq.tolist(), count.tolist()))))
+    return ({v: line for line, v in reversed(list(zip(lines, values)))}, Counter(values))
+
+
 def _check_locations(spat: Table, locs: Table, min_samples: int, out: ProblemLogs) -> None:
     """Check duplicated ids, locations without zero position and locations with too few samples."""
     zero_line: dict[int, int] = {}
@@ -117,8 +131,8 @@ def _check_locations(spat: Table, locs: Table, min_samples: int, out: ProblemLog
             out.add(locs.path, line, "location",
                     f"location {v} is duplicated (also on line {zero_line[v]})", "duplicated")
         zero_line.setdefault(v, line)
-    first_line = {v: line for line, v in reversed(list(zip(spat.lines, spat.cols["location"])))}
-    counts, least = Counter(spat.cols["location"]), max(min_samples, 1)
+    first_line, counts = _first_lines(spat.lines, spat.cols["location"])
+    least = max(min_samples, 1)
     for v in sorted((set(first_line) | set(zero_line)) - {None}):
         path, line = (spat.path, first_line[v]) if v in first_line else (locs.path, zero_line[v])
         if v not in zero_line:
