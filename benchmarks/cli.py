@@ -4,6 +4,12 @@ Each is run as a whole process (as a user starts it); CPU from RUSAGE_CHILDREN, 
 9 interleaved rounds (each round runs every command once), beside `python -c pass` and `python -c
 "import numpy"` in the same rounds; ratios to the bare interpreter per round (noisy machines).
 A start-up cost: the baselines are the interpreter and its imports, not another implementation.
+
+``python benchmarks/cli.py --floors`` (about two minutes; section ``floors``): ``identify`` as a
+whole process against its floor, measured in the same rounds: the interpreter with the imports
+its work cannot avoid (:data:`FLOOR_IMPORTS`, one BLAS thread) as a whole process, plus its
+evaluations (``identify`` in this process, after a warm-up call); on the UR5 grid also against
+the careful hand-written fit (``benchmarks/ur5_handwritten.py``) as a whole process.
 """
 
 from __future__ import annotations
@@ -12,9 +18,11 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
-from _report import compile_package, machine, ratio, write_section
+from _report import compile_package, cpu_runs, machine, ratio, spread, write_section
 
 from aacmm_pin.cli import BLAS_THREAD_VARIABLES
 
@@ -79,5 +87,95 @@ yourdfpy or trimesh: the arm is read as an XML tree (`aacmm_pin.model.urdf_tree`
 {table}""")
 
 
+ROOT = Path(__file__).resolve().parents[1]
+UR5 = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker" / "UR5"
+HAND = ROOT / "benchmarks" / "ur5_handwritten.py"
+FLOOR_IMPORTS = ("numpy, scipy.linalg, scipy.optimize, scipy.sparse.linalg, scipy.special, "
+                 "pinocchio, lxml.etree, threadpoolctl")
+"""What an identification cannot avoid importing (``tests/test_imports.py``'s floor): arrays,
+the solver and its sparse operators, the noise tests' special functions, the kinematics, the URDF
+tree, the BLAS thread limit."""
+HEADER = ("| campaign | CLI CPU (s) | floor imports (s) | evaluations in-process (s) | floor (s) | "
+          "CLI / floor | careful fit, whole process (s) | CLI / careful fit |\n"
+          "|---|---|---|---|---|---|---|---|")
+FLOOR_RUNS = 7
+"""Interleaved rounds of the floors section."""
+IN_PROCESS = 5
+"""identify calls per round in this process (their mean is the round's evaluations)."""
+
+
+def floors() -> None:
+    """Write the ``floors`` section: identify as a whole process against its floor."""
+    import aacmm_pin as ap
+    from aacmm_pin._blas import single_threaded_blas
+
+    compile_package()
+    cli = [sys.executable, "-m", "aacmm_pin"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    rows, notes = [], []
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        subprocess.run([*cli, "simulate", str(tmp / "c")], check=True, capture_output=True,
+                       env=env)
+        subprocess.run([*cli, "import-points", str(UR5 / "3D_UR5_uncalibrated_grid_cleaned.csv"),
+                        "--out", str(tmp / "g")], check=True, capture_output=True, env=env)
+        cases = [("the UR5 grid (1000 laser-tracker points), `--arm ur5 --model dh`", tmp / "g",
+                  ["--arm", "ur5", "--model", "dh"], "ur5", "dh", True),
+                 ("the simulated paper campaign (`aacmm-pin simulate c`: 4 x 200 SPAT samples, "
+                  "7 bar placements), `--model proposed`", tmp / "c", ["--model", "proposed"],
+                  None, "proposed", False)]
+        for label, campaign, options, arm_name, model, hand in cases:
+            arm = ap.load_arm(arm_name) if arm_name else ap.load_arm()
+            data = ap.read_campaign(campaign, arm=arm)
+            runs: dict[str, list[float]] = {"cli": [], "imports": [], "work": [], "hand": []}
+            with single_threaded_blas():  # as the CLI: one BLAS thread
+                ap.identify(data, arm, model=model)  # warm-up: caches built once per process
+                for k in range(FLOOR_RUNS):
+                    runs["cli"].append(cpu_of([*cli, "identify", str(campaign), *options, "--out",
+                                               str(tmp / f"cal{k}"), "--force"], {}))
+                    runs["imports"].append(cpu_of([sys.executable, "-c",
+                                                   f"import {FLOOR_IMPORTS}"], ONE))
+                    runs["work"].append(float(np.mean(cpu_runs(
+                        lambda: ap.identify(data, arm, model=model), IN_PROCESS)[0])))
+                    if hand:
+                        runs["hand"].append(cpu_of([sys.executable, str(HAND), *(
+                            str(UR5 / f"3D_UR5_uncalibrated_{s}_cleaned.csv")
+                            for s in ("grid", "random"))], ONE))
+            floor = np.add(runs["imports"], runs["work"])
+            rows.append(f"| {label} | {spread(runs['cli'])} | {spread(runs['imports'])} | "
+                        f"{spread(runs['work'], '.3f')} | {spread(floor)} | "
+                        f"{ratio(runs['cli'], floor, name=label + ': CLI / floor')} | "
+                        + (f"{spread(runs['hand'])} | "
+                           f"{ratio(runs['cli'], runs['hand'], name=label + ': CLI / hand')} |"
+                           if hand else "- | - |"))
+            notes.append(label)
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
+    write_section("floors", f"""## Commands against their floor (`python benchmarks/cli.py --floors`)
+
+{machine()}. `aacmm-pin identify` as a whole process (`python -m aacmm_pin identify CAMPAIGN ...
+--out DIR`: interpreter start, imports, reading and checking the campaign, the fit, writing the
+calibration folder), CPU = user + system, against its floor measured in the same rounds: the
+interpreter with the imports its work cannot avoid (`python -c "import {FLOOR_IMPORTS}"`, one
+BLAS thread, as a whole process; `tests/test_imports.py` fails if `identify` imports any other
+third-party module) plus its evaluations (`identify(campaign, arm)` in-process, the mean of
+{IN_PROCESS} calls after a warm-up: the fit alone, its caches built). On the UR5 grid also against
+the careful hand-written fit (`benchmarks/ur5_handwritten.py`: numpy and scipy's optimizer, no
+Pinocchio; whole process, one BLAS thread). Median (range) of {FLOOR_RUNS} interleaved rounds;
+ratios of the medians, their range over the rounds of this run and of the earlier runs named below.
+Issue 41's targets: the UR5 grid at most 1.2x the careful fit, the paper campaign at most 1.3x its
+floor. The load average (1, 5 and 15 min) when this table was written: {load}.
+
+{HEADER}
+{chr(10).join(rows)}
+
+What lies between the CLI and its floor: the package's own modules (~0.1 s), the first call's
+set-up (the arm's identification model, caches a warm call finds built), reading and checking
+the campaign and writing the calibration folder (parameters, URDF, compact URDF and its loss,
+report).""")
+
+
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["--floors"]:
+        floors()
+    else:
+        main()

@@ -32,14 +32,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT.parent / "shared" / "sample-campaign"
 REPEAT = 5
+UR5_GRID = (ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker" / "UR5"
+            / "3D_UR5_uncalibrated_grid_cleaned.csv")
+"""The UR5's grid poses (public laser-tracker data; skipped where absent)."""
 FIGURES = ("gap_figure", "step_figure", "unexplained_figure")
 """The figure functions ``write_discovery`` calls (module attributes of discovery_figures), inside
 ``figure_batch`` (clocked too: it imports matplotlib)."""
 
 
-def child(campaign: str, out: str, root: str) -> None:
+def child(campaign: str, out: str, root: str, *options: str) -> None:
     """Run ``aacmm-pin discover`` of the package in ``root`` in this process; print its CPU and its
-    figures' as JSON."""
+    figures' as JSON. ``options``: the command's further options (``--arm ur5``)."""
     sys.path.insert(0, root)
     import aacmm_pin.outputs.discovery_figures as figures
     from aacmm_pin.cli import main as cli
@@ -74,7 +77,7 @@ def child(campaign: str, out: str, root: str) -> None:
     with open(os.devnull, "w") as sink:
         stdout, sys.stdout = sys.stdout, sink
         try:
-            status = cli(["discover", campaign, "--out", out])
+            status = cli(["discover", campaign, "--out", out, *options])
         finally:
             sys.stdout = stdout
     use = resource.getrusage(resource.RUSAGE_SELF)
@@ -83,9 +86,10 @@ def child(campaign: str, out: str, root: str) -> None:
                       "pngs": pngs}))
 
 
-def run_once(campaign: Path, out: Path, root: Path = ROOT) -> dict:
+def run_once(campaign: Path, out: Path, root: Path = ROOT, options: tuple[str, ...] = ()) -> dict:
     """One whole process running the package in ``root``; its measurements."""
-    text = subprocess.run([sys.executable, __file__, "--child", str(campaign), str(out), str(root)],
+    text = subprocess.run([sys.executable, __file__, "--child", str(campaign), str(out), str(root),
+                           *options],
                           check=True, capture_output=True, text=True,
                           env=dict(os.environ, PYTHONPATH=str(root))).stdout
     return dict(json.loads(text.strip().splitlines()[-1]))
@@ -106,18 +110,26 @@ def main(before: Path | None = None) -> None:
         simulated = Path(tmp) / "c"
         subprocess.run([sys.executable, "-m", "aacmm_pin", "simulate", str(simulated)],
                        check=True, capture_output=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        grid = Path(tmp) / "g"
+        if UR5_GRID.exists():
+            subprocess.run([sys.executable, "-m", "aacmm_pin", "import-points", str(UR5_GRID),
+                            "--out", str(grid)], check=True, capture_output=True,
+                           env=dict(os.environ, PYTHONPATH=str(ROOT)))
         cases = [("the sample campaign (`../shared/sample-campaign`: 4 x 200 SPAT samples, "
-                  "7 bar placements)", SAMPLE),
+                  "7 bar placements)", SAMPLE, ()),
                  ("the simulated paper campaign (`aacmm-pin simulate c`, seed 0: 4 x 200 SPAT "
-                  "samples, 7 bar placements)", simulated)]
-        for label, campaign in cases:
-            if not (campaign / "spat.csv").exists():
+                  "samples, 7 bar placements)", simulated, ()),
+                 ("the UR5 grid (1000 laser-tracker points, `--arm ur5`)", grid,
+                  ("--arm", "ur5"))]
+        for label, campaign, options in cases:
+            if not ((campaign / "spat.csv").exists() or (campaign / "points.csv").exists()):
                 continue
             trees = [("", ROOT)] + ([(" (before, `--before`)", before)] if before else [])
             runs: dict[Path, list[dict]] = {root: [] for _, root in trees}
             for k in range(REPEAT):  # interleaved: both trees see the same load
                 for i, (_, root) in enumerate(trees):
-                    runs[root].append(run_once(campaign, Path(tmp) / f"d{len(rows)}{k}{i}", root))
+                    runs[root].append(run_once(campaign, Path(tmp) / f"d{len(rows)}{k}{i}", root,
+                                               options))
             for name, root in trees:
                 assert all(r["status"] == 0 for r in runs[root]), runs[root]
                 cpu = np.array([r["cpu"] for r in runs[root]])
@@ -161,8 +173,8 @@ CPU times grow with the load.
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 5 and sys.argv[1] == "--child":
-        child(sys.argv[2], sys.argv[3], sys.argv[4])
+    if len(sys.argv) >= 5 and sys.argv[1] == "--child":
+        child(*sys.argv[2:])
     elif len(sys.argv) == 3 and sys.argv[1] == "--before":
         main(Path(sys.argv[2]).resolve())
     else:

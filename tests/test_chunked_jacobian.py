@@ -163,10 +163,10 @@ def _passes_and_residuals(arm: ap.Arm, sim: ap.Simulation, monkeypatch: pytest.M
     rows, whole, positions = (unk.Unknowns.jacobian_rows, unk.Unknowns.jacobian,
                               unk.Unknowns.positions)
 
-    def rows_spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray, lo: int, hi: int
-                 ):  # type: ignore[no-untyped-def]
+    def rows_spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray, lo: int, hi: int,
+                 work: dict[str, np.ndarray] | None = None):  # type: ignore[no-untyped-def]
         count["jacobians"] += lo == 0
-        return rows(self, x, q, lo, hi)
+        return rows(self, x, q, lo, hi, work)
 
     def whole_spy(self: unk.Unknowns, x: np.ndarray, q: np.ndarray):  # type: ignore[no-untyped-def]
         count["jacobians"] += 1

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
-from scipy import stats
 
 from aacmm_pin.analyses.bar_linear import LinearBar, scaled_columns
 from aacmm_pin.analyses.discovery_results import Score
 from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
+from aacmm_pin.distributions import chi2_ppf, f_sf
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians
 from aacmm_pin.errors import AacmmError
@@ -59,7 +59,7 @@ def size_factors(cal: Calibration) -> dict[str, float]:
     for group in dict.fromkeys(groups.tolist()):
         sel = (groups == group) & cal.identifiable
         n = int(sel.sum())
-        if n and np.sum(value2[sel] / (size2[sel] + var[sel])) > stats.chi2.ppf(1 - SIZE_ALPHA, n):
+        if n and np.sum(value2[sel] / (size2[sel] + var[sel])) > chi2_ppf(1 - SIZE_ALPHA, n):
             out[group] = float(np.sqrt(max(np.sum(value2[sel] - var[sel]) / np.sum(size2[sel]), 1.0)))
     return out
 
@@ -285,7 +285,7 @@ class LinearScorer:
                      fit_rms=float(np.sqrt(new["fit_ssr"] / self.n_data)),
                      heldout_rms=float(np.sqrt(new["held_ssr"] / n_held)),
                      heldout_gain=float((base["held_ssr"] - new["held_ssr"]) / var),
-                     p_value=float(stats.f.sf(f_stat, k_eff, dof)),
+                     p_value=float(f_sf(f_stat, k_eff, dof)),
                      bic_gain=float(gain / var - k_eff * np.log(self.n_data)))
 
     @property

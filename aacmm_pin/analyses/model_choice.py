@@ -15,13 +15,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from aacmm_pin.analyses.linear_scorer import FOLDS, LinearScorer
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import measurements
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.progress import phase
+
+# The held-out scorer (``linear_scorer``: the length bar's linearisation, validation, the
+# discovery results) is imported where a comparison runs: an identify of SPATs needs none of it.
 
 AUTO = "auto"
 """``identify --model auto``: the proposed model on SPATs; on points alone the one
@@ -46,6 +48,8 @@ class ModelChoice:
 
     def text(self) -> str:
         """Return one line with both held-out RMS and the verdict (um)."""
+        from aacmm_pin.analyses.linear_scorer import FOLDS
+
         cells = ", ".join(f"{m} {v * 1e6:.2f} um" for m, v in self.heldout_rms.items())
         return f"held-out RMS ({FOLDS} folds of poses): {cells}"
 
@@ -65,6 +69,8 @@ class ModelChoice:
 
     def to_dict(self) -> dict[str, Any]:
         """Return the ``report.json`` form (``model_choice``)."""
+        from aacmm_pin.analyses.linear_scorer import FOLDS
+
         return {"heldout_rms_um": {m: v * 1e6 for m, v in self.heldout_rms.items()},
                 "folds": FOLDS, "better": self.chosen}
 
@@ -76,6 +82,8 @@ def points_only(campaign: Campaign) -> bool:
 
 def heldout_rms(cal: Calibration, campaign: Campaign, arm: Arm) -> float:
     """Return a calibration's held-out RMS per coordinate, m (``discover``'s start score)."""
+    from aacmm_pin.analyses.linear_scorer import LinearScorer  # its imports: only when scored
+
     meas = measurements(campaign, arm, cal.use_rtest, "bar" in cal.inputs, cal.stated_noise)
     return LinearScorer(cal, meas.samples).heldout_rms
 

@@ -31,10 +31,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from aacmm_pin.data.columns import column
 from aacmm_pin.data.poses import POSE_COLUMN
+from aacmm_pin.distributions import bartlett_p, chi2_sf, f_logsf, f_sf
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Effect, Variable
 from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.fit.identification_result import Calibration
@@ -267,7 +267,7 @@ def _within_better(designs: dict[str, np.ndarray], white: np.ndarray, loc_design
     if k <= 0 or dof_rest <= 0:
         return False
     rest = max(ssr - (ss_big - ss_loc), 1e-300)
-    return bool(stats.f.sf(((ss_big - ss_small) / k) / (rest / dof_rest), k, dof_rest)
+    return bool(f_sf(((ss_big - ss_small) / k) / (rest / dof_rest), k, dof_rest)
                 < ALPHA_STRUCTURE)
 
 
@@ -339,7 +339,7 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
                 continue
             explained = max(ss - ss_base, 0.0)
             rest = max(total - ss_loc - explained, 1e-300)
-            log_p = float(stats.f.logsf((explained / k) / (rest / (dof - k)), k, dof - k))
+            log_p = float(f_logsf((explained / k) / (rest / (dof - k)), k, dof - k))
             excess = max(explained - k * rest / (dof - k), 0.0)  # less what noise would explain
             fits.append((log_p, k, excess))
         if not fits:
@@ -356,16 +356,16 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
     ids = np.unique(location)
     groups = [white_centred[location == m].reshape(-1) for m in ids]
     if len(groups) > 1 and all(g.size > 1 for g in groups):
-        bartlett = stats.bartlett(*groups)
+        bartlett_pvalue = bartlett_p(groups)
         var = [float(np.mean(g ** 2)) for g in groups]
         worst = int(np.argmax(var))  # its excess in um: in units of its own stated noise
         excess_var = max(var[worst] - float(np.mean(white_centred ** 2)), 0.0)
         worst_noise = float(np.sqrt(np.mean(sigma[location == ids[worst]] ** 2)))
         found.append((Structure("the location (its spread)", "each location",
                                 float(np.sqrt(excess_var)) * worst_noise, 1.0,
-                                float(np.log(max(float(bartlett.pvalue), 1e-300))), len(groups) - 1,
+                                float(np.log(max(bartlett_pvalue, 1e-300))), len(groups) - 1,
                                 location.astype(float), "location"),
-                      float(np.log(max(float(bartlett.pvalue), 1e-300)))))
+                      float(np.log(max(bartlett_pvalue, 1e-300)))))
     found.sort(key=lambda item: item[1])
     ranked: list[Structure] = []
     for i, (s, log_p) in enumerate(found):  # Holm: the i-th smallest times (m - i), monotone
@@ -378,7 +378,7 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         ranked = _merge_time(ranked, _within_better(designs, white, loc_design, total - ss_loc,
                                                     dof))
     return Scan(fit_rms=float(np.sqrt(np.mean(residual ** 2))), noise=noise_rms, chi2=ssr_stated,
-                dof=dof, p_value=float(stats.chi2.sf(ssr_stated, dof)), variables=ranked,
+                dof=dof, p_value=float(chi2_sf(ssr_stated, dof)), variables=ranked,
                 residual=centred, location=location,
                 location_ratio={int(m): float(np.sqrt(np.mean(white[location == m] ** 2)))
                               for m in np.unique(location)})

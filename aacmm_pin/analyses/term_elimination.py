@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
+from aacmm_pin.distributions import f_sf
 from aacmm_pin.effects.base import ModelSpec, Term
 from aacmm_pin.fit.identification_result import Calibration
 
@@ -68,7 +68,7 @@ def term_p_value(cal: Calibration, term: Term) -> float:
         return 1.0
     wald = float(theta @ np.linalg.pinv(cov) @ theta)
     dof = max(cal.fun.size - len(cal.x), 1)
-    return float(stats.f.sf(wald / k, k, dof))
+    return float(f_sf(wald / k, k, dof))
 
 
 def eliminate(cal: Calibration, spec: ModelSpec, refit: Callable[[ModelSpec], Calibration],

@@ -43,6 +43,7 @@ from aacmm_pin.data.csv_table import (
     Table,
     check_radians,
     matrix,
+    numbers,
     per_sample_columns,
     q_names,
     read_table,
@@ -111,6 +112,20 @@ def couplings_of(arm: ArmNames | None) -> Sequence[AxisCoupling]:
     return tuple(getattr(arm, "axis_couplings", ()))
 
 
+def _first_lines(lines: Sequence[int], values: Any) -> tuple[dict[Any, int], Counter[Any]]:
+    """Return the first line of each value of a column and how many rows hold it.
+
+    A typed column (an ``array``: every cell good) is counted without a Python object per row
+    (1.6M samples: a list of (line, value) tuples took 150 MB); a list (bad cells are None) as is.
+    """
+    if not isinstance(values, list):
+        uniq, first, count = np.unique(np.asarray(values), return_index=True, return_counts=True)
+        at = np.asarray(lines)[first]
+        return (dict(zip(uniq.tolist(), at.tolist())),
+                Counter(dict(zip(uniq.tolist(), count.tolist()))))
+    return ({v: line for line, v in reversed(list(zip(lines, values)))}, Counter(values))
+
+
 def _check_locations(spat: Table, locs: Table, min_samples: int, out: ProblemLogs) -> None:
     """Check duplicated ids, locations without zero position and locations with too few samples."""
     zero_line: dict[int, int] = {}
@@ -119,8 +134,8 @@ def _check_locations(spat: Table, locs: Table, min_samples: int, out: ProblemLog
             out.add(locs.path, line, "location",
                     f"location {v} is duplicated (also on line {zero_line[v]})", "duplicated")
         zero_line.setdefault(v, line)
-    first_line = {v: line for line, v in reversed(list(zip(spat.lines, spat.cols["location"])))}
-    counts, least = Counter(spat.cols["location"]), max(min_samples, 1)
+    first_line, counts = _first_lines(spat.lines, spat.cols["location"])
+    least = max(min_samples, 1)
     for v in sorted((set(first_line) | set(zero_line)) - {None}):
         path, line = (spat.path, first_line[v]) if v in first_line else (locs.path, zero_line[v])
         if v not in zero_line:
@@ -176,6 +191,50 @@ def _check_tools(points: Table, tool_names: list[str], out: ProblemLogs) -> None
                     "unknown tool")
 
 
+_MIX = np.uint64(0x9E3779B97F4A7C15)
+"""An odd 64-bit constant (the golden ratio's): multiplying by it spreads a row's cells over its
+hash."""
+
+
+def _cell_codes(col: Any) -> np.ndarray:
+    """Return one uint64 per cell, equal exactly where the cells are equal (shape (rows,))."""
+    if isinstance(col, list) and col and isinstance(col[0], str):
+        return np.unique(np.asarray(col, dtype=object), return_inverse=True)[1].reshape(-1).astype(
+            np.uint64)
+    values = np.asarray(col)
+    if values.dtype.kind == "f":
+        values = values + 0.0  # -0.0 == 0.0: one bit pattern
+    return np.ascontiguousarray(values).view(np.uint64).reshape(-1)
+
+
+def _repeated_rows(cols: list[Any]) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Return the rows that repeat an earlier row cell for cell, or None if none does.
+
+    Returns:
+        ``(copies, first, most)``: the repeating rows (ascending), the earlier row each repeats
+        (its first occurrence), the most copies of one row. Rows are hashed (a pass per column);
+        only rows whose hash repeats are compared cell by cell.
+    """
+    codes = [_cell_codes(c) for c in cols]
+    digest = np.zeros(len(codes[0]), dtype=np.uint64)
+    for c in codes:
+        digest = (digest ^ c) * _MIX
+    order = np.argsort(digest, kind="stable")
+    same = digest[order[1:]] == digest[order[:-1]]
+    shared = np.zeros(len(digest), dtype=bool)
+    shared[order[1:][same]] = shared[order[:-1][same]] = True
+    rows = np.flatnonzero(shared)
+    if not rows.size:
+        return None
+    _, first, inverse = np.unique(np.stack([c[rows] for c in codes], axis=1), axis=0,
+                                  return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    copied = first[inverse] != np.arange(len(rows))
+    if not copied.any():
+        return None  # the hashes met, the rows differ
+    return rows[copied], rows[first[inverse[copied]]], int(np.bincount(inverse).max())
+
+
 def _copies(table: Table) -> str | None:
     """Return a note on the rows of a measurement log that repeat an earlier row cell for cell.
 
@@ -184,21 +243,16 @@ def _copies(table: Table) -> str | None:
     reading from a pasted copy. A copy counts one measurement twice, so the fit's claimed standard
     deviations shrink as if it were independent (by sqrt(copies) for a row copied throughout).
     """
-    if not table.n_axes or any(v is None for c in table.cols.values() for v in c):
+    if not table.n_axes or any(isinstance(c, list) and None in c for c in table.cols.values()):
         return None  # bad readout columns or cells, reported already
-    codes = np.stack([np.unique(np.asarray(c, dtype=object if c and isinstance(c[0], str)
-                                           else float), return_inverse=True)[1].reshape(-1)
-                      for c in table.cols.values()], axis=1)
-    _, first, inverse = np.unique(codes, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    copies = np.flatnonzero(first[inverse] != np.arange(len(inverse)))
-    if not copies.size:
+    found = _repeated_rows(list(table.cols.values()))
+    if found is None:
         return None
+    copies, first, most = found
     lines = np.asarray(table.lines)
     k = int(copies[0])
-    most = int(np.bincount(inverse).max())
     return (f"{table.path}:{lines[k]}: {copies.size} row(s) repeat an earlier row cell for cell "
-            f"(this one is line {lines[first[inverse[k]]]}; up to {most} copies of one row): "
+            f"(this one is line {lines[first[0]]}; up to {most} copies of one row): "
             "each copy counts as one more measurement and shrinks the claimed std; remove "
             "copies that are not distinct readings")
 
@@ -342,7 +396,7 @@ def _limits_note(table: Table, arm: ArmNames | None) -> str | None:
     low, high = (np.degrees(limits[:, k]) for k in (0, 1))
     beyond = []
     for a, name in enumerate(table.q_columns):
-        q = np.array([np.nan if v is None else v for v in table.cols[name]], dtype=float)
+        q = numbers(table, name)
         with np.errstate(invalid="ignore"):
             out = (q < low[a] - LIMIT_MARGIN_DEG) | (q > high[a] + LIMIT_MARGIN_DEG)
         beyond += [(int(r), a, name, float(q[r])) for r in np.flatnonzero(out)]

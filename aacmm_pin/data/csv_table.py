@@ -12,10 +12,11 @@ and any extra numeric column) are checked against the column table, :mod:`aacmm_
 from __future__ import annotations
 
 import csv
-import io
+import itertools
 import math
 import re
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from array import array
+from collections.abc import Callable, Iterable, Iterator, MutableSequence, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeGuard
@@ -63,10 +64,11 @@ class Table:
     q_columns: list[str]
     """The readout columns in axis order (``q1_deg..qn_deg`` or ``<joint>_deg``); empty if they
     are missing or have gaps."""
-    lines: list[int]
+    lines: MutableSequence[int]
     """1-based file line of each row kept (rows with the header's number of cells)."""
-    cols: dict[str, list[Any]]
-    """Parsed cells of each known column, in file units; None where a cell is bad."""
+    cols: dict[str, Any]
+    """Parsed cells of each known column, in file units: a typed array (``array("d")``, ids
+    ``array("q")``) or a list of str; lists with None where a cell is bad."""
     per_sample: list[str] = field(default_factory=list)
     """The per-sample columns read (optional ones of the column table and extra ones), in file
     order; their cells are checked against :func:`aacmm_pin.data.columns.column`."""
@@ -120,6 +122,115 @@ def _bad_value(value: float, kind: str) -> str | None:
     return None
 
 
+CHUNK_ROWS = 1024
+"""Rows checked together: a chunk whose every cell is good is converted and checked a column at
+a time; one with a problem is read cell by cell (the same checks, each problem added)."""
+_FLOAT = np.dtype(float)
+
+
+def _chunks(rows: Rows) -> Iterator[list[tuple[int, list[str]]]]:
+    """Yield the rows in lists of :data:`CHUNK_ROWS`."""
+    while chunk := list(itertools.islice(rows, CHUNK_ROWS)):
+        yield chunk
+
+
+def _all_good(values: np.ndarray, kind: str, col: Column | None) -> bool:
+    """Whether :func:`_bad_value` (or ``col.check``) passes every parsed value of one kind."""
+    if col is not None and type(col) is not Column:  # a subclass's own check: value by value
+        return all(col.check(float(v)) is None for v in values)
+    ok = np.isfinite(values)
+    if col is not None:
+        ok &= (values >= col.low) & (values <= col.high)
+        if col.positive:
+            ok &= values > 0
+    elif kind == "angle":
+        ok &= np.abs(values) <= MAX_ANGLE_DEG
+    elif kind == "length":
+        ok &= (values > 0) & (values >= BAR_LENGTH_MIN * 1e3) & (values <= BAR_LENGTH_MAX * 1e3)
+    elif kind == "displacement":
+        ok &= np.abs(values) <= RTEST_RANGE * 1e3
+    elif kind == "coordinate":
+        ok &= np.abs(values) <= MAX_COORDINATE * 1e3
+    return bool(ok.all())
+
+
+class _Cells:
+    """The kept cells of a table, by column, filled a chunk of rows at a time.
+
+    Numbers in typed arrays (``array("d")``, ids ``array("q")``: 8 bytes a cell, no Python object
+    per cell), text in lists of str; once :meth:`finish` ran, a table with a bad cell has lists
+    with None at its bad cells (as the cell-by-cell reading gives them).
+    """
+
+    def __init__(self, kinds: dict[str, str], checks: dict[str, Column]):
+        self.kinds, self.checks = kinds, checks
+        self.cols: dict[str, Any] = {
+            name: [] if kind == "text" else array("q" if kind == "id" else "d")
+            for name, kind in kinds.items()}
+        self.bad: list[tuple[str, int]] = []
+        """(column, row) of every bad cell kept: None once the table is read."""
+
+    def fast(self, chunk: list[tuple[int, list[str]]], index: dict[str, int], width: int,
+             keep: bool) -> bool:
+        """Check and keep (if ``keep``) a chunk whose every row and cell is good (cells as written).
+
+        Returns:
+            Whether it was; if not, nothing is kept (the chunk is then read cell by cell).
+        """
+        if not all(len(row) == width and any(row) for _, row in chunk):
+            return False
+        parsed: dict[str, list[Any]] = {}
+        by_column = list(zip(*(row for _, row in chunk)))  # cells as written: int() and
+        for name, k in index.items():  # float() ignore the spaces that strip() removes
+            kind, texts = self.kinds[name], by_column[k]
+            try:
+                if kind == "text":
+                    if not all(stripped := [t.strip() for t in texts]):
+                        return False
+                    parsed[name] = stripped
+                elif kind == "id":
+                    ids = list(map(int, texts))
+                    if not (min(ids) >= 1 and max(ids) < 2**63):
+                        return False
+                    parsed[name] = ids
+                else:
+                    values = list(map(float, texts))
+                    if not _all_good(np.array(values, dtype=_FLOAT), kind, self.checks.get(name)):
+                        return False
+                    parsed[name] = values
+            except ValueError:  # a cell that is not a number (or empty): read cell by cell
+                return False
+        if keep:
+            for name, values in parsed.items():
+                self.cols[name].extend(values)
+        return True
+
+    def parse(self, name: str, text: str, keep: bool) -> tuple[Any, str | None, str]:
+        """:func:`_parse` one cell of column ``name``, keeping its value (if ``keep``)."""
+        value, reason, why = _parse(text, self.kinds[name], self.checks.get(name))
+        if keep:
+            col = self.cols[name]
+            if value is None and not isinstance(col, list):
+                self.bad.append((name, len(col)))
+            col.append(value if value is not None or isinstance(col, list)
+                       else 0 if self.kinds[name] == "id" else math.nan)
+        return value, reason, why
+
+    def finish(self) -> None:
+        """With a bad cell kept, every column a list with None at the bad cells (as read)."""
+        if self.bad:
+            self.as_lists()
+
+    def as_lists(self) -> None:
+        """Turn the typed columns into lists of Python numbers, None at the bad cells."""
+        for name, col in self.cols.items():
+            if not isinstance(col, list):
+                self.cols[name] = col.tolist()
+        for name, row in self.bad:
+            self.cols[name][row] = None
+        self.bad = []
+
+
 Rows = Iterator[tuple[int, list[str]]]
 """The (1-based line, stripped cells) of each data row of a CSV file, read as they come."""
 
@@ -139,23 +250,36 @@ def _text(path: Path, log: ProblemLog) -> str | None:
         return None
 
 
-def _records(text: str, log: ProblemLog) -> Rows:
-    """Yield the (line, stripped cells) of every row of a CSV text but trailing blank ones.
+def _lines(text: str) -> Iterator[str]:
+    """Yield the lines of a text, each with its newline, as ``io.StringIO(text)`` iterates them.
+
+    Without StringIO's copy of the text (4 bytes a character: 860 MB for a 215 MB file).
+    """
+    start, find = 0, text.find
+    while (end := find("\n", start)) >= 0:
+        yield text[start:end + 1]
+        start = end + 1
+    if start < len(text):
+        yield text[start:]
+
+
+def _records(text: str, log: ProblemLog, strip: bool = True) -> Rows:
+    """Yield the (line, cells) of every row of a CSV text but trailing blank ones.
 
     One row at a time: the rows are never all held. A CSV syntax error ends the rows, added as a
-    problem at its line.
+    problem at its line. ``strip``: the cells stripped of surrounding spaces (else as written).
     """
     # the last line with content: rows after it are blank (trailing newlines, empty cells)
     end = len(text)
     while end and text[end - 1] in " \t\r\n,":
         end -= 1
     last = text.count("\n", 0, end) + 1 if end else 0
-    reader = csv.reader(io.StringIO(text))
+    reader = csv.reader(_lines(text))
     try:
         for row in reader:
             if reader.line_num > last:
                 return
-            yield reader.line_num, [c.strip() for c in row]
+            yield reader.line_num, [c.strip() for c in row] if strip else row
     except csv.Error as exc:
         log.add(reader.line_num, None, f"{exc}")
 
@@ -372,42 +496,50 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         _unknown_columns(head, top, expected, listing, has_q and not named, add)
     per_sample = [name for name in header if name in taken
                   or (name in optional and name in head.index and has_unit(name))]
-    table = Table(path, head.q_columns, [], {name: [] for name in head.index}, per_sample)
     kinds = {name: ("angle" if name in head.q_columns or Q_COLUMN.fullmatch(name)
                     or name in named else "column" if name in per_sample
                     else _KINDS.get(name, "number")) for name in head.index}
-    checks = {name: column(name) for name in per_sample}
+    cells = _Cells(kinds, {name: column(name) for name in per_sample})
+    table = Table(path, head.q_columns, array("q"), cells.cols, per_sample)
     n_rows = 0
-    for line, cells in _data_rows(text, log):
-        n_rows += 1
-        if not any(cells):
-            add(line, None, "blank line among the data rows")
-            continue
-        if len(cells) != len(header):
-            add(line, None, f"{len(cells)} cells, but the header has {len(header)} columns",
-                kind=("cells", len(cells)))
-            continue
-        keep = table.complete = table.complete and log.count < MAX_SHOWN
-        if keep:
-            table.lines.append(line)
-        for name, k in head.index.items():
-            value, reason, why = _parse(cells[k], kinds[name], checks.get(name))
+    for chunk in _chunks(_data_rows(text, log, strip=False)):  # cells as written
+        n_rows += len(chunk)
+        if cells.fast(chunk, head.index, len(header), keep := table.complete and
+                      log.count < MAX_SHOWN):
+            table.complete = keep
             if keep:
-                table.cols[name].append(value)
-            if reason and name in taken and value is None and reason.startswith("'"):
-                reason += f"; {path.name}'s further columns hold numbers"
-            if reason:
-                add(line, name, reason, kind=why, unit="cells")
+                table.lines.extend(line for line, _ in chunk)
+            continue
+        for line, cells_written in chunk:  # a problem: cell by cell, each problem added
+            row = [c.strip() for c in cells_written]
+            if not any(row):
+                add(line, None, "blank line among the data rows")
+                continue
+            if len(row) != len(header):
+                add(line, None, f"{len(row)} cells, but the header has {len(header)} columns",
+                    kind=("cells", len(row)))
+                continue
+            keep = table.complete = table.complete and log.count < MAX_SHOWN
+            if keep:
+                table.lines.append(line)
+            for name, k in head.index.items():
+                value, reason, why = cells.parse(name, row[k], keep)
+                if reason and name in taken and value is None and reason.startswith("'"):
+                    reason += f"; {path.name}'s further columns hold numbers"
+                if reason:
+                    add(line, name, reason, kind=why, unit="cells")
+    cells.finish()
     if not n_rows:
         add(None, None, "header only: no data rows")
     if coupled and head.q_columns:
+        cells.as_lists()  # a filled column holds None where a cell it needs is bad
         fill_or_check(table.cols, table.q_columns, table.lines, couplings, add)
     return table
 
 
-def _data_rows(text: str, log: ProblemLog) -> Rows:
-    """Yield the data rows of a CSV text (the rows after its header)."""
-    rows = _records(text, log)
+def _data_rows(text: str, log: ProblemLog, strip: bool = True) -> Rows:
+    """Yield the data rows of a CSV text (the rows after its header), stripped if ``strip``."""
+    rows = _records(text, log, strip)
     next(rows, None)
     yield from rows
 
@@ -415,6 +547,14 @@ def _data_rows(text: str, log: ProblemLog) -> Rows:
 def q_names(n: int) -> list[str]:
     """Return the names of the encoder columns, q1_deg..qn_deg."""
     return [f"q{i}_deg" for i in range(1, n + 1)]
+
+
+def numbers(table: Table, name: str) -> np.ndarray:
+    """Return one column of numbers as floats, shape (rows,), NaN at its bad cells."""
+    col = table.cols[name]
+    if isinstance(col, list):
+        return np.array([math.nan if v is None else v for v in col], dtype=float)
+    return np.array(col, dtype=float)
 
 
 def matrix(table: Table, names: Iterable[str], scale: float) -> np.ndarray:
@@ -438,8 +578,7 @@ def check_radians(table: Table, out: list[Problem]) -> None:
     """
     if len(table.lines) < RADIAN_MIN_ROWS or not table.q_columns or not table.complete:
         return
-    cols = [np.array([math.nan if v is None else v for v in table.cols[name]], dtype=float)
-            for name in table.q_columns]
+    cols = [numbers(table, name) for name in table.q_columns]
     if any(np.isnan(c).any() for c in cols):
         return  # bad cells, reported already
     k = radian_like_column(np.stack(cols, axis=1))

@@ -213,7 +213,7 @@ def _missing(path: Path, header: list[str], fmt: PointFormat) -> list[Problem]:
     return problems
 
 
-def _check_values(path: Path, lines: list[int], fmt: PointFormat, q: np.ndarray,
+def _check_values(path: Path, lines: Sequence[int], fmt: PointFormat, q: np.ndarray,
                   point: np.ndarray, out: list[Problem]) -> None:
     """Add a problem for each angle or coordinate beyond what an arm or instrument gives.
 
@@ -226,12 +226,12 @@ def _check_values(path: Path, lines: list[int], fmt: PointFormat, q: np.ndarray,
     other_length = "m" if fmt.length_unit == "mm" else "mm"
     for k, name in enumerate(fmt.joints):
         for i in np.flatnonzero(np.abs(np.degrees(q[:, k])) > MAX_ANGLE_DEG):
-            log.add(lines[i], name, f"{q[i, k] / ANGLE_UNITS[fmt.angle_unit]:g} {fmt.angle_unit} "
+            log.add(lines[int(i)], name, f"{q[i, k] / ANGLE_UNITS[fmt.angle_unit]:g} {fmt.angle_unit} "
                                     f"is beyond +-{MAX_ANGLE_DEG:g} deg: in {other_angle}? "
                                     "(--angles)", "angle")
     for k, (name, _) in enumerate(fmt.point):
         for i in np.flatnonzero(np.abs(point[:, k]) > MAX_COORDINATE):
-            log.add(lines[i], name, f"{point[i, k] / LENGTH_UNITS[fmt.length_unit]:g} "
+            log.add(lines[int(i)], name, f"{point[i, k] / LENGTH_UNITS[fmt.length_unit]:g} "
                                     f"{fmt.length_unit} is beyond +-{MAX_COORDINATE:g} m: in "
                                     f"{other_length}? (--units)", "coordinate")
     moving = (radian_like_column(q / ANGLE_UNITS[fmt.angle_unit])

@@ -121,6 +121,10 @@ class ChunkedJacobian:
         """The u and f whose J^T u, J^T f the next pass with products takes (:meth:`defer`)."""
         self._residual_rows: Callable[[int, int, np.ndarray], np.ndarray] | None = None
         """Makes f's rows from a chunk's positions in the next pass (:meth:`evaluate`)."""
+        self._work: dict[str, np.ndarray] = {}
+        """The chunks' buffers (positions, dense block, angle columns), reused by every pass:
+        a chunk's 70 MB are written into the same pages each time instead of fresh ones (page
+        faults: system time that grew faster than the data)."""
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -130,14 +134,17 @@ class ChunkedJacobian:
     def scaled(self, row_weight: np.ndarray) -> ChunkedJacobian:
         """Return diag(row_weight) @ J (row_weight shape (3N,))."""
         w = row_weight if self.row_weight is None else self.row_weight * row_weight
-        return ChunkedJacobian(self.unknowns, self.x_arm, self.q, w)
+        out = ChunkedJacobian(self.unknowns, self.x_arm, self.q, w)
+        out._work = self._work  # one pass at a time: the buffers serve both
+        return out
 
     def chunks(self, products: bool = False) -> Iterator[tuple[int, int, BlockJacobian]]:
         """Yield (first row, end row, the Jacobian's rows there) chunk by chunk.
 
         ``products``: the same pass takes J^T J (unless kept) and the deferred J^T u and J^T f
         (:meth:`defer`, :meth:`evaluate`), kept once every chunk has been yielded (a pass ended
-        early keeps none).
+        early keeps none). A chunk's rows live in buffers the next chunk overwrites: use them
+        before asking for the next.
         """
         n, m = self.q.shape[0], self.shape[1]
         rows, f = self._deferred if products else (None, None)
@@ -149,12 +156,12 @@ class ChunkedJacobian:
         grad = None if f is None else np.zeros(m)
         for lo in range(0, n, CHUNK_SAMPLES):
             hi = min(n, lo + CHUNK_SAMPLES)
-            pos, jac = self.unknowns.jacobian_rows(self.x_arm, self.q, lo, hi)
+            pos, jac = self.unknowns.jacobian_rows(self.x_arm, self.q, lo, hi, self._work)
             if rows_of is not None and f is not None:
                 f[3 * lo:3 * hi] = rows_of(3 * lo, 3 * hi, pos)
             del pos
-            if self.row_weight is not None:
-                jac = jac.scaled(self.row_weight[3 * lo:3 * hi])
+            if self.row_weight is not None:  # in place: the rows are this pass's own
+                jac = jac.scaled(self.row_weight[3 * lo:3 * hi], in_place=True)
             if normal is not None:
                 normal += chunk_normal(jac)
             if cross is not None and rows is not None:

@@ -681,7 +681,7 @@ def _judgement(campaign: Campaign, setup: _Setup, residual: np.ndarray, kept: np
     time = setup.meas.samples.t
     variables = [values for name, values in setup.meas.samples.columns.items()
                  if name.endswith("_c")]  # an arm that warms drifts: a temperature's order
-    state = np.column_stack([setup.meas.q, *variables])[kept]
+    state = np.column_stack([setup.meas.q[kept], *(v[kept] for v in variables)])  # kept rows only
     judged = judge_residual(white, n_det, _segments(campaign, setup.meas)[kept],
                             None if time is None else time[kept], state)
     if judged.row_order is None:

@@ -14,9 +14,9 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy import stats
 
 from aacmm_pin.data.campaign import Campaign, PointLog, SpatLog, StatedNoise
+from aacmm_pin.distributions import chi2_isf
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.samples import Samples
@@ -119,7 +119,7 @@ def _least_spread(pts: np.ndarray, sigma: float) -> float | None:
     """
     centred = pts - pts.mean(axis=0)
     ss = float(np.linalg.svd(centred, compute_uv=False)[-1] ** 2)
-    if ss / sigma ** 2 > stats.chi2.isf(SPREAD_P, len(pts) - 1) and \
+    if ss / sigma ** 2 > chi2_isf(SPREAD_P, len(pts) - 1) and \
             np.linalg.matrix_rank(centred, tol=1e-4) == 3:
         return None
     return float(np.sqrt(ss / len(pts)))

@@ -35,7 +35,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy import stats
+
+from aacmm_pin.distributions import chi2_sf, f_sf
 
 NOISE_P = 1e-3
 """A residual whose chi-square p-value against the stated noise is below this does not match it."""
@@ -122,7 +123,7 @@ def row_order(white: np.ndarray, group: int, n_tests: int) -> RowOrder | None:
                                          ("drift", drift_ss, 0, float(np.linalg.norm(slope))
                                           * (m - 1), 1)):
         f = (ss / 3) / max((total - ss) / dof_res, 1e-300)
-        p = min(float(stats.f.sf(f, 3, dof_res)) * factor * 2 * n_tests, 1.0)
+        p = min(float(f_sf(f, 3, dof_res)) * factor * 2 * n_tests, 1.0)
         if p < ALPHA_ROW_ORDER and ss > 0.5 * total:
             found.append(RowOrder(group, shape, row, ss / total, p, size))
     return max(found, key=lambda o: o.fraction) if found else None
@@ -175,7 +176,7 @@ def judge_residual(white: np.ndarray, n_det: int, segment: np.ndarray | None,
     """
     dof = max(white.size - n_det, 1)
     stat = float(np.sum(white ** 2))
-    p = float(stats.chi2.sf(stat, dof))
+    p = float(chi2_sf(stat, dof))
     ratio = float(np.sqrt(stat / max(white.size, 1)))
     worst = None
     if p < NOISE_P and segment is not None:

@@ -235,7 +235,8 @@ class Unknowns:
         pos = stylus_positions(self.arm, params, q, frame="mt", samples=self._samples(q))
         return pos + self.measurement_shift(params, q) if self.terms else pos
 
-    def _chain_blocks(self, params: Parameters, q: np.ndarray, lo: int = 0, hi: int | None = None
+    def _chain_blocks(self, params: Parameters, q: np.ndarray, lo: int = 0, hi: int | None = None,
+                      work: dict[str, np.ndarray] | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return positions, free non-map columns and map axes' angle columns, without terms.
 
@@ -244,7 +245,9 @@ class Unknowns:
         copy). Built :data:`BUILD_CHUNK` samples at a time into the results: the configurations
         (8 ``nq`` bytes per sample) and the chain's blocks exist for one chunk only, and every
         sample's columns are those of a single call (the chain works sample by sample).
-        ``lo:hi``: the samples of q to take (default all; N = hi - lo).
+        ``lo:hi``: the samples of q to take (default all; N = hi - lo). ``work``: buffers kept
+        from an earlier call (filled in and returned, overwritten by the next call), for chunks of
+        one size taken over and over (:meth:`jacobian_rows`).
         """
         ident = self.arm.identification
         fids = np.asarray(ident.tool_frames)[tool_rows(self.arm, q.shape[0], None,
@@ -254,14 +257,14 @@ class Unknowns:
         order = np.concatenate([ident.base_idx[[4, 3, 5]], ident.base_idx[:3], ident.error_idx,
                                 ident.tool_idx])[self.free[:self.n_dense]]
         maps = ident.axis_idx[[a - 1 for a in self.map_axes]]
-        pos = np.empty((n, 3))
-        dense = np.empty((n, 3, order.size))
-        angles = np.empty((maps.size, n, 3))
+        pos = _buffer(work, "pos", (n, 3))
+        dense = _buffer(work, "dense", (n, 3, order.size))
+        angles = _buffer(work, "angles", (maps.size, n, 3))
         for lo in range(0, n, BUILD_CHUNK):
             hi = min(n, lo + BUILD_CHUNK)
             config = identification_configuration(self.arm, params, q[lo:hi], "mt")
-            pos[lo:hi], dense[lo:hi], extra = ident.chain.jacobian_blocks(config, fids[lo:hi],
-                                                                           order, maps)
+            extra = ident.chain.jacobian_blocks(config, fids[lo:hi], order, maps,
+                                                out=(pos[lo:hi], dense[lo:hi]))[2]
             angles[:, lo:hi] = extra.transpose(2, 0, 1)
         return pos, dense.reshape(3 * n, -1), angles
 
@@ -324,20 +327,31 @@ class Unknowns:
         params = self.start if params is None else params
         return not (self.terms or params.extensions)
 
-    def jacobian_rows(self, x: np.ndarray, q: np.ndarray, lo: int, hi: int
+    def jacobian_rows(self, x: np.ndarray, q: np.ndarray, lo: int, hi: int,
+                      work: dict[str, np.ndarray] | None = None
                       ) -> tuple[np.ndarray, BlockJacobian]:
         """Return :meth:`jacobian`'s positions and Jacobian for the samples ``lo:hi`` of q only.
 
         Shapes (hi - lo, 3) and (3 (hi - lo), n_free); the same values as those rows of
         :meth:`jacobian` (not cached). Only for a layout whose Jacobian comes from the chain alone
         (:meth:`chain_only`): the chunked products of a large campaign
-        (:class:`aacmm_pin.fit.chunked_jacobian.ChunkedJacobian`).
+        (:class:`aacmm_pin.fit.chunked_jacobian.ChunkedJacobian`). ``work``: the caller's
+        buffers (a dict, empty at first): the results live in them until the next call.
         """
         params = self.parameters(x)
         if not self.chain_only(params):
             raise ValueError("jacobian_rows: only for a layout without terms or extensions")
-        position, dense, angles = self._chain_blocks(params, q, lo, hi)
+        position, dense, angles = self._chain_blocks(params, q, lo, hi, work)
         return position, self._with_nodes(params, q[lo:hi], dense, angles)
+
+
+def _buffer(work: dict[str, np.ndarray] | None, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """Return ``work[name]`` if it has this shape, else a new array (kept there, if ``work``)."""
+    if work is None:
+        return np.empty(shape)
+    if name not in work or work[name].shape != shape:
+        work[name] = np.empty(shape)
+    return work[name]
 
 
 _CACHED: list[weakref.ref[Unknowns]] = []
@@ -501,10 +515,15 @@ class BlockJacobian:
         fresh: np.ndarray = out.copy()
         return fresh
 
-    def scaled(self, row_weight: np.ndarray) -> BlockJacobian:
-        """Return diag(row_weight) @ J (row_weight shape (3N,))."""
+    def scaled(self, row_weight: np.ndarray, in_place: bool = False) -> BlockJacobian:
+        """Return diag(row_weight) @ J (row_weight shape (3N,)).
+
+        ``in_place``: its dense block is this one's, scaled (no copy of the largest block).
+        """
         w3 = row_weight.reshape(-1, 3)
-        return BlockJacobian(self.dense * row_weight[:, None],
+        if in_place:
+            np.multiply(self.dense, row_weight[:, None], out=self.dense)
+        return BlockJacobian(self.dense if in_place else self.dense * row_weight[:, None],
                              tuple(ax._replace(d=ax.d * w3) for ax in self.axes), self.n_nodes)
 
     def matmul(self, m: np.ndarray) -> np.ndarray:

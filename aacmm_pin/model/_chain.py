@@ -184,30 +184,36 @@ class BatchedChain:
         return pos, jac
 
     def jacobian_blocks(self, q: np.ndarray, frames: np.ndarray, first: np.ndarray,
-                        second: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        second: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return frame origins (N, 3) and two blocks of Jacobian columns, (N, 3, F) and (N, 3, S).
 
         The columns ``first`` and ``second`` of :meth:`jacobians` (velocity indices), each block
         contiguous: a caller that keeps the first and only reads the second holds no memory for
-        the second's columns.
+        the second's columns. ``out``: arrays for the origins and the first block, written
+        (a caller's buffers, reused from call to call: no fresh pages to fault in).
         """
-        pos, jac, extra = self._jacobians(q, frames, first, second)
+        pos, jac, extra = self._jacobians(q, frames, first, second, out)
         assert extra is not None
         return pos, jac, extra
 
     def _jacobians(self, q: np.ndarray, frames: np.ndarray, columns: np.ndarray | None,
-                   second: np.ndarray | None
+                   second: np.ndarray | None, out: tuple[np.ndarray, np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """:meth:`jacobians`, and the columns ``second`` in an array of their own (None: none)."""
+        """:meth:`jacobians`, and the columns ``second`` in an array of their own (None: none).
+
+        ``out``: the arrays of the origins and of ``columns``' block, written (else new ones).
+        """
         n = q.shape[0]
-        pos = np.empty((n, 3))
         columns = np.arange(self.nv) if columns is None else np.asarray(columns)
-        jac = np.empty((n, 3, columns.size))
+        pos, jac = out if out is not None else (np.empty((n, 3)), np.empty((n, 3, columns.size)))
         extra = None if second is None else np.empty((n, 3, len(second)))
+        whole = np.empty((self.nv, 3, min(CHUNK, n)))  # one block for every chunk of samples
         for lo in range(0, n, CHUNK):
             pose = self._forward(q[lo:lo + CHUNK])
             size = min(CHUNK, n - lo)
-            block = np.zeros((self.nv, 3, size))  # joint-major: contiguous column writes
+            block = whole[:, :, :size]  # joint-major: contiguous column writes
+            block.fill(0.0)
             for fid, rows in _groups(frames[lo:lo + CHUNK]):
                 point = self._point(pose, fid, rows)
                 pos[lo + rows] = point
