@@ -26,7 +26,7 @@ from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
-from aacmm_pin.errors import AacmmError, CampaignWarning
+from aacmm_pin.errors import AacmmError, CampaignWarning, StaleOutputWarning
 from aacmm_pin.interrupts import sigint_handler
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
@@ -192,11 +192,14 @@ def _run(args: argparse.Namespace, name: str, beat: bool) -> int:
 
 
 def _one_line_warning(command: str) -> Callable[..., None]:
-    """Return a ``warnings.showwarning`` that prints a campaign warning as one line, no source."""
+    """Return a ``warnings.showwarning`` that prints a campaign warning as one line, no source.
+
+    So too what a killed run left and this one took over (:class:`StaleOutputWarning`).
+    """
     default = warnings.showwarning
 
     def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
-        if issubclass(category, CampaignWarning):
+        if issubclass(category, (CampaignWarning, StaleOutputWarning)):
             print(f"{command}: warning: {message}", file=sys.stderr)
         else:
             default(message, category, *args, **kwargs)
