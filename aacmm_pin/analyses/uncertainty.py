@@ -28,6 +28,7 @@ from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.fit.solver import Factor
 from aacmm_pin.fit.unknowns import NodeKey, UnknownKey
+from aacmm_pin.interrupts import die_with_parent
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
 
 AGREE = 0.2
@@ -235,9 +236,13 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
     return std
 
 
-def _ignore_interrupt() -> None:
-    """A worker's start: Ctrl-C (SIGINT to the whole process group) is the main process's to handle."""
+def _start_worker(parent: int) -> None:
+    """A worker's start: it dies with its parent (``parent``: its pid).
+
+    Ctrl-C (SIGINT to the whole process group) is the main process's to handle.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
@@ -283,7 +288,8 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                         bar=campaign.bar) if has_bar else None
     results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
-    pool = ProcessPoolExecutor(workers, initializer=_ignore_interrupt) if own else executor
+    pool = (ProcessPoolExecutor(workers, initializer=_start_worker, initargs=(os.getpid(),))
+            if own else executor)
     with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
             from aacmm_pin._blas import single_threaded_blas
