@@ -100,3 +100,7 @@ class ArgumentError(AacmmError, ValueError):
 
 class CampaignWarning(UserWarning):
     """A campaign is read, but something in it deserves the user's eye (e.g. copied rows)."""
+
+
+class StaleOutputWarning(UserWarning):
+    """What a killed run left beside an output (a lock file, temporary files) was taken over or removed."""

@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import queue
 import shutil
 import threading
 import time
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -28,12 +28,14 @@ from typing import Any, TextIO
 import numpy as np
 
 from aacmm_pin.acquire.faults import FAULT_KINDS, AcquisitionError, PortCounts
-from aacmm_pin.acquire.lock import CampaignLock
+from aacmm_pin.acquire.lock import LOCK_NAME, CampaignLock
 from aacmm_pin.acquire.nest import Nest
 from aacmm_pin.acquire.pairing import Pair, Pairer
 from aacmm_pin.acquire.ports import PortConfig, PortEvent, PortReader, arm_port, gauge_port, open_port
 from aacmm_pin.acquire.protocols import COUNTER_MODULUS, HEIDENHAIN_REQUEST, GaugeSpec
 from aacmm_pin.acquire.writer import SpatWriter
+from aacmm_pin.data.output_claim import CAMPAIGN_FILES, claim_output, input_paths
+from aacmm_pin.data.output_file import write_text_file
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,11 @@ class AcquisitionConfig:
     """Seconds between status lines."""
     summary: Path | None = None
     """JSON summary file (default ``campaign/acquire-location<M>.json``)."""
+    force: bool = False
+    """Replace an existing ``summary`` file (the default one, an earlier run's summary of the
+    location, is replaced without it)."""
+    inputs: tuple[Path, ...] = ()
+    """Files the run reads besides the campaign's (the nest file): the summary may be none of them."""
 
     def __post_init__(self) -> None:
         channels = sorted(g.channel for g in self.gauges if g.channel is not None)
@@ -102,11 +109,38 @@ class AcquisitionConfig:
         object.__setattr__(self, "campaign", Path(self.campaign))
         if self.zero is not None:
             object.__setattr__(self, "zero", np.asarray(self.zero, dtype=float).reshape(3))
+        own = {(self.campaign / name).resolve() for name in (*CAMPAIGN_FILES, LOCK_NAME)}
+        if self.summary_path.resolve() in own:  # even before it exists: the run writes it
+            raise ValueError(f"summary: {self.summary_path} is a file of the campaign the run "
+                             "records into; choose another summary file")
 
     @property
     def summary_path(self) -> Path:
         """Where the JSON summary goes."""
         return self.summary or self.campaign / f"acquire-location{self.location}.json"
+
+    def summary_claim(self) -> AbstractContextManager[Path]:
+        """Claim the summary file for the run (before a port is opened).
+
+        Refused when it is one of the run's inputs (the campaign's files, :attr:`inputs`), or
+        exists and is neither to be replaced (:attr:`force`) nor the location's default summary
+        of an earlier run.
+        """
+        path = self.summary_path
+        earlier = self.summary is None and _is_summary(path)
+        return claim_output(path, self.force or earlier, input_paths(
+            *self.inputs, campaigns=[self.campaign]), folder=False)
+
+
+def _is_summary(path: Path) -> bool:
+    """Whether ``path`` holds an acquisition summary (a JSON object with its keys)."""
+    try:
+        if not path.is_file() or path.is_symlink() or path.stat().st_size > 2**20:
+            return False
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and {"campaign", "location", "rows_written", "ports"} <= set(data)
 
 
 @dataclass
@@ -261,11 +295,8 @@ def _port_configs(cfg: AcquisitionConfig) -> list[PortConfig]:
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON through a temporary file and an atomic rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    """Write the summary as JSON, whole or not at all (claimed by :func:`acquire` for the run)."""
+    write_text_file(path, json.dumps(data, indent=2) + "\n", force=True)
 
 
 def _drain(events: queue.Queue[PortEvent], timeout: float) -> list[PortEvent]:
@@ -301,8 +332,11 @@ def acquire(config: AcquisitionConfig, *, stop: threading.Event | None = None,
         AcquisitionError: if another acquire holds the campaign's lock (one writer per
             campaign, :class:`~aacmm_pin.acquire.lock.CampaignLock`), a port cannot be opened or
             the campaign files conflict (nothing is written then).
+        OutputExistsError: if the summary file is an input of the run, exists (and neither
+            ``force`` nor the location's default summary), or another run writes it (before a
+            port is opened).
     """
-    with CampaignLock(config.campaign) as lock:
+    with CampaignLock(config.campaign) as lock, config.summary_claim():
         return _record(config, lock, stop or threading.Event(), status)
 
 

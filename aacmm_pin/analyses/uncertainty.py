@@ -28,6 +28,8 @@ from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.fit.solver import Factor
 from aacmm_pin.fit.unknowns import NodeKey, UnknownKey
+from aacmm_pin.interrupts import die_with_parent
+from aacmm_pin.machine import check_workers, usable_cores
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
 
 AGREE = 0.2
@@ -235,9 +237,13 @@ def length_linear_std(cal: Calibration, campaign: Campaign) -> np.ndarray:
     return std
 
 
-def _ignore_interrupt() -> None:
-    """A worker's start: Ctrl-C (SIGINT to the whole process group) is the main process's to handle."""
+def _start_worker(parent: int) -> None:
+    """A worker's start: it dies with its parent (``parent``: its pid).
+
+    Ctrl-C (SIGINT to the whole process group) is the main process's to handle.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent)
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
@@ -263,15 +269,22 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
         seed: seed of the first trial (trial i uses seed + i: same seed, same result).
         executor: where trials run (any ``concurrent.futures.Executor``); default: a local
             process pool of ``workers`` processes (all cores), or in this process for ``workers=1``.
-        workers: local worker processes when no executor is given.
+        workers: local worker processes when no executor is given (at most the cores and
+            memory there are: :func:`aacmm_pin.machine.check_workers`).
         progress: show a progress bar.
+
+    Raises:
+        ArgumentError: for fewer than 2 trials or more workers than
+            :func:`aacmm_pin.machine.check_workers` allows.
     """
     from aacmm_pin.progress import Progress
 
     if trials < 2:
         raise ValueError(f"trials: need at least 2, got {trials}")
     shake = perturbation(cal, campaign, sigma_rtest, sigma_location)
-    workers = workers or os.cpu_count() or 1
+    if executor is None and workers is not None and workers > 1:
+        check_workers(workers)  # before any work, never a fork storm
+    workers = workers or usable_cores()
     seeds = [seed + i for i in range(trials)]
     parallel = executor is not None or workers > 1
     # few large batches: each ships the calibration once and factors its Jacobian once
@@ -283,7 +296,8 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
                         bar=campaign.bar) if has_bar else None
     results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
-    pool = ProcessPoolExecutor(workers, initializer=_ignore_interrupt) if own else executor
+    pool = (ProcessPoolExecutor(workers, initializer=_start_worker, initargs=(os.getpid(),))
+            if own else executor)
     with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
         if pool is None:
             from aacmm_pin._blas import single_threaded_blas

@@ -26,8 +26,8 @@ from typing import Any
 
 from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
-from aacmm_pin.errors import AacmmError, CampaignWarning
-from aacmm_pin.interrupts import sigint_handler
+from aacmm_pin.errors import AacmmError, CampaignWarning, StaleOutputWarning
+from aacmm_pin.interrupts import Terminated, sigint_handler, sigterm_as_interrupt
 
 __all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
 
@@ -101,6 +101,8 @@ def one_blas_thread_at_start() -> bool:
 
 INTERRUPTED = 128 + 2
 """Exit status after Ctrl-C (SIGINT): 128 + the signal's number, as the shells report it."""
+TERMINATED = 128 + 15
+"""Exit status after SIGTERM, handled as Ctrl-C is: 128 + the signal's number."""
 
 @contextlib.contextmanager
 def sigint_noted() -> Iterator[list[bool]]:
@@ -155,7 +157,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # a sign of life whenever a command is silent for 1.5 s (acquisition reports on its own)
     beat = args.command not in QUIET_COMMANDS
     name = args.command_parser.prog  # "aacmm-pin iso10360 euni": the whole command
-    with sigint_noted() as interrupted:
+    with sigint_noted() as interrupted, sigterm_as_interrupt():
         try:
             return _run(args, name, beat)
         except Exception:
@@ -179,6 +181,9 @@ def _run(args: argparse.Namespace, name: str, beat: bool) -> int:
     except (AacmmError, ValueError) as exc:  # bad input or a bad argument: a message, no traceback
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:  # SIGTERM: as Ctrl-C (workers ended, claims released), its own status
+        print(f"{name}: terminated (SIGTERM)", file=sys.stderr)
+        return TERMINATED
     except KeyboardInterrupt:  # Ctrl-C: one line; the claims and atomic writers left nothing partial
         print(f"{name}: interrupted", file=sys.stderr)
         return INTERRUPTED
@@ -192,11 +197,14 @@ def _run(args: argparse.Namespace, name: str, beat: bool) -> int:
 
 
 def _one_line_warning(command: str) -> Callable[..., None]:
-    """Return a ``warnings.showwarning`` that prints a campaign warning as one line, no source."""
+    """Return a ``warnings.showwarning`` that prints a campaign warning as one line, no source.
+
+    So too what a killed run left and this one took over (:class:`StaleOutputWarning`).
+    """
     default = warnings.showwarning
 
     def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any) -> None:
-        if issubclass(category, CampaignWarning):
+        if issubclass(category, (CampaignWarning, StaleOutputWarning)):
             print(f"{command}: warning: {message}", file=sys.stderr)
         else:
             default(message, category, *args, **kwargs)

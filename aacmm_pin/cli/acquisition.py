@@ -26,6 +26,7 @@ from aacmm_pin.cli._options import (
     load_given_arm,
     nest_option,
     positive,
+    read_files,
     seed_option,
     write_json,
 )
@@ -89,7 +90,8 @@ def _acquire(args: argparse.Namespace) -> int:
             gauge_range=args.gauge_range_mm * 1e-3, heidenhain_request=args.heidenhain_request,
             mitutoyo_request=args.mitutoyo_request, poll_interval=1.0 / args.poll_hz
             if args.poll_hz else 0.0, fsync_interval=args.fsync_s, status_interval=args.status_s,
-            summary=args.summary)
+            summary=args.summary, force=args.force,
+            inputs=(args.nest,) if args.nest else ())
     except ValueError as exc:
         print(f"aacmm-pin acquire: error: {exc}", file=sys.stderr)
         return 2
@@ -102,9 +104,11 @@ def _acquire(args: argparse.Namespace) -> int:
 def _fake_devices(args: argparse.Namespace) -> int:
     from aacmm_pin.acquire.fake_devices import FakeConfig, FakeDevices
     from aacmm_pin.acquire.nest import Nest, read_nest
+    from aacmm_pin.data.output_claim import input_paths
 
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
-    with claim_file(args.json, args.force):  # refused before the devices start
+    inputs = input_paths(args.nest, *read_files(args))  # its nest file, URDF: never replaced
+    with claim_file(args.json, args.force, inputs):  # refused before the devices start
         try:
             config = FakeConfig(
                 location=args.location, seed=args.seed, effects=effects, postures=args.postures,
@@ -155,7 +159,10 @@ def add_parsers(subparsers: Any) -> None:
                     "flushed row per paired sample) with a live status line; faults are counted, "
                     "never written. Line formats: see aacmm_pin.acquire.protocols.",
         parents=[nest_option("nest file (JSON with 3 sensor directions; default: orthogonal x, "
-                             "y, z)")])
+                             "y, z)"),
+                 force_option("replace the --summary FILE if it exists (never one of the run's "
+                              "inputs); without it such a file is refused. The default summary, "
+                              "an earlier run's of the location, is replaced without it")])
     p.add_argument("campaign", type=Path, help="campaign folder (spat.csv is appended to)")
     p.add_argument("--arm-port", required=True, help="arm port: device path or pyserial URL")
     p.add_argument("--gauge", action="append", required=True, metavar="FORMAT[:CHANNEL]=PORT",
@@ -193,8 +200,9 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--fsync-s", type=positive(zero=True), default=1.0,
                    help="seconds between fsyncs")
     p.add_argument("--status-s", type=positive(), default=0.5, help="seconds between status lines")
-    p.add_argument("--summary", type=Path, default=None,
-                   help="JSON summary (default: CAMPAIGN/acquire-location<M>.json)")
+    p.add_argument("--summary", type=Path, default=None, metavar="FILE",
+                   help="JSON summary (default: CAMPAIGN/acquire-location<M>.json); an existing "
+                        "file is refused without --force")
     p.add_argument("--quiet", action="store_true", help="no status line or report")
     p.set_defaults(handler=_acquire)
 

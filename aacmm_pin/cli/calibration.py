@@ -148,6 +148,11 @@ def _predict_into(args: argparse.Namespace, inputs: list[Path]) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
+    from aacmm_pin.errors import ArgumentError
+    from aacmm_pin.model.encoder_map import step_problem
+
+    if (why := step_problem(args.step_deg)) is not None:  # before any work
+        raise ArgumentError(f"--step-deg: {why}")
     with claim_output(args.out, args.force, _campaign_inputs(args)):
         return _identify_into(args)  # the folder held from before the work
 
@@ -365,6 +370,13 @@ def _validate_into(args: argparse.Namespace, inputs: list[Path]) -> int:
 
 
 def _uncertainty(args: argparse.Namespace) -> int:
+    from aacmm_pin.errors import ArgumentError
+    from aacmm_pin.machine import check_workers
+
+    try:
+        check_workers(args.workers or 1)  # before any work
+    except ArgumentError as exc:
+        raise ArgumentError(f"--{exc}") from None
     with claim_output(args.out, args.force, _campaign_inputs(args)):
         return _uncertainty_into(args)  # the folder held from before the work
 
@@ -686,7 +698,7 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
     p.add_argument("campaign", type=input_path, help="campaign folder")
     p.add_argument("--trials", type=positive(int), default=100, help="Monte Carlo trials")
     p.add_argument("--workers", type=positive(int), default=None,
-                   help="local processes (default: all cores)")
+                   help="local processes, at most one a core (default: all cores)")
     p.add_argument("--sigma-rtest-um", type=noise_um_or_zero, default=None,
                    help="R-Test reading sigma, um (default: the stated noise the fit used: "
                         "campaign.json's, else 2)")

@@ -1,8 +1,9 @@
 """Output files written whole or not at all: :func:`output_file`, :func:`write_text_file`.
 
-The file's text goes to a temporary file beside it (``.<name>.*.tmp``), flushed to disk, then
+The file's text goes to a temporary file beside it (``.<name>.<pid>.*.tmp``), flushed to disk, then
 replaces it in one rename: a process killed at any moment, or a disk that fills up, leaves the
-old file or the new one, never a fragment. An existing file is replaced only when asked (``force``,
+old file or the new one, never a fragment (a killed run's temporary file is removed by the next
+run into the file). An existing file is replaced only when asked (``force``,
 the CLI's ``--force``), never when it is one of the command's inputs; the file is claimed
 (:func:`~aacmm_pin.data.output_claim.claim_output`) for as long as the block runs, so a command
 that claims it at its start holds it from before its work to the rename.
@@ -16,7 +17,13 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from aacmm_pin.data.output_claim import claim_output, named_os_error, sync_folder, umask
+from aacmm_pin.data.output_claim import (
+    claim_output,
+    named_os_error,
+    sync_folder,
+    temp_prefix,
+    umask,
+)
 
 
 @contextmanager
@@ -37,7 +44,7 @@ def output_file(target: str | Path, force: bool = False, inputs: Iterable[str | 
     target = Path(target)
     with claim_output(target, force, inputs, folder=False):
         with named_os_error(target, target.absolute().parent):
-            fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+            fd, name = tempfile.mkstemp(prefix=temp_prefix(target), suffix=".tmp",
                                         dir=target.absolute().parent)
         os.close(fd)
         tmp = Path(name)

@@ -4,11 +4,12 @@ Every command that writes a folder (a calibration, a simulated campaign, a disco
 uncertainty study) writes it into a temporary folder beside the target, then puts it in place in
 one rename (Linux ``renameat2(RENAME_EXCHANGE)`` swaps it with an existing folder atomically; else
 the old folder is renamed aside first). A process killed at any moment leaves the old folder or
-the new one, never a mix (at worst a hidden ``.<name>.*.tmp`` folder beside it). An existing,
-non-empty folder is replaced only when asked (``force``, the CLI's ``--force``), never when it is
-or holds one of the command's inputs; the folder is claimed for as long as the block runs
-(:func:`~aacmm_pin.data.output_claim.claim_output`: a second run into it fails at once). An
-operating-system error while writing (a full disk) names the folder; the old one stays.
+the new one, never a mix (at worst a hidden ``.<name>.<pid>.*.tmp`` folder beside it, which the
+next run into it removes). An existing, non-empty folder is replaced only when asked (``force``,
+the CLI's ``--force``), never when it is or holds one of the command's inputs; the folder is
+claimed for as long as the block runs (:func:`~aacmm_pin.data.output_claim.claim_output`: a
+second run into it fails at once). An operating-system error while writing (a full disk) names
+the folder; the old one stays.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from aacmm_pin.data.output_claim import (
     claim_output,
     named_os_error,
     sync_folder,
+    temp_prefix,
     umask,
 )
 
@@ -83,7 +85,7 @@ def output_folder(target: str | Path, force: bool = False, inputs: Iterable[str 
     with claim_output(target, force, inputs, folder=True):
         parent = target.absolute().parent
         with named_os_error(target, parent):
-            tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent))
+            tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(target), suffix=".tmp", dir=parent))
         try:
             with named_os_error(target, tmp):
                 yield tmp

@@ -31,7 +31,7 @@ from aacmm_pin.data.bounded_read import read_bounded
 from aacmm_pin.data.campaign import ArmNames, couplings_of, write_campaign
 from aacmm_pin.data.columns import MAX_ANGLE_DEG
 from aacmm_pin.data.couplings import fill_coupled
-from aacmm_pin.data.csv_table import MAX_FILE_BYTES, radian_like_column, read_table
+from aacmm_pin.data.csv_table import MAX_COLUMNS, MAX_FILE_BYTES, radian_like_column, read_table
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, PointLog, StatedNoise
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
@@ -120,7 +120,8 @@ def parse_columns(text: str) -> tuple[str, ...]:
     A range's ends differ only in their last number (``joint_1..joint_7``, ``a1_deg..a6_deg``).
 
     Raises:
-        ValueError: for an empty list or name, or a range whose ends do not match.
+        ValueError: for an empty list or name, a range whose ends do not match, or more names
+            than a file's columns (:data:`~aacmm_pin.data.csv_table.MAX_COLUMNS`).
     """
     names: list[str] = []
     for item in (part.strip() for part in text.split(",")):
@@ -132,6 +133,10 @@ def parse_columns(text: str) -> tuple[str, ...]:
         if not (a and b and a[1] == b[1] and a[3] == b[3] and int(a[2]) <= int(b[2])):
             raise ValueError(f"{item!r}: a range is <name><first number>..<name><last number>, "
                              "e.g. q1..q6 or joint_1..joint_7")
+        count = int(b[2]) - int(a[2]) + 1
+        if len(names) + count > MAX_COLUMNS:  # a file has no more: never a million names
+            raise ValueError(f"{item!r}: a range of {count:,} columns; a file is read with at "
+                             f"most {MAX_COLUMNS} columns (e.g. q1..q6 or joint_1..joint_7)")
         width = len(a[2]) if a[2].startswith("0") else 1  # q01..q06 keeps its zero padding
         names += [f"{a[1]}{k:0{width}d}{a[3]}" for k in range(int(a[2]), int(b[2]) + 1)]
     if not names or not all(names):

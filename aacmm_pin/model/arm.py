@@ -209,8 +209,10 @@ def build_model(urdf: UrdfTree) -> pin.Model:
     (A ``continuous`` joint as a revolute one: :func:`one_entry_per_axis`.)
 
     Raises:
-        ArmModelError: naming the file and what Pinocchio's URDF parser said.
+        ArmModelError: naming the file and what Pinocchio's URDF parser said, or a chain too
+            deep for it (:meth:`UrdfTree.check_depth`).
     """
+    urdf.check_depth(" (with the error frames and tool added in memory)")  # else a SIGSEGV
     try:
         return pin.buildModelFromXML(one_entry_per_axis(urdf).xml())
     except (RuntimeError, ValueError) as exc:

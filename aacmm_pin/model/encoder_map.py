@@ -19,16 +19,37 @@ TWO_PI = 2.0 * np.pi
 DEFAULT_STEP_DEG = 5.0
 
 
+MAX_MAP_NODES = 720
+"""Most nodes of one encoder map (a step of 0.5 deg). Each node is an unknown of the fit, and its
+covariance and Jacobian grow with their number: 7 maps of 720 nodes hold 5,040 unknowns (a 203 MB
+covariance); a step of 0.01 deg, 36,000 nodes a map, had run 8.5 min into 5.5 GB, then MemoryError."""
+
+
+def step_problem(step_deg: float) -> str | None:
+    """Return why ``step_deg`` cannot be a map's node step (None if it can), in one line."""
+    if not step_deg > 0 or not np.isfinite(step_deg):
+        return f"must be a finite number > 0 that divides 360 deg, got {step_deg}"
+    n = 360.0 / step_deg
+    if abs(n - round(n)) > 1e-9:
+        return f"must divide 360 deg, got {step_deg}"
+    if round(n) > MAX_MAP_NODES:
+        unknowns = 7 * round(n)
+        return (f"{step_deg:g} deg gives {round(n):,} nodes a map, at most {MAX_MAP_NODES:,} "
+                f"(a step of {360 / MAX_MAP_NODES:g} deg or more): 7 such maps would be "
+                f"{unknowns:,} unknowns, their covariance alone {unknowns ** 2 * 8 / 1e9:,.1f} GB")
+    return None
+
+
 def node_count(step_deg: float) -> int:
     """Return the number of nodes of a periodic table with this step (360 / step, an integer).
 
     Raises:
-        ValueError: if ``step_deg`` does not divide 360 deg.
+        ArgumentError: if ``step_deg`` does not divide 360 deg, or gives more than
+            :data:`MAX_MAP_NODES` nodes.
     """
-    n = 360.0 / step_deg
-    if step_deg <= 0 or abs(n - round(n)) > 1e-9:
-        raise ValueError(f"step_deg must divide 360 deg, got {step_deg}")
-    return int(round(n))
+    if (why := step_problem(step_deg)) is not None:
+        raise ArgumentError(f"step_deg: {why}")
+    return int(round(360.0 / step_deg))
 
 
 def node_angles(step_deg: float = DEFAULT_STEP_DEG) -> np.ndarray:

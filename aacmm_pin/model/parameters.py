@@ -32,7 +32,7 @@ from aacmm_pin.data.json_file import read_json
 from aacmm_pin.data.problem_log import ProblemLog, close_match, key_problems
 from aacmm_pin.errors import FileFormatError, Problem
 from aacmm_pin.model.arm import Arm
-from aacmm_pin.model.encoder_map import DEFAULT_STEP_DEG, EncoderMap
+from aacmm_pin.model.encoder_map import DEFAULT_STEP_DEG, EncoderMap, step_problem
 from aacmm_pin.units import MAX_PARAMETER
 
 _IMPLAUSIBLE = f"beyond +-{MAX_PARAMETER:g} (m or rad): not a calibration value"
@@ -237,6 +237,8 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         axes_data = {}
     if not isinstance(step, (int, float)) or step <= 0 or 360.0 / step != round(360.0 / step):
         bad("encoder_maps.step_deg", f"must divide 360, got {step!r}")
+    elif (why := step_problem(step)) is not None:
+        bad("encoder_maps.step_deg", why)
     else:
         for key, values in axes_data.items():
             if not _numbers(values):
