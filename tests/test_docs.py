@@ -1,10 +1,16 @@
 """Every ``bash`` and ``python`` block of the README and of docs/ runs, and the README stays short.
 
-Blocks run in a temporary folder per document, in the document's order: a shell line as a command
-(``aacmm-pin`` and ``python`` are this checkout's, whatever is installed), a Python block in a
-process of its own (each block is self-contained, as a reader would paste it). ``../shared`` and
-``urdf/`` resolve as from the repository's folder. A comment just before a block changes when it
-runs:
+The blocks run as a user runs them: a document's blocks in page order, in a fresh temporary folder
+of its own that is not the repository and holds none of its files (no ``urdf/``, no ``aacmm_pin/``),
+with the *installed* ``aacmm-pin`` console script and the ``python`` of the environment running the
+tests (nothing is installed here: ``.ci/run`` installs the package with the README's line first; on
+a developer's machine install the checkout, ``pip install -e .``). The installed package must be
+this checkout's (the same source files), else the blocks fail at once, naming both. A shell line
+runs as a command; a Python block is saved as a file of its own and run with ``python FILE`` (each
+block is self-contained, as a reader would paste it into a file). The docs name the shared data as
+``../shared`` (the project's folder ``shared/`` beside a checkout): the fresh folder's parent holds
+a link ``shared`` to it, and nothing else of the repository is reachable. A comment just before a
+block changes when it runs:
 
 * ``<!-- slow -->``: only under ``pytest -m slow`` (long commands);
 * ``<!-- needs: hardware -->``: never (serial ports);
@@ -21,16 +27,20 @@ fast block, all of them for a slow one), so ``-k`` can pick any one.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
-from tests.helpers import ENV, ROOT
+from tests.helpers import ROOT
 
 README = ROOT / "README.md"
 DOCS = sorted((ROOT / "docs").glob("*.md"))
@@ -108,39 +118,106 @@ def shell_lines(text: str) -> list[str]:
 
 @dataclass
 class Session:
-    """A document's temporary folder and the blocks already run in it."""
+    """A document's fresh folder (``base/work``, beside ``base/shared``) and the blocks run in it."""
 
-    work: Path
+    base: Path
     done: set[int] = field(default_factory=set)
+
+    @property
+    def work(self) -> Path:
+        """The folder the blocks run in (the reader's own folder)."""
+        return self.base / "work"
 
 
 _SESSIONS: dict[Path, Session] = {}
+REPOSITORY_FILES = ("urdf", "aacmm_pin", "pyproject.toml", "tests", "docs", "README.md", ".git")
+"""Files of the repository that a block's folder must not hold (it runs as a user's would)."""
 
 
 def _session(doc: Path, factory: pytest.TempPathFactory) -> Session:
     if doc not in _SESSIONS:
         base = factory.mktemp(doc.stem)
         (base / "shared").symlink_to(SHARED, target_is_directory=True)
-        work = base / "repo"
-        work.mkdir()
-        (work / "urdf").symlink_to(ROOT / "urdf", target_is_directory=True)
-        _SESSIONS[doc] = Session(work)
+        (base / "work").mkdir()
+        (base / "blocks").mkdir()
+        _SESSIONS[doc] = Session(base)
     return _SESSIONS[doc]
 
 
-def _run(block: Block, work: Path) -> None:
-    exe = sys.executable
-    env = {**ENV, "PATH": str(Path(exe).parent) + os.pathsep + os.environ.get("PATH", "")}
+def _environment() -> dict[str, str]:
+    """The tests' environment without this checkout on ``PYTHONPATH``, the environment's scripts first.
+
+    ``aacmm-pin`` and ``python`` are then the installed console script and the interpreter running
+    the tests (its virtual environment's, in CI the one the README's install line filled).
+    """
+    env = dict(os.environ)
+    kept = [entry for entry in env.pop("PYTHONPATH", "").split(os.pathsep)
+            if entry and not _inside(Path(entry), ROOT)]
+    if kept:
+        env["PYTHONPATH"] = os.pathsep.join(kept)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    return env
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    resolved, top = path.resolve(), folder.resolve()
+    return resolved == top or top in resolved.parents
+
+
+def _digest(package: Path) -> dict[str, str]:
+    return {str(f.relative_to(package)): hashlib.sha1(f.read_bytes()).hexdigest()
+            for f in sorted(package.rglob("*.py"))}
+
+
+@functools.cache
+def installed() -> tuple[Path, Path]:
+    """Return the installed ``aacmm-pin`` script and ``aacmm_pin`` package folder, checked.
+
+    Raises:
+        AssertionError: if the environment has no ``aacmm-pin`` script, or its package is not this
+            checkout's (the same ``.py`` files, byte for byte).
+    """
+    env = _environment()
+    script = shutil.which("aacmm-pin", path=env["PATH"])
+    assert script, (f"no installed aacmm-pin on PATH ({Path(sys.executable).parent} first): install "
+                    f"this checkout in the environment running the tests (pip install -e {ROOT})")
+    probe = subprocess.run([sys.executable, "-c", "import aacmm_pin; print(aacmm_pin.__file__)"],
+                           cwd=tempfile.gettempdir(), env=env, capture_output=True, text=True)
+    assert probe.returncode == 0, f"the environment cannot import aacmm_pin:\n{probe.stderr}"
+    package = Path(probe.stdout.strip()).parent
+    ours, theirs = _digest(ROOT / "aacmm_pin"), _digest(package)
+    changed = sorted(name for name in ours if theirs.get(name) != ours[name])
+    assert not changed, (f"the installed aacmm_pin ({package}) is not this checkout's ({ROOT}): "
+                         f"{len(changed)} files differ ({', '.join(changed[:5])}); install this "
+                         f"checkout (pip install -e {ROOT}) in {Path(sys.executable).parent.parent}")
+    return Path(script), package
+
+
+def assert_fresh(work: Path) -> None:
+    """Assert a block's folder is a user's: outside the repository, without repository files."""
+    assert not _inside(work, ROOT), f"{work} is inside the repository {ROOT}"
+    present = [name for name in REPOSITORY_FILES if (work / name).exists()]
+    assert not present, f"{work} holds repository files: {present}"
+    beside = sorted(p.name for p in work.parent.iterdir())
+    assert beside == ["blocks", "shared", "work"], f"{work.parent} holds {beside}"
+
+
+def _run(block: Block, session: Session) -> None:
+    installed()
+    assert_fresh(session.work)
+    env = _environment()
     timeout = 1800 if block.slow else 300
     if block.lang == "python":
-        runs = [[exe, "-c", block.text]]
+        # saved as a file, as a reader would (a script's main guard matters to multiprocessing)
+        script = session.base / "blocks" / f"{block.doc.stem}_{block.line}.py"
+        script.write_text(block.text + "\n")
+        runs = [["python", str(script)]]
     else:
-        # the checkout's CLI and interpreter, whatever an installed console script points to
-        prelude = f'aacmm-pin() {{ "{exe}" -m aacmm_pin "$@"; }}; python() {{ "{exe}" "$@"; }}; '
-        runs = [["bash", "-euo", "pipefail", "-c", prelude + line] for line in shell_lines(block.text)]
+        runs = [["bash", "-euo", "pipefail", "-c", line] for line in shell_lines(block.text)]
     printed = ""
     for argv in runs:
-        proc = subprocess.run(argv, cwd=work, env=env, capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run(argv, cwd=session.work, env=env, capture_output=True, text=True,
+                              timeout=timeout)
         assert proc.returncode == 0, (
             f"{block.id}: {argv[-1][-300:]!r} exited {proc.returncode}\n"
             f"stdout: {proc.stdout[-2000:]}\nstderr: {proc.stderr[-2000:]}")
@@ -180,10 +257,10 @@ def test_block_runs(block: Block, tmp_path_factory: pytest.TempPathFactory) -> N
     for earlier in ALL:
         if (earlier.doc == block.doc and earlier.line < block.line and earlier.runs
                 and earlier.line not in session.done and (block.slow or not earlier.slow)):
-            _run(earlier, session.work)
+            _run(earlier, session)
             session.done.add(earlier.line)
     if block.line not in session.done:
-        _run(block, session.work)
+        _run(block, session)
         session.done.add(block.line)
 
 
@@ -231,3 +308,27 @@ def test_api_reference_lists_every_public_name() -> None:
     for module, names in aacmm_pin._PUBLIC.items():
         for name in names:
             assert f"{module}.{name}" in listed, f"docs/api.md does not list aacmm_pin.{name}"
+
+
+def test_blocks_run_where_a_user_would(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """A block's folder holds no repository file (no urdf/, no aacmm_pin/, none beside it), its
+    ``aacmm-pin`` is the installed script, its ``python`` imports the installed package (not this
+    checkout through the folder or PYTHONPATH) and ``../shared`` is the shared data; a folder inside
+    the repository, or one holding a repository file, is refused."""
+    script, package = installed()
+    doc = ROOT / "fresh-folder-probe.md"
+    lines = ["test ! -e urdf && test ! -e aacmm_pin && test ! -e ../urdf && test ! -e ../aacmm_pin",
+             "command -v aacmm-pin",
+             "python -c 'import aacmm_pin, os; print(os.path.dirname(aacmm_pin.__file__))'"]
+    prints = [str(script), str(package)]
+    if SHARED.is_dir():
+        lines.append("test -f ../shared/sample-campaign/spat.csv && echo shared-reached")
+        prints.append("shared-reached")
+    _run(Block(doc, 1, "bash", "", "\n".join(lines), tuple(prints)), _session(doc, tmp_path_factory))
+    with pytest.raises(AssertionError, match="inside the repository"):
+        assert_fresh(ROOT / "docs")
+    base = tmp_path_factory.mktemp("not-fresh")
+    for name in ("blocks", "shared", "work/urdf"):
+        (base / name).mkdir(parents=True)
+    with pytest.raises(AssertionError, match=r"repository files: \['urdf'\]"):
+        assert_fresh(base / "work")

@@ -35,3 +35,22 @@ def test_documented_commands_name_arms_an_installed_package_has() -> None:
                     if arm.startswith("urdf/") or ("/" not in arm and not arm.endswith(".urdf")
                                                    and arm not in EMBEDDED)]
     assert not bad, bad
+
+
+def test_sizes_names_an_embedded_arm(tmp_path, capsys) -> None:
+    """``--sizes ur5`` (``load_arm(..., sizes="ur5")``) gives another URDF the embedded UR5's sizes
+    from any folder; a name that is neither a file nor an embedded arm with sizes is refused in one
+    line naming it (exit status 2), before any work."""
+    from aacmm_pin.cli import main
+    from aacmm_pin.model.arm_files import resolve_sizes_path
+
+    urdf = tmp_path / "my_ur5.urdf"  # the UR5 under another name: no sizes file beside it
+    urdf.write_text((ROOT / "urdf" / "ur5.urdf").read_text())
+    assert ap.load_arm(urdf).sizes != ap.load_arm("ur5").sizes
+    assert ap.load_arm(urdf, sizes="ur5").sizes == ap.load_arm("ur5").sizes
+    assert resolve_sizes_path("ur5").name == "ur5.sizes.json"
+    assert main(["axes", str(urdf), "--sizes", "ur5"]) == 0
+    capsys.readouterr()
+    assert main(["axes", str(urdf), "--sizes", "ur6"]) == 2
+    err = capsys.readouterr().err
+    assert "ur6" in err and "embedded arms with sizes: ur5" in err and len(err.strip().splitlines()) == 1

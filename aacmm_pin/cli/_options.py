@@ -38,23 +38,31 @@ def arm_source(text: str) -> str:
     return text
 
 
+def sizes_source(text: str) -> str:
+    """``type=`` of ``--sizes`` (a sizes file or an embedded arm's name), checked as an input."""
+    return text
+
+
 def check_input_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Raise if an argument of ``parser`` of type :func:`input_path` names no file or folder.
 
-    An argument of type :func:`arm_source` must be a URDF file or an embedded arm's name.
+    An argument of type :func:`arm_source` must be a URDF file or an embedded arm's name, one of
+    type :func:`sizes_source` a sizes file or the name of an embedded arm with one.
 
     Raises:
         FileNotFoundError: naming the path and the argument (one line), for the first missing one.
-        ArmModelError: for an arm that is neither a file nor an embedded arm's name.
+        ArmModelError: for an arm (or sizes) that is neither a file nor an embedded arm's name.
     """
     import errno
     import os
 
-    from aacmm_pin.model.arm_files import resolve_arm_path
+    from aacmm_pin.model.arm_files import resolve_arm_path, resolve_sizes_path
 
     for action in parser._actions:
         if action.type is arm_source and getattr(args, action.dest, None) is not None:
             resolve_arm_path(getattr(args, action.dest))
+        if action.type is sizes_source and getattr(args, action.dest, None) is not None:
+            resolve_sizes_path(getattr(args, action.dest))
         if action.type is not input_path:
             continue
         given = getattr(args, action.dest, None)
@@ -104,14 +112,15 @@ def _parent() -> argparse.ArgumentParser:
 TOOL_FRAME_HELP = ("for a URDF without a fixed joint 'tool': the link the measured point (stylus, "
                    "SMR) hangs off; a joint 'tool' is added on it in memory, the point's vector "
                    "in its frame identified (default: tool0)")
-SIZES_HELP = ("the arm's plausible error sizes, a sizes file (JSON, SI; default: <urdf>.sizes.json "
-              "beside the URDF, else the default AACMM's)")
+SIZES_HELP = ("the arm's plausible error sizes, a sizes file (JSON, SI) or an embedded arm's name "
+              "(its sizes, e.g. ur5 for another UR5 URDF; default: <urdf>.sizes.json beside the "
+              "URDF, else the default AACMM's)")
 
 
 def arm_details(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add ``--tool-frame LINK`` and ``--sizes FILE`` (how to read an arm's URDF) to ``p``."""
     p.add_argument("--tool-frame", default=None, metavar="LINK", help=TOOL_FRAME_HELP)
-    p.add_argument("--sizes", type=input_path, default=None, metavar="FILE", help=SIZES_HELP)
+    p.add_argument("--sizes", type=sizes_source, default=None, metavar="FILE", help=SIZES_HELP)
     return p
 
 

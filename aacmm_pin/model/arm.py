@@ -64,6 +64,7 @@ from aacmm_pin.errors import ArmModelError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm_files import EMBEDDED as EMBEDDED  # re-exported: the embedded arms
 from aacmm_pin.model.arm_files import resolve_arm_path as resolve_arm_path
+from aacmm_pin.model.arm_files import resolve_sizes_path
 from aacmm_pin.model.sizes import DEFAULT as DEFAULT_SIZES
 from aacmm_pin.model.sizes import Sizes, read_sizes, sizes_file
 from aacmm_pin.model.urdf_completion import Completion, add_error_frames, add_tool_joint
@@ -687,17 +688,20 @@ def load_arm(arm: str | Path = DEFAULT_ARM, tool_frame: str | None = None,
         arm: URDF path or embedded arm name.
         tool_frame: the link the measured point hangs off, for a URDF without a ``tool`` joint;
             None: ``tool0``.
-        sizes: the arm's sizes file (:mod:`aacmm_pin.model.sizes`); None: the one beside the URDF
-            (``<urdf>.sizes.json``), else the defaults.
+        sizes: the arm's sizes file (:mod:`aacmm_pin.model.sizes`) or an embedded arm's name (its
+            sizes file, :func:`~aacmm_pin.model.arm_files.resolve_sizes_path`); None: the one
+            beside the URDF (``<urdf>.sizes.json``), else the defaults.
         error_frames: add error frames to a URDF that has none; False loads a calibrated arm whose
             values are folded into its joint origins (a calibration folder's ``compact.urdf``)
             as it is.
 
     Raises:
         ArmModelError: if the file cannot be read, breaks the conventions or gives nothing to
-            calibrate (message names the file, and the line and column for XML syntax errors).
+            calibrate (message names the file, and the line and column for XML syntax errors), or
+            if ``sizes`` is neither a file nor an embedded arm with a sizes file.
     """
     path = resolve_arm_path(arm)
+    sizes = resolve_sizes_path(sizes) if sizes is not None else None
     urdf, frame = add_tool_joint(read_urdf(path), tool_frame)
     out = Arm(urdf, path, str(arm), sizes=sizes, completion=Completion(frame))
     if not out.error_frames and error_frames:

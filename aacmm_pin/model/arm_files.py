@@ -1,7 +1,8 @@
-"""Where an arm's URDF is: :func:`resolve_arm_path` (a path, or an embedded arm's name).
+"""Where an arm's files are: its URDF and its sizes file, by path or by an embedded arm's name.
 
-Imports neither Pinocchio nor numpy: the command line checks ``--arm`` with it before the heavy
-imports (a wrong path is reported at once).
+:func:`resolve_arm_path` finds a URDF, :func:`resolve_sizes_path` a sizes file (an embedded arm's
+name gives that arm's). Imports neither Pinocchio nor numpy: the command line checks ``--arm``
+and ``--sizes`` with it before the heavy imports (a wrong path is reported at once).
 """
 
 from __future__ import annotations
@@ -35,3 +36,30 @@ def resolve_arm_path(arm: str | Path) -> Path:
             return Path(str(candidate))
     raise ArmModelError(arm, f"no such URDF file, and no embedded arm named '{name}' "
                              f"(embedded: {', '.join(EMBEDDED)})")
+
+
+
+def _embedded_sizes(name: str) -> Path:
+    """The sizes file beside an embedded arm's URDF (which may not exist: the defaults)."""
+    urdf = resolve_arm_path(name)
+    return urdf.with_name(urdf.name.removesuffix(".urdf") + ".sizes.json")
+
+
+def resolve_sizes_path(sizes: str | Path) -> Path:
+    """Return the sizes file given by path or by the name of an embedded arm (that arm's file).
+
+    ``--sizes ur5`` gives the embedded UR5's sizes to another URDF of the same robot (one without
+    a sizes file beside it), reachable from any folder once the package is installed.
+
+    Raises:
+        ArmModelError: if it is neither an existing file nor an embedded arm with a sizes file.
+    """
+    path = Path(sizes)
+    if path.is_file():
+        return path
+    name = str(sizes)
+    with_sizes = [arm for arm in EMBEDDED if _embedded_sizes(arm).is_file()]
+    if name in with_sizes:
+        return _embedded_sizes(name)
+    raise ArmModelError(sizes, f"no such sizes file, and no embedded arm with sizes named '{name}' "
+                               f"(embedded arms with sizes: {', '.join(with_sizes)})")
