@@ -277,7 +277,8 @@ def _discover_into(args: argparse.Namespace) -> int:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
     if result.widened:
-        print(f"  with the default effects the residual stayed larger than the stated noise: "
+        print(f"  with the default effects the residual stayed larger than the stated noise, "
+              f"following no variable: "
               f"also tried {', '.join(result.widened)} (not offered by default), by the same tests")
     if result.scan is not None:
         print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
