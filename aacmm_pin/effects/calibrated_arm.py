@@ -324,7 +324,7 @@ class CalibratedArm:
                 vals := self._one(readouts)) is not None:
             angles = np.array(self._plain.forward(vals, "readouts")[0])
             change = self._change(np.array([vals]), columns, direction)
-            if change is None or not change.tilted:  # else predict's tilt columns, below
+            if change is None or not change.moves_point:  # else predict's tilt or twist columns
                 if change is not None:
                     angles += change.offsets[0]
                 pin.forwardKinematics(self.model, self.data, angles)
