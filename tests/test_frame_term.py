@@ -298,3 +298,59 @@ def test_a_plugin_adds_a_growing_stylus(arm: ap.Arm, seed: int, tmp_path: Path) 
     moved = np.linalg.norm(xyz[1] - xyz[0])
     # the calibration's arm (its calibrated.urdf) holds the calibrated tool; 9 decimals of mm
     np.testing.assert_allclose(moved, k * 10.0 * np.linalg.norm(params["tool"]), rtol=1e-6)
+
+
+DRIFT = '''
+import numpy as np
+import aacmm_pin as ap
+
+
+def _basis(samples):
+    out = np.zeros((samples.n, 6, 1))
+    out[:, 0, 0] = np.sin(samples.q[:, 0])
+    return out
+
+
+class Drift(ap.Effect):
+    name = "drift"
+
+    def candidates(self, arm, samples):
+        return [self.term("drift[dx43]")]
+
+    def term(self, key):
+        if key != "drift[dx43]":
+            return None
+        return ap.FrameTerm(key, "drift", ("drift[dx43].m",), (1e-5,), "error frame dx43 slides",
+                            frame="dx43", basis_of=_basis,
+                            variable_of=lambda s: ("A1 (rad)", s.q[:, 0]))
+
+
+ap.register_effect(Drift)
+'''
+
+
+def test_a_term_on_an_error_frame_survives_the_compact_urdf(arm: ap.Arm, small_sim: ap.Simulation,
+                                                             tmp_path: Path) -> None:
+    """The compact URDF folds the error frames: a calibration whose frame term moves one is
+    evaluated on parameters.json's arm by load_calibrated, the same points as predict."""
+    from aacmm_pin.effects.calibrated_arm import load_calibrated
+    from aacmm_pin.effects.registry import load_effect_file, read_parameters
+
+    effects = tmp_path / "drift.py"
+    effects.write_text(DRIFT)
+    ap.write_campaign(small_sim.campaign, tmp_path / "campaign")
+    done = _cli("identify", str(tmp_path / "campaign"), "--effects-file", str(effects), "--terms",
+                "drift[dx43]", "--out", str(tmp_path / "cal"))
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "cal" / "compact.json").is_file()
+    load_effect_file(effects)
+    from aacmm_pin.effects import registry
+    try:
+        params = read_parameters(tmp_path / "cal" / "parameters.json")
+        assert params.extensions["drift[dx43]"][0] != 0.0
+        runtime = load_calibrated(tmp_path / "cal")
+        q = np.radians([[10.0, 20, 30, 40, 50, 60, 70], [-30.0, 10, 60, -20, 40, -50, 5]])
+        expected = ap.predict(ap.load_arm(params.arm), params, q)
+        np.testing.assert_allclose(runtime.position(q), expected, atol=1e-12)
+    finally:
+        registry.LIBRARY.pop("drift", None)

@@ -9,6 +9,10 @@ check them against Pinocchio's per-sample functions). Map nodes enter through th
 :math:`\partial p / \partial \Delta\theta_{n,map}(k) = \partial p / \partial \theta_n \cdot w_k(\theta^*_n)`
 with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
 
+Extension terms change the arm through an :class:`Adjustment`: angle offsets, a length scale,
+lateral tilts of joints and small twists of any frame (everything hanging from a moved frame
+moves with it; :meth:`StylusJacobians.twist` gives the point's columns of a frame's twist).
+
 Inverse kinematics (:func:`solve_ik`, the simulator's postures, the planner's candidates) needs
 only the n_axes joint columns: :class:`JointKinematics` computes them on the runtime model, not the
 identification model's DH, tool and map columns.
