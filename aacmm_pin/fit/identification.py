@@ -30,7 +30,7 @@ from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import stylus_positions
-from aacmm_pin.effects.registry import check_terms
+from aacmm_pin.effects.term_axes import check_terms
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
 from aacmm_pin.fit import robust as rob

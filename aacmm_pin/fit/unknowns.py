@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians, stylus_positions
-from aacmm_pin.effects.registry import measurement_shift
+from aacmm_pin.effects.forward import measurement_shift
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
 from aacmm_pin.model.kinematics import StylusJacobians, identification_configuration, tool_rows
@@ -196,7 +196,8 @@ class Unknowns:
         return self.start.replace(
             rotation_abc=full[0:3], translation=full[3:6],
             dh=dict(zip(self.arm.error_names, full[6:6 + n_err])),
-            tool=tool[0], tools=tools, encoder_maps=maps, extensions=extensions)
+            tool=tool[0], tools=tools, encoder_maps=maps, extensions=extensions,
+            extension_terms={**self.start.extension_terms, **{t.key: t for t in self.terms}})
 
     def _samples(self, q: np.ndarray) -> Samples | None:
         return self.samples if self.samples is not None and self.samples.matches(q) else None

@@ -10,7 +10,10 @@
      "encoder_maps": {"step_deg": 5.0, "axes": {"1": [72 values, rad], ...}},
      "extensions": {"compliance[A2]": [k], "thermal": [alpha], ...}}   # optional, SI
 
-Extensions are terms of the effect library (:mod:`aacmm_pin.effects`) added by discovery.
+Extensions are terms of the effect library (:mod:`aacmm_pin.effects`) added by discovery. The
+parameters carry each extension's term with its values (:attr:`Parameters.extension_terms`): a key
+becomes its term once, where the parameters are made (read from the file, or built), through the
+lookup the effect library registers (:data:`TERM_LOOKUP`; this layer cannot import it).
 
 Missing maps mean zero error. The r-CS -> MT-CS transform is
 ``p_mt = D_b(beta0) D_a(alpha0) D_c(gamma0) p_r + translation`` (paper Eq. 4). Keys this file does
@@ -21,9 +24,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -43,6 +47,41 @@ def rotation_abc(abc: np.ndarray) -> np.ndarray:
     a, b, c = np.asarray(abc, dtype=float)
     rot: np.ndarray = pin.rpy.rotate("y", b) @ pin.rpy.rotate("x", a) @ pin.rpy.rotate("z", c)
     return rot
+
+
+class ExtensionTerm(Protocol):
+    """What the model layer knows of an extension's term (an :class:`aacmm_pin.effects.Term`)."""
+
+    @property
+    def key(self) -> str:
+        """The term's key in ``parameters.json`` ``extensions``, e.g. ``compliance[A2]``."""
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of its parameters (one value each)."""
+
+
+TERM_LOOKUP: list[Callable[[str], ExtensionTerm]] = []
+"""The effect library's key -> term lookup (registered by :mod:`aacmm_pin.effects.registry`
+when it is imported); it raises a ``KeyError`` for a key no registered effect knows."""
+
+
+def _terms_of(keys: Any, known: dict[str, ExtensionTerm]) -> dict[str, ExtensionTerm]:
+    """Return key -> term for ``keys``: the ``known`` terms, the others looked up (once, here).
+
+    A key no registered effect knows has no term (the file's check names it,
+    :func:`aacmm_pin.effects.check_extensions`; evaluating it raises the lookup's error).
+    """
+    out = {}
+    for key in keys:
+        if key in known:
+            out[key] = known[key]
+        elif TERM_LOOKUP:
+            try:
+                out[key] = TERM_LOOKUP[0](key)
+            except KeyError:
+                continue
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +110,10 @@ class Parameters:
     tools: dict[str, np.ndarray] = field(default_factory=dict)
     """Tool joint name -> tool vector (in its parent's frame), shape (3,), in m, for arms with
     several tools (every tool, in the arm's tool order); empty for a single-tool arm (``tool``)."""
+    extension_terms: dict[str, ExtensionTerm] = field(default_factory=dict, repr=False)
+    """Extension key -> its term (an :class:`aacmm_pin.effects.Term`), for every key of
+    ``extensions`` that a registered effect knows: given (the terms a fit estimated, or of the
+    parameters replaced) or looked up when the parameters are made, never on evaluation."""
 
     def __post_init__(self) -> None:
         tools = {str(k): np.array(v, dtype=float).reshape(-1) for k, v in self.tools.items()}
@@ -93,6 +136,8 @@ class Parameters:
         object.__setattr__(self, "dh", {k: float(v) for k, v in self.dh.items()})
         object.__setattr__(self, "extensions", {k: np.array(v, dtype=float).reshape(-1)
                                                 for k, v in self.extensions.items()})
+        object.__setattr__(self, "extension_terms",
+                           _terms_of(self.extensions, dict(self.extension_terms)))
         for axis, emap in self.encoder_maps.items():
             if emap.step_deg != self.step_deg:
                 raise ValueError(f"encoder_maps: axis {axis} has step {emap.step_deg} deg, "
@@ -130,6 +175,15 @@ class Parameters:
                              f"parameters hold {', '.join(self.tools) or 'one tool vector'}")
         return {name: self.tools[name] for name in arm.tool_joints}
 
+    def term_values(self) -> list[tuple[ExtensionTerm, np.ndarray]]:
+        """Return every extension's term with its values, shape (k,) each, SI, in key order.
+
+        Raises:
+            KeyError: (the effect library's error) for a key no registered effect knows.
+        """
+        return [(self.extension_terms[k] if k in self.extension_terms else _looked_up(k), v)
+                for k, v in self.extensions.items()]
+
     def rotation(self) -> np.ndarray:
         """Return the r-CS -> MT-CS rotation matrix, shape (3, 3)."""
         return rotation_abc(self.rotation_abc)
@@ -155,6 +209,13 @@ class Parameters:
                if self.extensions else {}),
             **self.extra,
         }
+
+
+def _looked_up(key: str) -> ExtensionTerm:
+    """Return the term of a key unknown when the parameters were made (or raise its error)."""
+    if not TERM_LOOKUP:
+        raise KeyError(f"{key!r}: no effect library loaded (import aacmm_pin.effects)")
+    return TERM_LOOKUP[0](key)
 
 
 _KNOWN = ("arm", "units", "dh", "tool", "tools", "base_to_mt", "encoder_maps", "extensions")
