@@ -11,13 +11,15 @@ steps.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, lsmr
 
 from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian
 from aacmm_pin.fit.data_rows import DataRows
-from aacmm_pin.fit.solver_values import Factor
+from aacmm_pin.fit.solver_values import Counted, Factor
 
 RANK_TOL = 1e-10
 """Relative singular value below which a constraint row adds no rank."""
@@ -84,6 +86,25 @@ class ReducedJacobian(DataRows):
 
         data = jac.evaluate(self.nuisance_jacobian(x), rows)
         return np.concatenate([data, self.prior * x_loc, self.length_residuals(x)]), jac
+
+    def fun_reported(self, z: np.ndarray, on_evaluation: Callable[[float], None] | None,
+                     given: np.ndarray | None = None,
+                     evaluate: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+        """Return :meth:`fun` at z (shape (n_rows,), m) and report its RMS to ``on_evaluation``.
+
+        The RMS is in m (in units of the solve's sigma for weighted rows); ``on_evaluation`` is
+        called once per evaluation when given (progress). A :class:`~aacmm_pin.fit.solver_values.Counted`
+        callback takes the evaluation from its budget first (raising
+        :class:`~aacmm_pin.fit.solver_values.BudgetSpent` when none is left). ``given``: the
+        residual at z when the caller has it (counted and reported, not computed again);
+        ``evaluate``: what computes it instead of :meth:`fun` (the same numbers).
+        """
+        if isinstance(on_evaluation, Counted):
+            on_evaluation.budget.take()
+        out = (self.fun if evaluate is None else evaluate)(z) if given is None else given
+        if on_evaluation is not None:
+            on_evaluation(float(np.sqrt(np.mean(out ** 2))))
+        return out
 
     def _prior_rows(self, p_nuis: np.ndarray) -> np.ndarray:
         out: np.ndarray = self.prior[:, None] * p_nuis[:self.n_loc]

@@ -10,17 +10,15 @@ MB) never lives twice; :class:`_Handover` serves a warm start's residual and Jac
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 from scipy.sparse.linalg import LinearOperator
 
 from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian
+from aacmm_pin.fit.reduced_jacobian import ReducedJacobian
 from aacmm_pin.fit.solver_values import BudgetSpent, Solution, SolverSettings, WarmStart
-
-if TYPE_CHECKING:
-    from aacmm_pin.fit.solver import Problem
 
 T = TypeVar("T")
 
@@ -121,7 +119,7 @@ class SolveRun:
     """One :meth:`~aacmm_pin.fit.solver.Problem.solve`: its state and scipy's functions.
 
     Args:
-        problem: the problem.
+        problem: the problem (a :class:`~aacmm_pin.fit.solver.Problem`: preconditioned).
         start: the start, reduced coordinates, shape (n_z,), or a :class:`WarmStart` (not kept:
             its Jacobian is handed to scipy's first step and then freed).
         settings: loss, its scale and the evaluation budget.
@@ -129,7 +127,7 @@ class SolveRun:
         on_evaluation: called after every residual evaluation with the residual's RMS.
     """
 
-    def __init__(self, problem: Problem, start: WarmStart | np.ndarray, settings: SolverSettings,
+    def __init__(self, problem: ReducedJacobian, start: WarmStart | np.ndarray, settings: SolverSettings,
                  jac: str, on_evaluation: Callable[[float], None] | None):
         warm = start if isinstance(start, WarmStart) else WarmStart(np.asarray(start))
         self.problem, self.settings, self.jac, self.on_evaluation = problem, settings, jac, on_evaluation

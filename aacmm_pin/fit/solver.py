@@ -37,7 +37,6 @@ from aacmm_pin.fit.data_rows import Nuisance
 from aacmm_pin.fit.reduced_jacobian import RANK_TOL, ReducedJacobian
 from aacmm_pin.fit.solve_run import BUDGET_MESSAGE, STEP_TOL, SolveRun
 from aacmm_pin.fit.solver_values import (
-    Counted,
     Factor,
     Solution,
     SolverSettings,
@@ -122,25 +121,6 @@ class Problem(ReducedJacobian):
         self.basis = t
         self.r_inv = np.linalg.inv(chol.T)
         self.p = t @ self.r_inv
-
-    def fun_reported(self, z: np.ndarray, on_evaluation: Callable[[float], None] | None,
-                     given: np.ndarray | None = None,
-                     evaluate: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
-        """Return :meth:`fun` at z (shape (n_rows,), m) and report its RMS to ``on_evaluation``.
-
-        The RMS is in m (in units of the solve's sigma for weighted rows); ``on_evaluation`` is
-        called once per evaluation when given (progress). A :class:`~aacmm_pin.fit.solver_values.Counted`
-        callback takes the evaluation from its budget first (raising
-        :class:`~aacmm_pin.fit.solver_values.BudgetSpent` when none is left). ``given``: the
-        residual at z when the caller has it (counted and reported, not computed again);
-        ``evaluate``: what computes it instead of :meth:`fun` (the same numbers).
-        """
-        if isinstance(on_evaluation, Counted):
-            on_evaluation.budget.take()
-        out = (self.fun if evaluate is None else evaluate)(z) if given is None else given
-        if on_evaluation is not None:
-            on_evaluation(float(np.sqrt(np.mean(out ** 2))))
-        return out
 
     # ------------------------------------------------------------ solving
     def dense(self, n_z: int) -> bool:
