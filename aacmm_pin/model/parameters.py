@@ -236,23 +236,6 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
     def bad(key: str, reason: str) -> None:
         log.add(None, key, reason)
 
-    def vector(value: Any, key: str, n: int) -> np.ndarray:
-        if not _numbers(value):  # numpy would take "0.001" and True for numbers
-            bad(key, f"needs a list of {n} numbers, got {value!r}")
-            return np.zeros(n)
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            bad(key, f"needs {n} numbers, got {value!r}")
-            return np.zeros(n)
-        if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-            bad(key, f"needs {n} finite numbers, got {value!r}")
-            return np.zeros(n)
-        if np.any(np.abs(arr) > MAX_PARAMETER):
-            bad(key, f"{value!r} is {_IMPLAUSIBLE}")
-            return np.zeros(n)
-        return arr
-
     if not isinstance(data, dict):
         raise FileFormatError([Problem(path, None, None, "the top level must be a JSON object")])
     for key in ("arm", "dh"):
@@ -262,6 +245,52 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         bad("tool", "missing (or give 'tools': {tool joint: [x, y, z]} for several tools)")
     if data.get("units", "SI") != "SI":
         bad("units", f"must be 'SI', got {data.get('units')!r}")
+    dh = _dh(data, bad)
+    base = data.get("base_to_mt", {})
+    if not isinstance(base, dict):
+        bad("base_to_mt", "must be an object")
+        base = {}
+    rot = _vector(base.get("rotation_abc", [0, 0, 0]), "base_to_mt.rotation_abc", 3, bad)
+    trans = _vector(base.get("translation", [0, 0, 0]), "base_to_mt.translation", 3, bad)
+    tool, tools = _tools(data, bad)
+    step, maps = _maps(data.get("encoder_maps") or {}, bad)
+    extensions = _extensions(data.get("extensions") or {}, bad)
+    for problem in key_problems(path, data, (*_KNOWN, *_WRITTEN), strict=False):
+        bad(str(problem.column), problem.reason)  # a misspelt key; others are carried (extra)
+    log.close()
+    if problems:
+        raise FileFormatError(problems)
+    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, tools=tools, rotation_abc=rot,
+                      translation=trans, encoder_maps=maps, extensions=extensions,
+                      step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
+                      extra={k: v for k, v in data.items() if k not in _KNOWN})
+
+
+_Bad = Callable[[str, str], None]
+"""Reports a bad field: ``bad(JSON path, reason)``."""
+
+
+def _vector(value: Any, key: str, n: int, bad: _Bad) -> np.ndarray:
+    """Return ``value`` as n finite, plausible numbers, or zeros with the problem reported."""
+    if not _numbers(value):  # numpy would take "0.001" and True for numbers
+        bad(key, f"needs a list of {n} numbers, got {value!r}")
+        return np.zeros(n)
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        bad(key, f"needs {n} numbers, got {value!r}")
+        return np.zeros(n)
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        bad(key, f"needs {n} finite numbers, got {value!r}")
+        return np.zeros(n)
+    if np.any(np.abs(arr) > MAX_PARAMETER):
+        bad(key, f"{value!r} is {_IMPLAUSIBLE}")
+        return np.zeros(n)
+    return arr
+
+
+def _dh(data: dict[str, Any], bad: _Bad) -> dict[str, float]:
+    """Return the checked ``dh`` entries (m or rad); report bad ones."""
     dh: dict[str, float] = {}
     if isinstance(data.get("dh"), dict):
         for name, value in data["dh"].items():
@@ -274,22 +303,25 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                 dh[name] = float(value)
     elif "dh" in data:
         bad("dh", "must be an object of name: value")
-    base = data.get("base_to_mt", {})
-    if not isinstance(base, dict):
-        bad("base_to_mt", "must be an object")
-        base = {}
-    rot = vector(base.get("rotation_abc", [0, 0, 0]), "base_to_mt.rotation_abc", 3)
-    trans = vector(base.get("translation", [0, 0, 0]), "base_to_mt.translation", 3)
+    return dh
+
+
+def _tools(data: dict[str, Any], bad: _Bad) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Return the tool vector (3,) and the tools by joint name (m); report bad ones."""
     tools: dict[str, np.ndarray] = {}
     if isinstance(data.get("tools", {}), dict):
-        tools = {str(k): vector(v, f"tools.{k}", 3) for k, v in data.get("tools", {}).items()}
+        tools = {str(k): _vector(v, f"tools.{k}", 3, bad) for k, v in data.get("tools", {}).items()}
     else:
         bad("tools", "must be an object of tool joint: [x, y, z]")
-    tool = (vector(data["tool"], "tool", 3) if "tool" in data
+    tool = (_vector(data["tool"], "tool", 3, bad) if "tool" in data
             else next(iter(tools.values())) if tools else np.zeros(3))
     if tools and "tool" in data and not np.array_equal(tool, next(iter(tools.values()))):
         bad("tool", "differs from the first entry of 'tools' (give one of them)")
-    maps_data = data.get("encoder_maps") or {}
+    return tool, tools
+
+
+def _maps(maps_data: Any, bad: _Bad) -> tuple[Any, dict[int, EncoderMap]]:
+    """Return the maps' node step (deg, as written) and the checked maps by axis; report bad ones."""
     step = maps_data.get("step_deg", DEFAULT_STEP_DEG) if isinstance(maps_data, dict) else None
     maps: dict[int, EncoderMap] = {}
     axes_data = maps_data.get("axes") or {} if isinstance(maps_data, dict) else {}
@@ -312,16 +344,7 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                 continue
             if np.any(np.abs(maps[int(key)].values) > MAX_PARAMETER):
                 bad(f"encoder_maps.axes.{key}", f"a value {_IMPLAUSIBLE}")
-    extensions = _extensions(data.get("extensions") or {}, bad)
-    for problem in key_problems(path, data, (*_KNOWN, *_WRITTEN), strict=False):
-        bad(str(problem.column), problem.reason)  # a misspelt key; others are carried (extra)
-    log.close()
-    if problems:
-        raise FileFormatError(problems)
-    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, tools=tools, rotation_abc=rot,
-                      translation=trans, encoder_maps=maps, extensions=extensions,
-                      step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
-                      extra={k: v for k, v in data.items() if k not in _KNOWN})
+    return step, maps
 
 
 def _numbers(value: Any) -> bool:
@@ -330,7 +353,7 @@ def _numbers(value: Any) -> bool:
         isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
 
 
-def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
+def _extensions(data: Any, bad: _Bad) -> dict[str, np.ndarray]:
     """Return the checked ``extensions`` entries; report bad ones through ``bad(key, reason)``.
 
     Only the form is checked here (a list of finite, plausible numbers per key); whether a key is a
