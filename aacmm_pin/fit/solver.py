@@ -6,11 +6,12 @@ itself. :func:`aacmm_pin.identify` builds one per round and keeps the last in
 :attr:`aacmm_pin.Calibration.problem`. :meth:`Problem.solve` starts from a
 :class:`~aacmm_pin.fit.solver_values.WarmStart` and returns a :class:`~aacmm_pin.fit.solver_values.Solution`.
 
-The full vector is ``[arm unknowns, nest offsets, instrument frames]`` (:class:`Nuisance`): every
-R-Test location's zero position has an unknown error (3 per location) with the stated prior
-``sigma_location``, so the location uncertainty enters the estimate and its covariance
-(generalised least squares); a length-bar socket used as a calibration input is a nest with a
-loose prior whose distances to the other sockets of its placement are residual rows; points
+The full vector is ``[arm unknowns, nest offsets, instrument frames]``
+(:class:`~aacmm_pin.fit.data_rows.Nuisance`): every R-Test location's zero position has an
+unknown error (3 per location) with the stated prior ``sigma_location``, so the location
+uncertainty enters the estimate and its covariance (generalised least squares); a length-bar
+socket used as a calibration input is a nest with a loose prior whose distances to the other
+sockets of its placement are residual rows; points
 measured in a second instrument frame carry that frame's six unknowns.
 
 Constraints ``C (x_arm - x_start) = 0`` (gauges, held directions) are met exactly by moving only in
@@ -53,7 +54,6 @@ DENSE_LIMIT = 2e7
 FRAME_ANGLE = 1e-2
 FRAME_LENGTH = 1e-2
 """Scales (rad, m) of an instrument frame's six unknowns in the preconditioner's basis."""
-
 
 
 class Problem(ReducedJacobian):
