@@ -42,12 +42,8 @@ if TYPE_CHECKING:
     )
     from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
     from aacmm_pin.effects.calibrated_arm import CalibratedArm, load_calibrated
-    from aacmm_pin.effects.registry import (
-        load_effect_file,
-        read_parameters,
-        register_effect,
-        write_parameters,
-    )
+    from aacmm_pin.effects.parameters_file import read_parameters, write_parameters
+    from aacmm_pin.effects.registry import load_effect_file, register_effect
     from aacmm_pin.errors import (
         AacmmError,
         ArgumentError,
@@ -116,8 +112,8 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "model.parameters": ("Parameters",),
     "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "FrameTerm", "MeasurementTerm",
                      "MapTerm", "BasisTerm", "Variable"),
-    "effects.registry": ("read_parameters", "write_parameters", "register_effect",
-                         "load_effect_file"),
+    "effects.parameters_file": ("read_parameters", "write_parameters"),
+    "effects.registry": ("register_effect", "load_effect_file"),
     "analyses.planning": ("Plan", "plan"),
     "model.sizes": ("Sizes", "read_sizes", "write_sizes"),
     "analyses.simulate": ("Simulation", "SimulationConfig", "simulate_campaign", "write_simulation"),

@@ -37,7 +37,7 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.effects import registry
+from aacmm_pin.effects import parameters_file, registry
 from aacmm_pin.effects.base import Effect, MapTerm, ModelSpec, Term, TiltTerm
 from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
 from aacmm_pin.model.encoder_map import EncoderMap
@@ -276,8 +276,8 @@ def test_values_round_trip_through_parameters_json(name: str, request: pytest.Fi
     effect, sources = _effect_sources(name, request)
     for k, case in enumerate(_cases(effect, sources)):
         path = tmp_path / f"p{k}.json"
-        registry.write_parameters(case.params, path)
-        back = registry.read_parameters(path)
+        parameters_file.write_parameters(case.params, path)
+        back = parameters_file.read_parameters(path)
         if isinstance(case.term, MapTerm):
             np.testing.assert_array_equal(back.map(case.term.axis).values, case.values)
             continue
@@ -302,7 +302,7 @@ def _predict_elsewhere(cases: list[Case], folder: Path, effect_files: list[str]
                        ) -> dict[str, np.ndarray]:
     job: dict[str, Any] = {"effect_files": effect_files, "cases": []}
     for k, case in enumerate(cases):
-        registry.write_parameters(case.params, folder / f"p{k}.json")
+        parameters_file.write_parameters(case.params, folder / f"p{k}.json")
         np.savez(folder / f"s{k}.npz", **samples_arrays(case.samples))
         job["cases"].append({"id": case.id, "params": str(folder / f"p{k}.json"),
                              "samples": str(folder / f"s{k}.npz")})
@@ -325,8 +325,8 @@ def test_predict_in_a_second_process_is_this_ones(name: str, request: pytest.Fix
              if name in EXAMPLE_PLUGINS
              else request.getfixturevalue("second_process"))
     for k, case in enumerate(cases):
-        registry.write_parameters(case.params, tmp_path / f"here{k}.json")
-        params = registry.read_parameters(tmp_path / f"here{k}.json")
+        parameters_file.write_parameters(case.params, tmp_path / f"here{k}.json")
+        params = parameters_file.read_parameters(tmp_path / f"here{k}.json")
         samples = rebuild(case.arm, samples_arrays(case.samples))
         here = ap.predict(case.arm, params, samples.q, samples, tool=samples.tool)
         np.testing.assert_allclose(there[case.id], here, rtol=0, atol=1e-12, err_msg=case.id)

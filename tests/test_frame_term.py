@@ -32,7 +32,7 @@ import aacmm_pin as ap
 from aacmm_pin.effects.base import FrameTerm
 from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
 from aacmm_pin.effects.calibrated_arm import CalibratedArm
-from aacmm_pin.effects.registry import terms_adjustment
+from aacmm_pin.effects.forward import terms_adjustment
 from aacmm_pin.errors import FrameNotFound
 from aacmm_pin.model import kinematics
 from aacmm_pin.model._chain import BatchedChain
@@ -334,7 +334,8 @@ def test_a_term_on_an_error_frame_survives_the_compact_urdf(arm: ap.Arm, small_s
     """The compact URDF folds the error frames: a calibration whose frame term moves one is
     evaluated on parameters.json's arm by load_calibrated, the same points as predict."""
     from aacmm_pin.effects.calibrated_arm import load_calibrated
-    from aacmm_pin.effects.registry import load_effect_file, read_parameters
+    from aacmm_pin.effects.parameters_file import read_parameters
+    from aacmm_pin.effects.registry import load_effect_file
 
     effects = tmp_path / "drift.py"
     effects.write_text(DRIFT)

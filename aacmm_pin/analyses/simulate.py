@@ -39,7 +39,7 @@ import pinocchio as pin
 
 from aacmm_pin.data.campaign import Campaign, LengthBarLog, PointLog, SpatLog
 from aacmm_pin.effects.calibrated import stylus_positions
-from aacmm_pin.effects.registry import adjustment
+from aacmm_pin.effects.forward import adjustment
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
@@ -170,7 +170,7 @@ class TrueArm:
         E.g. lateral compliance, at the readouts' gravity moments, with the other effects' angle
         errors ``offsets`` (N, n_axes) added.
         """
-        change = adjustment(self.truth.extensions, Samples(self.arm, q_readout), self.arm.n_axes)
+        change = adjustment(self.truth, Samples(self.arm, q_readout), self.arm.n_axes)
         change.offsets += offsets
         return change
 

@@ -161,7 +161,8 @@ def _identify_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.model_choice import AUTO, identify_model
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.logs import noise_summary
-    from aacmm_pin.effects.registry import check_terms, term_from_key
+    from aacmm_pin.effects.registry import term_from_key
+    from aacmm_pin.effects.term_axes import check_terms
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 

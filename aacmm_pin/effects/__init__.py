@@ -15,8 +15,10 @@ an installed package's ``aacmm_pin.effects`` entry point, or from a file
 :mod:`aacmm_pin.effects.registry`.
 
 Calibrated values of the terms live in ``Parameters.extensions`` (``parameters.json``
-``"extensions": {"compliance[A2]": [k], ...}``, SI units) and are applied by
-:func:`aacmm_pin.stylus_positions` and :func:`aacmm_pin.predict`.
+``"extensions": {"compliance[A2]": [k], ...}``, SI units), each key's term in
+``Parameters.extension_terms`` (looked up once, where the parameters are made), and are applied by
+:func:`aacmm_pin.stylus_positions` and :func:`aacmm_pin.predict` (:mod:`aacmm_pin.effects.forward`).
+The file with its terms and plugins is :mod:`aacmm_pin.effects.parameters_file`.
 """
 
 from aacmm_pin.effects.base import (
@@ -41,22 +43,20 @@ from aacmm_pin.effects.builtin.encoder import encoder_harmonic, encoder_map
 from aacmm_pin.effects.builtin.lateral_compliance import lateral_compliance
 from aacmm_pin.effects.builtin.rtest import rtest
 from aacmm_pin.effects.builtin.thermal import thermal
+from aacmm_pin.effects.forward import measurement_shift
+from aacmm_pin.effects.parameters_file import check_extensions, read_parameters, write_parameters
 from aacmm_pin.effects.registry import (
     LIBRARY,
     EffectNotFound,
-    check_extensions,
     effect_names,
     library,
     load_effect_file,
     load_plugins,
-    measurement_shift,
     plugin_of,
     plugins_of,
-    read_parameters,
     register_effect,
     term_from_key,
     terms_of,
-    write_parameters,
 )
 
 __all__ = [

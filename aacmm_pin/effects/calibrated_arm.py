@@ -44,12 +44,8 @@ import pinocchio as pin
 
 from aacmm_pin.effects._plain_maps import PlainMaps
 from aacmm_pin.effects.base import FrameTerm
-from aacmm_pin.effects.registry import (
-    check_extensions,
-    read_parameters,
-    term_from_key,
-    terms_adjustment,
-)
+from aacmm_pin.effects.forward import term_values, terms_adjustment
+from aacmm_pin.effects.parameters_file import check_extensions, read_parameters
 from aacmm_pin.errors import ArgumentError
 from aacmm_pin.model.arm import Arm, load_arm, resolve_arm_path
 from aacmm_pin.model.encoder_map import correct_with_slopes, readouts_of_angles
@@ -127,8 +123,7 @@ class CalibratedArm:
         """Whether one sample may take the plain-float path (:mod:`._plain_maps`)."""
         self._fast = self._plain_ok and not params.extensions
         """... and needs no extension term either."""
-        self._terms = [(term_from_key(key), np.asarray(values, dtype=float))
-                       for key, values in params.extensions.items()]
+        self._terms = term_values(params)  # looked up where the parameters were made
         self._keys = list(params.extensions)
         self._rotation = params.rotation()
         self._translation = np.asarray(params.translation, dtype=float)

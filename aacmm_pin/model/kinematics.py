@@ -141,7 +141,7 @@ def _tool_values(arm: Arm, params: Parameters) -> np.ndarray:
 class Adjustment:
     """How a calibration's extension terms change the arm at N samples (SI).
 
-    Built by the effect library (:func:`aacmm_pin.effects.registry.adjustment`) and applied here.
+    Built by the effect library (:func:`aacmm_pin.effects.forward.adjustment`) and applied here.
 
     Args:
         n: number of samples.

@@ -23,7 +23,7 @@ import pinocchio as pin
 from aacmm_pin.analyses.validation import ValidationResult, points_in_main_frame, validate
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.calibrated import predict
-from aacmm_pin.effects.registry import check_extensions
+from aacmm_pin.effects.parameters_file import check_extensions
 from aacmm_pin.extras import require
 from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.model.arm import Arm, load_arm, one_entry_per_axis
