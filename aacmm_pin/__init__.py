@@ -32,6 +32,7 @@ if TYPE_CHECKING:
         AngleTerm,
         BasisTerm,
         Effect,
+        FrameTerm,
         MapTerm,
         MeasurementTerm,
         ScaleTerm,
@@ -83,8 +84,8 @@ __all__ = [
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
     "Sizes", "read_sizes", "write_sizes", "import_points", "ImportResult", "PointFormat",
     # the extension point: an effect, the ways its terms act, registration
-    "Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm", "MapTerm", "BasisTerm",
-    "Variable", "register_effect", "load_effect_file",
+    "Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "FrameTerm", "MeasurementTerm", "MapTerm",
+    "BasisTerm", "Variable", "register_effect", "load_effect_file",
 ]
 
 _PUBLIC: dict[str, tuple[str, ...]] = {
@@ -109,7 +110,7 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "effects.calibrated": ("predict", "stylus_jacobians", "stylus_positions"),
     "effects.calibrated_arm": ("CalibratedArm", "load_calibrated"),
     "model.parameters": ("Parameters",),
-    "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm",
+    "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "FrameTerm", "MeasurementTerm",
                      "MapTerm", "BasisTerm", "Variable"),
     "effects.parameters_file": ("read_parameters", "write_parameters"),
     "effects.registry": ("register_effect", "load_effect_file"),

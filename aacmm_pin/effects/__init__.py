@@ -3,7 +3,7 @@ r"""The effect library: named extensions of the arm model, for :func:`aacmm_pin.
 An effect (:class:`Effect`) is a physical cause of measurement error; it proposes terms
 (:class:`Term`), each a few parameters that the model is linear in, acting in one of a few ways
 (one subclass each: :class:`AngleTerm`, :class:`ScaleTerm`, :class:`TiltTerm`,
-:class:`MeasurementTerm`, :class:`MapTerm`; see :mod:`aacmm_pin.effects.base`).
+:class:`FrameTerm`, :class:`MeasurementTerm`, :class:`MapTerm`; see :mod:`aacmm_pin.effects.base`).
 
 Built-in effects (one module each): ``encoder`` (map or low-order harmonics), ``compliance``
 (gravity torque about the joint axis, from the URDF inertias), ``lateral_compliance`` (gravity
@@ -26,6 +26,7 @@ from aacmm_pin.effects.base import (
     AngleTerm,
     BasisTerm,
     Effect,
+    FrameTerm,
     MapTerm,
     MeasurementTerm,
     ModelSpec,
@@ -59,7 +60,7 @@ from aacmm_pin.effects.registry import (
 )
 
 __all__ = [
-    "LIBRARY", "Adjustment", "AngleTerm", "BasisTerm", "Effect", "EffectNotFound", "MapTerm",
+    "LIBRARY", "Adjustment", "AngleTerm", "BasisTerm", "Effect", "EffectNotFound", "FrameTerm", "MapTerm",
     "MeasurementTerm", "ModelSpec", "ScaleTerm", "StylusDerivatives", "Term", "TiltTerm", "Variable",
     "backlash", "check_extensions", "compliance", "crosstalk", "effect_names", "encoder_harmonic",
     "encoder_map", "lateral_compliance", "library", "load_effect_file", "load_plugins",

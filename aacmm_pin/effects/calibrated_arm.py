@@ -43,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.effects._plain_maps import PlainMaps
+from aacmm_pin.effects.base import FrameTerm
 from aacmm_pin.effects.forward import term_values, terms_adjustment
 from aacmm_pin.effects.parameters_file import check_extensions, read_parameters
 from aacmm_pin.errors import ArgumentError
@@ -319,7 +320,7 @@ class CalibratedArm:
                 vals := self._one(readouts)) is not None:
             angles = np.array(self._plain.forward(vals, "readouts")[0])
             change = self._change(np.array([vals]), columns, direction)
-            if change is None or not change.tilted:  # else predict's tilt columns, below
+            if change is None or not change.moves_point:  # else predict's tilt or twist columns
                 if change is not None:
                     angles += change.offsets[0]
                 pin.forwardKinematics(self.model, self.data, angles)
@@ -341,7 +342,7 @@ class CalibratedArm:
         """Return the tool frame's placement, a homogeneous transform (4 x 4), m.
 
         Its translation is :meth:`position`; its rotation that of the tool link at the true
-        joint angles (lateral tilts of extension terms move the point only).
+        joint angles (lateral tilts and frame twists of extension terms move the point only).
 
         Args:
             readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
@@ -387,8 +388,8 @@ class CalibratedArm:
         j is d/d(readout j): the joint's column times the slope of its map and through the
         couplings (a coupled axis has no readout: a zero column). The extension terms' angle
         errors enter the angles at which it is taken, not its columns (their change with the
-        readouts is second order); a scale term scales the velocity rows; lateral tilt terms,
-        which move the point (:meth:`position`), are left out (their change is of their size times
+        readouts is second order); a scale term scales the velocity rows; lateral tilt and frame
+        terms, which move the point (:meth:`position`), are left out (their change is of their size times
         the rotation, second order too).
 
         Args:
@@ -584,8 +585,21 @@ def load_calibrated(path: str | Path, arm: str | Path | None = None) -> Calibrat
                             f"{params.arm}); give another arm with the folder or its "
                             f"{FULL_PARAMETERS}")
     # a compact URDF (compact.json: no DH values) is loaded as it is, without error frames
-    return CalibratedArm(load_arm(arm if arm is not None else params.arm,
-                                  error_frames=bool(params.dh)), params)
+    loaded = CalibratedArm(load_arm(arm if arm is not None else params.arm,
+                                    error_frames=bool(params.dh)), params)
+    if file.name == COMPACT_PARAMETERS and _moves_a_folded_frame(loaded):
+        return load_calibrated(file.with_name(FULL_PARAMETERS), arm)
+    return loaded
+
+
+def _moves_a_folded_frame(runtime: CalibratedArm) -> bool:
+    """Whether a frame term of the calibration moves a frame its (compact) model has not.
+
+    The compact URDF folds the error frames into the joint origins: a term on an error frame is
+    evaluated on the arm of ``parameters.json``, which keeps them.
+    """
+    return any(isinstance(t, FrameTerm) and not runtime.model.existFrame(t.frame)
+               for t, _ in runtime._terms)
 
 
 def _urdf_path(arm: str | Path) -> Path:
