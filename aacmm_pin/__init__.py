@@ -41,7 +41,8 @@ if TYPE_CHECKING:
         Variable,
     )
     from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
-    from aacmm_pin.effects.calibrated_arm import CalibratedArm, load_calibrated
+    from aacmm_pin.effects.calibrated_arm import CalibratedArm
+    from aacmm_pin.effects.calibrated_folder import load_calibrated
     from aacmm_pin.effects.parameters_file import read_parameters, write_parameters
     from aacmm_pin.effects.registry import load_effect_file, register_effect
     from aacmm_pin.errors import (
@@ -108,7 +109,8 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "outputs.calibration_folder": ("CalibrationFolder", "read_calibration"),
     "model.kinematics": ("StylusJacobians",),
     "effects.calibrated": ("predict", "stylus_jacobians", "stylus_positions"),
-    "effects.calibrated_arm": ("CalibratedArm", "load_calibrated"),
+    "effects.calibrated_arm": ("CalibratedArm",),
+    "effects.calibrated_folder": ("load_calibrated",),
     "model.parameters": ("Parameters",),
     "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "FrameTerm", "MeasurementTerm",
                      "MapTerm", "BasisTerm", "Variable"),

@@ -333,7 +333,7 @@ def test_a_term_on_an_error_frame_survives_the_compact_urdf(arm: ap.Arm, small_s
                                                              tmp_path: Path) -> None:
     """The compact URDF folds the error frames: a calibration whose frame term moves one is
     evaluated on parameters.json's arm by load_calibrated, the same points as predict."""
-    from aacmm_pin.effects.calibrated_arm import load_calibrated
+    from aacmm_pin.effects.calibrated_folder import load_calibrated
     from aacmm_pin.effects.parameters_file import read_parameters
     from aacmm_pin.effects.registry import load_effect_file
 
