@@ -27,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from aacmm_pin.data.arm_names import ArmNames, couplings_of
 from aacmm_pin.data.bounded_read import read_bounded
-from aacmm_pin.data.campaign import ArmNames, couplings_of, write_campaign
+from aacmm_pin.data.campaign_writer import write_campaign
 from aacmm_pin.data.columns import MAX_ANGLE_DEG
 from aacmm_pin.data.couplings import fill_coupled
 from aacmm_pin.data.csv_table import MAX_COLUMNS, MAX_FILE_BYTES, radian_like_column, read_table
