@@ -217,15 +217,24 @@ def _worst_ranges(std: np.ndarray, nodes_deg: np.ndarray, top: int = 2
 
 
 def candidate_grid(campaign: Campaign, per_side: int = 3, half_width: float = 0.26,
-                   heights: Sequence[float] = (0.0, 0.25)) -> np.ndarray:
+                   heights: Sequence[float] = (0.0, 0.25), *, unit: float = 1.0) -> np.ndarray:
     """Return candidate R-Test nest positions around the present nests' centre, shape (k, 3), m.
 
-    A square of ``per_side`` x ``per_side`` positions, ``half_width`` (m) from the centre to each
+    A square of ``per_side`` x ``per_side`` positions, ``half_width`` from the centre to each
     side (one position, the centre, for ``per_side`` 1), at each height above the nests (m),
     ordered by height, then x, then y: ``k = per_side**2 * len(heights)``.
+
+    Args:
+        campaign: the campaign (its nests' zero positions).
+        per_side: positions along x and along y.
+        half_width: from the centre to the outer positions, in ``unit``.
+        heights: above the nests' centre, m.
+        unit: metres per unit of ``half_width`` (the CLI's ``--spacing-mm``: ``MM``); the steps
+            are spaced in that unit, then converted (the grid the CLI has always built).
     """
     centre = np.mean(list(campaign.locations.values()), axis=0)
-    steps = np.linspace(-half_width, half_width, per_side) if per_side > 1 else np.zeros(1)
+    steps = (np.linspace(-half_width, half_width, per_side) * unit if per_side > 1
+             else np.zeros(1))
     return np.array([centre + [dx, dy, dz] for dz in heights for dx in steps for dy in steps])
 
 

@@ -313,7 +313,7 @@ def _plan_into(args: argparse.Namespace, inputs: list[Path]) -> int:
     cal = identify(campaign, arm, model=args.model, max_nfev=args.max_nfev,
                    progress=True)
     heights = [float(h) * 1e-3 for h in args.heights_mm.split(",")]
-    grid = candidate_grid(campaign, args.grid, args.spacing_mm * 1e-3, heights)
+    grid = candidate_grid(campaign, args.grid, args.spacing_mm, heights, unit=1e-3)
     result = plan(cal, campaign, grid=grid, n_postures=args.postures, seed=args.seed,
                   progress=True)
     print(result.table(args.top))

@@ -36,7 +36,7 @@ from aacmm_pin.data.arm_names import ArmNames, couplings_of
 from aacmm_pin.data.columns import BUILT_IN, column, file_order
 from aacmm_pin.data.csv_table import DISPLACEMENT, POINT, q_names
 from aacmm_pin.data.logs import NOISE_FILE, Campaign, LengthBarLog, PointLog, SpatLog
-from aacmm_pin.data.output_claim import temp_prefix, umask
+from aacmm_pin.data.output_claim import remove_leftovers, temp_prefix, umask
 from aacmm_pin.data.spreadsheet import neutralise_formulas
 from aacmm_pin.errors import AcquisitionError
 
@@ -353,7 +353,12 @@ def write_zero(folder: str | Path, location: int, zero: np.ndarray) -> None:
 
 
 def _replace_text(path: Path, text: str) -> None:
-    """Replace ``path`` by ``text`` (UTF-8) through a temporary file beside it and one rename."""
+    """Replace ``path`` by ``text`` (UTF-8) through a temporary file beside it and one rename.
+
+    A killed run's temporary file of ``path`` is removed first
+    (:func:`~aacmm_pin.data.output_claim.remove_leftovers`).
+    """
+    remove_leftovers(path)
     fd, name = tempfile.mkstemp(prefix=temp_prefix(path), suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
