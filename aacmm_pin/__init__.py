@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from aacmm_pin.analyses.discovery import discover
     from aacmm_pin.analyses.discovery_results import Discovery
     from aacmm_pin.analyses.planning import Plan, plan
-    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign
     from aacmm_pin.analyses.uncertainty import MonteCarloResult, monte_carlo
     from aacmm_pin.analyses.validation import ValidationResult, validate
     from aacmm_pin.data.campaign import (
@@ -66,6 +66,7 @@ if TYPE_CHECKING:
     from aacmm_pin.outputs.calibration_folder import CalibrationFolder, read_calibration
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.outputs.export import write_calibration
+    from aacmm_pin.outputs.simulation_folder import write_simulation
     from aacmm_pin.outputs.viewer import View, view
 
 __version__ = "0.1.0"
@@ -118,7 +119,8 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "effects.registry": ("register_effect", "load_effect_file"),
     "analyses.planning": ("Plan", "plan"),
     "model.sizes": ("Sizes", "read_sizes", "write_sizes"),
-    "analyses.simulate": ("Simulation", "SimulationConfig", "simulate_campaign", "write_simulation"),
+    "analyses.simulate": ("Simulation", "SimulationConfig", "simulate_campaign"),
+    "outputs.simulation_folder": ("write_simulation",),
     "analyses.uncertainty": ("MonteCarloResult", "monte_carlo"),
     "analyses.validation": ("ValidationResult", "validate"),
     "outputs.viewer": ("View", "view"),
