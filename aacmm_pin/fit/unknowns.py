@@ -20,6 +20,7 @@ import scipy.sparse as sp
 
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians, stylus_positions
+from aacmm_pin.effects.contract import check_once
 from aacmm_pin.effects.registry import measurement_shift
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
@@ -214,6 +215,7 @@ class Unknowns:
         ``jac`` are the stylus Jacobians at ``params`` (:func:`stylus_jacobians`).
         """
         samples = self._samples(q) or Samples(self.arm, q)
+        check_once(self.terms, samples, params)  # columns vs forward change, once per process
         cols = [t.columns(samples, jac, params) for t in self.terms]
         return np.concatenate(cols, axis=2) if cols else np.zeros((q.shape[0], 3, 0))
 

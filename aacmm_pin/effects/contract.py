@@ -1,0 +1,245 @@
+r"""The effect contract at run time: declared columns, and a term's columns against its model.
+
+Declared columns are checked before an effect is asked anything, a term's columns against its
+forward change before the term is first used.
+
+Two checks, both cheap, for every effect and term (built-in, an installed plugin's, a file's):
+
+* **Declared columns** (:func:`usable_effects`): an effect is asked nothing (``candidates``,
+  ``offered``, ``variables``) on samples that lack a column it declares (:attr:`Effect.reads`); it
+  is left out and listed (:class:`LeftOut`, e.g. ``basetemp (no column temp_base_c)``), never an
+  error. Every place that asks effects goes through this one function.
+* **Columns against the forward change** (:func:`check_once`): the first time a term is used in a
+  process (by its effect's plugin and its key), its Jacobian columns (``term.columns``) on
+  :data:`SAMPLES` of the samples are compared with central differences of its forward change: the
+  stylus centres (:func:`aacmm_pin.model.kinematics.stylus_positions`) with the term's
+  :class:`~aacmm_pin.model.kinematics.Adjustment` (``term.adjust``) at its values :math:`\pm h`,
+  plus its change of the measured point (``term.shift``). A term whose columns disagree beyond the
+  differences' own error is refused (:class:`ContractBroken`, one line naming the term, its effect
+  and its plugin). The check is generic (no per-kind code): any term that acts through
+  ``adjust``/``shift`` and gives ``columns`` is covered. Terms whose values are not extensions (an
+  encoder map: its nodes live in the maps) are skipped; the contract test checks them.
+
+The step and tolerance (:func:`disagreement`): :math:`h` is :data:`STEP` of the parameter's
+plausible size. Two central differences, :math:`D_h` and :math:`D_{2h}`, give the derivative
+:math:`R = (4 D_h - D_{2h}) / 3` (Richardson: truncation :math:`O(h^4)`); the truncation error of
+:math:`D_h` is :math:`(D_{2h} - D_h) / 3`, so :math:`|D_{2h} - D_h|` bounds the truncation of
+:math:`R` with a factor of 3 to spare. Rounding: every stylus centre carries at most
+:data:`ROUNDING_ULPS` ulps of its size :math:`|p|`, which :math:`R` turns into at most
+:math:`1.5 \cdot \text{ulps} \cdot \epsilon |p| / h` (and the columns' own rounding, the same ulps
+of their size). The tolerance is their sum; a term without a forward change (the issue's plugin:
+columns, no ``adjust``) differs by its whole column, ~1e6 times this on a plausible term.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+
+from aacmm_pin.effects.base import Effect, PluginOutputError, Term
+from aacmm_pin.effects.registry import plugin_of
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.model import kinematics
+from aacmm_pin.model.kinematics import Adjustment
+
+if TYPE_CHECKING:
+    from aacmm_pin.model.parameters import Parameters
+    from aacmm_pin.model.samples import Samples
+
+SAMPLES = 4
+"""Samples the columns are checked on (spread over the samples given)."""
+STEP = 1e-3
+"""Central differences' step, as a fraction of each parameter's plausible size."""
+ROUNDING_ULPS = 64.0
+"""Rounding error of a stylus centre, in ulps of its size: a chain of up to ~16 rigid transforms
+(base, the joints and their error frames, the tool) each adding a few ulps."""
+FRAME = "mt"
+"""The frame the check works in: the fit's and the scorers' (the MT-CS, with X0)."""
+
+T = TypeVar("T")
+_CHECKED: set[tuple[str, str]] = set()
+_LOCK = threading.Lock()
+
+
+# ------------------------------------------------------------------ declared columns
+@dataclass(frozen=True)
+class LeftOut:
+    """An effect not asked on these samples: they lack columns it declares (``Effect.reads``)."""
+
+    effect: str
+    """The effect's name."""
+    columns: tuple[str, ...]
+    """The declared columns the samples do not have, as in the files (``temp_base_c``)."""
+
+    def __str__(self) -> str:
+        """``basetemp (no column temp_base_c)``."""
+        return f"{self.effect} (no column{'s' if len(self.columns) > 1 else ''} " \
+               f"{', '.join(self.columns)})"
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return ``discovery.json``'s entry: the effect and the columns missing."""
+        return {"effect": self.effect, "missing_columns": list(self.columns)}
+
+
+def missing_columns(effect: Effect, samples: Samples) -> tuple[str, ...]:
+    """Return the columns ``effect`` declares (:attr:`Effect.reads`) that the samples lack."""
+    return tuple(name for name in effect.reads if not samples.has_column(name))
+
+
+def usable_effects(effects: Iterable[Effect], samples: Samples
+                   ) -> tuple[list[Effect], list[LeftOut]]:
+    """Return the effects that may be asked on these samples, and those left out (and why).
+
+    An effect is asked nothing (``candidates``, ``offered``, ``variables``) on samples without a
+    column it declares: it is left out, in order, never an error.
+    """
+    kept, left = [], []
+    for effect in effects:
+        if missing := missing_columns(effect, samples):
+            left.append(LeftOut(effect.name, missing))
+        else:
+            kept.append(effect)
+    return kept, left
+
+
+# ------------------------------------------------------------------ columns vs forward change
+class ContractBroken(PluginOutputError):
+    """A term's columns disagree with central differences of its forward change (adjust, shift)."""
+
+
+def check_once(terms: Iterable[Term], samples: Samples, params: Parameters) -> None:
+    """Check each term's columns against its forward change, once per process (see module doc).
+
+    A term is known by its effect's plugin and its key: checked the first time it comes, then
+    passed at the cost of a set lookup.
+
+    Args:
+        terms: the terms about to be evaluated (a fit's, a scorer's candidate).
+        samples: the samples they are evaluated on (N >= 1); :data:`SAMPLES` spread rows are used.
+        params: the parameters at which they are evaluated (the term's values there, zero when
+            the parameters have none; the other extensions are left out of the check).
+
+    Raises:
+        ContractBroken: one line naming the term, its effect and its plugin, for columns that
+            differ from the central differences of the forward change.
+        PluginOutputError: naming the term, for a forward change or columns that raise or have
+            the wrong shape.
+        MissingColumn: as the term's own code raises it, for samples without its column.
+    """
+    for term in terms:
+        key = (plugin_of(term.effect), term.key)
+        if key in _CHECKED:
+            continue
+        check_term(term, samples, params)
+        with _LOCK:
+            _CHECKED.add(key)
+
+
+def check_term(term: Term, samples: Samples, params: Parameters, n: int = SAMPLES) -> None:
+    """Check one term's columns against central differences of its forward change (every time).
+
+    See :func:`check_once` for the arguments and errors. The term's parameters move together, along
+    one direction of random signs and weights (a wrong column cannot cancel in it but by chance);
+    only when that disagrees is each parameter checked alone, to name the one whose column is
+    wrong. A term whose values are not extensions (an encoder map: its nodes live in the maps) is
+    not checked here (the contract test does).
+    """
+    if not term.is_extension:
+        return
+    rows = np.unique(np.linspace(0, samples.n - 1, min(n, samples.n)).round().astype(int))
+    sub = samples.select(rows)
+    k = len(term.names)
+    values = np.asarray(params.extensions.get(term.key, np.zeros(k)), dtype=float).reshape(-1)
+    cols = _columns(term, sub, params.replace(extensions={term.key: values}), values)
+    sizes = np.abs(np.broadcast_to(np.asarray(term.sizes(sub.arm.sizes), dtype=float), (k,)))
+    steps = STEP * np.where(sizes > 0, sizes, 1.0)
+    plain = params.replace(extensions={})
+    rng = np.random.default_rng(k)
+    direction = steps * rng.choice([-1.0, 1.0], k) * rng.uniform(0.5, 1.5, k)
+    if disagreement(cols @ direction, _points(term, plain, sub, values, direction), 1.0) is None:
+        return
+    for j in range(k):
+        alone = np.where(np.arange(k) == j, steps, 0.0)
+        why = disagreement(cols[:, :, j], _points(term, plain, sub, values, alone), steps[j])
+        if why is not None:
+            raise ContractBroken(term, f"its columns disagree with its forward change (adjust, "
+                                       f"shift) for {term.names[j]}: {why} on {sub.n} samples: "
+                                       "columns and forward change must describe one model")
+    raise ContractBroken(term, f"its columns disagree with its forward change (adjust, shift) "
+                               f"for its {k} parameters together on {sub.n} samples, though for "
+                               "none alone: columns and forward change must describe one model")
+
+
+def _columns(term: Term, samples: Samples, params: Parameters, values: np.ndarray) -> np.ndarray:
+    """Return the term's columns at ``params`` (its values ``values``), checked: (n, 3, k)."""
+    stylus = _guarded(term, "its forward change", lambda: kinematics.stylus_jacobians(
+        samples.arm, params, samples.q, FRAME, samples, tool=samples.tool,
+        adjust=_adjustment(term, values, samples), tilts=True))
+    cols = _guarded(term, "its columns", lambda: np.asarray(
+        term.columns(samples, stylus, params), dtype=float))
+    if cols.shape != (samples.n, 3, values.size):
+        raise PluginOutputError(term, f"its columns have shape {cols.shape}, expected "
+                                      f"({samples.n}, 3, {values.size}) for {samples.n} samples "
+                                      f"and {values.size} parameters")
+    return cols
+
+
+def disagreement(column: np.ndarray, points: Sequence[np.ndarray], h: float) -> str | None:
+    """Return why one parameter's column differs from the central differences, or None.
+
+    Args:
+        column: the term's column of the parameter, shape (n, 3), m per unit.
+        points: the modelled points at values -2h, -h, +h, +2h of the parameter, each (n, 3), m.
+        h: the step, in the parameter's unit.
+    """
+    minus2, minus1, plus1, plus2 = points
+    d1 = (plus1 - minus1) / (2 * h)
+    d2 = (plus2 - minus2) / (4 * h)
+    derivative = (4 * d1 - d2) / 3
+    size = max(float(np.abs(p).max()) for p in points)
+    ulp = ROUNDING_ULPS * np.finfo(float).eps
+    tol = float(np.abs(d2 - d1).max()) + 1.5 * ulp * size / h + ulp * float(np.abs(column).max())
+    off = float(np.abs(column - derivative).max())
+    if off <= tol:
+        return None
+    return (f"columns up to {np.abs(column).max():.3g}, central differences up to "
+            f"{np.abs(derivative).max():.3g} (m per unit), apart by {off:.3g} > {tol:.2g}")
+
+
+def _points(term: Term, params: Parameters, samples: Samples, values: np.ndarray,
+            step: np.ndarray) -> list[np.ndarray]:
+    """Return the modelled points at the term's values moved by -2, -1, 1 and 2 times ``step``."""
+    return [_guarded(term, "its forward change",
+                     functools.partial(_point, term, params, samples, values + t * step))
+            for t in (-2.0, -1.0, 1.0, 2.0)]
+
+
+def _adjustment(term: Term, values: np.ndarray, samples: Samples) -> Adjustment:
+    """Return the term's change of the arm alone at these values."""
+    out = Adjustment(samples.n, samples.arm.n_axes)
+    term.adjust(values, samples, out)
+    return out
+
+
+def _point(term: Term, params: Parameters, samples: Samples, values: np.ndarray) -> np.ndarray:
+    """Return the modelled point with the term alone at ``values``, shape (n, 3), m (MT-CS)."""
+    pos = kinematics.stylus_positions(samples.arm, params, samples.q, FRAME, samples,
+                                      tool=samples.tool, adjust=_adjustment(term, values, samples))
+    shift = term.shift(values, samples)
+    return pos if shift is None else pos + np.asarray(shift, dtype=float)
+
+
+def _guarded(term: Term, what: str, run: Callable[[], T]) -> T:
+    """Return ``run()``; a plugin's exception (not the package's own) named in one line."""
+    try:
+        out = run()
+    except AacmmError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a plugin's code: named, in one line
+        raise PluginOutputError(term, f"{what} raised {type(exc).__name__}: {exc}") from None
+    return out
