@@ -33,6 +33,7 @@ columns, no ``adjust``) differs by its whole column, ~1e6 times this on a plausi
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import threading
 from collections.abc import Callable, Iterable, Sequence
@@ -42,10 +43,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 
 from aacmm_pin.effects.base import Effect, PluginOutputError, Term
+from aacmm_pin.effects.calibrated import needs_tilts
 from aacmm_pin.effects.registry import plugin_of
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.model import kinematics
-from aacmm_pin.model.kinematics import Adjustment
+from aacmm_pin.model.kinematics import Adjustment, StylusJacobians
 
 if TYPE_CHECKING:
     from aacmm_pin.model.parameters import Parameters
@@ -64,6 +66,8 @@ FRAME = "mt"
 T = TypeVar("T")
 _CHECKED: set[tuple[str, str]] = set()
 _LOCK = threading.Lock()
+_STYLUS: list[tuple[tuple[Any, ...], StylusJacobians]] = []
+"""The last stylus Jacobians of an arm no term changes: (parameters, readouts, tools, tilts)."""
 
 
 # ------------------------------------------------------------------ declared columns
@@ -155,7 +159,7 @@ def check_term(term: Term, samples: Samples, params: Parameters, n: int = SAMPLE
     sub = samples.select(rows)
     k = len(term.names)
     values = np.asarray(params.extensions.get(term.key, np.zeros(k)), dtype=float).reshape(-1)
-    cols = _columns(term, sub, params.replace(extensions={term.key: values}), values)
+    cols = _columns(term, sub, params.replace(extensions={term.key: values}), values, params)
     sizes = np.abs(np.broadcast_to(np.asarray(term.sizes(sub.arm.sizes), dtype=float), (k,)))
     steps = STEP * np.where(sizes > 0, sizes, 1.0)
     plain = params.replace(extensions={})
@@ -175,11 +179,10 @@ def check_term(term: Term, samples: Samples, params: Parameters, n: int = SAMPLE
                                "none alone: columns and forward change must describe one model")
 
 
-def _columns(term: Term, samples: Samples, params: Parameters, values: np.ndarray) -> np.ndarray:
+def _columns(term: Term, samples: Samples, params: Parameters, values: np.ndarray,
+             base: Parameters) -> np.ndarray:
     """Return the term's columns at ``params`` (its values ``values``), checked: (n, 3, k)."""
-    stylus = _guarded(term, "its forward change", lambda: kinematics.stylus_jacobians(
-        samples.arm, params, samples.q, FRAME, samples, tool=samples.tool,
-        adjust=_adjustment(term, values, samples), tilts=True))
+    stylus = _stylus(term, samples, params, values, base)
     cols = _guarded(term, "its columns", lambda: np.asarray(
         term.columns(samples, stylus, params), dtype=float))
     if cols.shape != (samples.n, 3, values.size):
@@ -187,6 +190,38 @@ def _columns(term: Term, samples: Samples, params: Parameters, values: np.ndarra
                                       f"({samples.n}, 3, {values.size}) for {samples.n} samples "
                                       f"and {values.size} parameters")
     return cols
+
+
+def _stylus(term: Term, samples: Samples, params: Parameters, values: np.ndarray,
+            base: Parameters) -> StylusJacobians:
+    """Return the stylus Jacobians with the term's change of the arm at its values.
+
+    Where that change leaves the arm as it is (a term at zero, e.g. a candidate), the last ones of
+    these samples and ``base`` parameters serve again: the terms a fit or a scorer brings in one
+    go cost one evaluation of the Jacobians.
+    """
+    change = _guarded(term, "its forward change",
+                      functools.partial(_adjustment, term, values, samples))
+    key = (base, samples.q.tobytes(), None if samples.tool is None else samples.tool.tobytes(),
+           needs_tilts([term]))
+    still = _unchanged(change)
+    with _LOCK:
+        if still and _STYLUS and _STYLUS[0][0][0] is base and _STYLUS[0][0][1:] == key[1:]:
+            return _STYLUS[0][1]
+    stylus = _guarded(term, "its forward change", lambda: kinematics.stylus_jacobians(
+        samples.arm, params, samples.q, FRAME, samples, tool=samples.tool, adjust=change,
+        tilts=bool(key[3])))
+    if still:
+        with _LOCK:
+            _STYLUS[:] = [(key, stylus)]
+    return stylus
+
+
+def _unchanged(change: Adjustment) -> bool:
+    """Whether a change of the arm leaves it as it is (every field as a new one's)."""
+    fresh = Adjustment(change.n, change.n_axes)
+    return all(np.array_equal(getattr(change, f.name), getattr(fresh, f.name))
+               for f in dataclasses.fields(change) if not f.init)
 
 
 def disagreement(column: np.ndarray, points: Sequence[np.ndarray], h: float) -> str | None:
@@ -213,10 +248,30 @@ def disagreement(column: np.ndarray, points: Sequence[np.ndarray], h: float) -> 
 
 def _points(term: Term, params: Parameters, samples: Samples, values: np.ndarray,
             step: np.ndarray) -> list[np.ndarray]:
-    """Return the modelled points at the term's values moved by -2, -1, 1 and 2 times ``step``."""
-    return [_guarded(term, "its forward change",
-                     functools.partial(_point, term, params, samples, values + t * step))
-            for t in (-2.0, -1.0, 1.0, 2.0)]
+    """Return the modelled points at the term's values moved by -2, -1, 1 and 2 times ``step``.
+
+    Each (n, 3), m, in the MT-CS: the stylus centres with the term's change of the arm alone, plus
+    its change of the measured point. The four in one call of the kinematics (the samples
+    repeated) where their adjustments stack, else one call each.
+    """
+    moved = [values + t * step for t in (-2.0, -1.0, 1.0, 2.0)]
+    changes = [_guarded(term, "its forward change", functools.partial(_adjustment, term, v, samples))
+               for v in moved]
+    shifts = [_guarded(term, "its forward change", functools.partial(term.shift, v, samples))
+              for v in moved]
+    arm, n, stacked = samples.arm, samples.n, _stacked(changes)
+    if stacked is None:
+        pos = [_guarded(term, "its forward change", functools.partial(
+            kinematics.stylus_positions, arm, params, samples.q, FRAME, samples, tool=samples.tool,
+            adjust=change)) for change in changes]
+    else:
+        tools = kinematics.tool_rows(arm, n, None, samples)
+        every = _guarded(term, "its forward change", functools.partial(
+            kinematics.stylus_positions, arm, params, np.tile(samples.q, (len(moved), 1)), FRAME,
+            tool=np.tile(tools, len(moved)), adjust=stacked))
+        pos = [every[i * n:(i + 1) * n] for i in range(len(moved))]
+    return [p if shift is None else p + np.asarray(shift, dtype=float)
+            for p, shift in zip(pos, shifts)]
 
 
 def _adjustment(term: Term, values: np.ndarray, samples: Samples) -> Adjustment:
@@ -226,12 +281,25 @@ def _adjustment(term: Term, values: np.ndarray, samples: Samples) -> Adjustment:
     return out
 
 
-def _point(term: Term, params: Parameters, samples: Samples, values: np.ndarray) -> np.ndarray:
-    """Return the modelled point with the term alone at ``values``, shape (n, 3), m (MT-CS)."""
-    pos = kinematics.stylus_positions(samples.arm, params, samples.q, FRAME, samples,
-                                      tool=samples.tool, adjust=_adjustment(term, values, samples))
-    shift = term.shift(values, samples)
-    return pos if shift is None else pos + np.asarray(shift, dtype=float)
+def _stacked(parts: list[Adjustment]) -> Adjustment | None:
+    """Return the changes of the arm one after the other (samples repeated), or None.
+
+    Generic in what an :class:`Adjustment` holds: every field it fills itself must be an array
+    with a row per sample; otherwise (None) the kinematics take each change apart.
+    """
+    n = parts[0].n
+    try:
+        out = Adjustment(n * len(parts), parts[0].n_axes)
+    except TypeError:  # built otherwise: taken apart
+        return None
+    for f in dataclasses.fields(out):
+        if f.init:
+            continue
+        rows = [getattr(p, f.name) for p in parts]
+        if not all(isinstance(r, np.ndarray) and r.ndim and r.shape[0] == n for r in rows):
+            return None
+        setattr(out, f.name, np.concatenate(rows))
+    return out
 
 
 def _guarded(term: Term, what: str, run: Callable[[], T]) -> T:
