@@ -99,7 +99,7 @@ class ArgumentError(AacmmError, ValueError):
 
 
 class MissingColumn(AacmmError, KeyError):
-    """Samples (or a file) have no such per-sample column, e.g. ``temp_base_c``.
+    """Samples (or a file) have no such per-sample column, e.g. ``temp_wrist_c``.
 
     A ``KeyError`` too, so that an effect's code written as for a mapping catches it. Its message
     is one line naming the column and the files that could hold it.

@@ -220,7 +220,7 @@ class Discovery:
     (:attr:`aacmm_pin.effects.Effect.reads`; :func:`aacmm_pin.effects.contract.usable_effects`)."""
 
     def left_out_text(self) -> str:
-        """Return ``left out: basetemp (no column temp_base_c), ...``, or "" when none is."""
+        """Return ``left out: thermal (no column temp_c), ...``, or "" when none is."""
         return "left out: " + ", ".join(map(str, self.left_out)) if self.left_out else ""
 
     @property

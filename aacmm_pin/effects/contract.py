@@ -7,7 +7,7 @@ Two checks, both cheap, for every effect and term (built-in, an installed plugin
 
 * **Declared columns** (:func:`usable_effects`): an effect is asked nothing (``candidates``,
   ``offered``, ``variables``) on samples that lack a column it declares (:attr:`Effect.reads`); it
-  is left out and listed (:class:`LeftOut`, e.g. ``basetemp (no column temp_base_c)``), never an
+  is left out and listed (:class:`LeftOut`, e.g. ``thermal (no column temp_c)``), never an
   error. Every place that asks effects goes through this one function.
 * **Columns against the forward change** (:func:`check_once`): the first time a term is used in a
   process (by its effect's plugin and its key), its Jacobian columns (``term.columns``) on
@@ -78,10 +78,10 @@ class LeftOut:
     effect: str
     """The effect's name."""
     columns: tuple[str, ...]
-    """The declared columns the samples do not have, as in the files (``temp_base_c``)."""
+    """The declared columns the samples do not have, as in the files (``temp_wrist_c``)."""
 
     def __str__(self) -> str:
-        """``basetemp (no column temp_base_c)``."""
+        """``thermal (no column temp_c)``."""
         return f"{self.effect} (no column{'s' if len(self.columns) > 1 else ''} " \
                f"{', '.join(self.columns)})"
 
