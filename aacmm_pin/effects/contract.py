@@ -218,10 +218,26 @@ def _stylus(term: Term, samples: Samples, params: Parameters, values: np.ndarray
 
 
 def _unchanged(change: Adjustment) -> bool:
-    """Whether a change of the arm leaves it as it is (every field as a new one's)."""
-    fresh = Adjustment(change.n, change.n_axes)
-    return all(np.array_equal(getattr(change, f.name), getattr(fresh, f.name))
-               for f in dataclasses.fields(change) if not f.init)
+    """Whether a change of the arm leaves it as it is (every field as a new one's).
+
+    A mapping's entry that a new change lacks counts as zeros (a frame's twist, say).
+    """
+    try:
+        fresh = Adjustment(change.n, change.n_axes)
+        filled = [f.name for f in dataclasses.fields(change) if not f.init]
+    except TypeError:  # built otherwise: not known to be unchanged
+        return False
+    for name in filled:
+        now, new = getattr(change, name), getattr(fresh, name)
+        if isinstance(now, dict) and isinstance(new, dict):  # an entry a new one lacks: zeros
+            same = all(isinstance(a, np.ndarray) and not np.any(a != new.get(k, 0.0))
+                       for k, a in now.items())
+        else:
+            same = isinstance(now, np.ndarray) and isinstance(new, np.ndarray) \
+                and np.array_equal(now, new)
+        if not same:
+            return False
+    return True
 
 
 def disagreement(column: np.ndarray, points: Sequence[np.ndarray], h: float) -> str | None:
@@ -284,22 +300,44 @@ def _adjustment(term: Term, values: np.ndarray, samples: Samples) -> Adjustment:
 def _stacked(parts: list[Adjustment]) -> Adjustment | None:
     """Return the changes of the arm one after the other (samples repeated), or None.
 
-    Generic in what an :class:`Adjustment` holds: every field it fills itself must be an array
-    with a row per sample; otherwise (None) the kinematics take each change apart.
+    Generic in what an :class:`Adjustment` holds: every field it fills itself is an array with a
+    row per sample, or a mapping of such arrays (an entry one change lacks: zeros); otherwise
+    (None) the kinematics take each change apart.
     """
     n = parts[0].n
     try:
         out = Adjustment(n * len(parts), parts[0].n_axes)
+        filled = [f.name for f in dataclasses.fields(out) if not f.init]
     except TypeError:  # built otherwise: taken apart
         return None
-    for f in dataclasses.fields(out):
-        if f.init:
-            continue
-        rows = [getattr(p, f.name) for p in parts]
-        if not all(isinstance(r, np.ndarray) and r.ndim and r.shape[0] == n for r in rows):
+    for name in filled:
+        fields = [getattr(p, name) for p in parts]
+        if all(isinstance(f, dict) for f in fields):
+            if (merged := _stacked_entries(fields, n)) is None:
+                return None
+            setattr(out, name, merged)
+        elif all(_per_sample(f, n) for f in fields):
+            setattr(out, name, np.concatenate(fields))
+        else:
             return None
-        setattr(out, f.name, np.concatenate(rows))
     return out
+
+
+def _stacked_entries(fields: list[dict[Any, Any]], n: int) -> dict[Any, np.ndarray] | None:
+    """Return mappings of per-sample arrays stacked by key (zeros where one lacks a key), or None."""
+    keys = list(dict.fromkeys(k for f in fields for k in f))
+    out = {}
+    for key in keys:
+        have = [f[key] for f in fields if key in f]
+        if not all(_per_sample(a, n) for a in have):
+            return None
+        out[key] = np.concatenate([f.get(key, np.zeros_like(have[0])) for f in fields])
+    return out
+
+
+def _per_sample(value: Any, n: int) -> bool:
+    """Whether a value is an array with a row per sample (n rows)."""
+    return isinstance(value, np.ndarray) and value.ndim > 0 and value.shape[0] == n
 
 
 def _guarded(term: Term, what: str, run: Callable[[], T]) -> T:
