@@ -374,6 +374,10 @@ def test_every_registered_effect_is_checked() -> None:
 
 
 # ------------------------------------------------------------------ (e) the contract at run time
+BASETEMP = "basetemp"
+"""Example 05's effect (an angle term on the column temp_base_c)."""
+BASETEMP_FILE = ROOT / "examples" / "05_plugin" / "aacmm_pin_basetemp.py"
+"""Example 05's plugin module, as its distribution installs it."""
 # A plugin whose term gives Jacobian columns but no forward change (issue 37: accepted by
 # discover, fitted to 18.3 ppm/K for a true 8 while the fit RMS rose): its ``adjust`` adds nothing.
 GHOST_SOURCE = '''
@@ -525,14 +529,14 @@ def test_samples_without_an_effects_column_leave_it_out(sources: dict[str, Any],
 
     arm, _, plain = sources["effects_sim"]
     _, _, warm = example_effect["effects_sim"]
-    effect = registry.library()[EXAMPLE]
+    effect = registry.library()[BASETEMP]
     with pytest.raises(KeyError, match=r"^no column 'temp_base_c' in the samples"):
         plain.column("temp_base_c")
     with pytest.raises(ap.AacmmError):
         plain.column("temp_base_c")
     kept, left = usable_effects([registry.library()["compliance"], effect], plain)
     assert [e.name for e in kept] == ["compliance"]
-    assert left == [LeftOut(EXAMPLE, ("temp_base_c",))]
+    assert left == [LeftOut(BASETEMP, ("temp_base_c",))]
     assert str(left[0]) == "basetemp (no column temp_base_c)"
     kept, left = usable_effects([effect], warm)
     assert kept == [effect] and left == [] and effect.candidates(arm, warm)
@@ -552,7 +556,7 @@ def test_discover_with_the_example_plugin_installed_lists_it_as_left_out(
                                    "Version: 0.1.0\n")
     (info / "entry_points.txt").write_text("[aacmm_pin.effects]\n"
                                            "basetemp = aacmm_pin_basetemp:BaseTemperature\n")
-    (site / EXAMPLE_PLUGIN.name).write_text(EXAMPLE_PLUGIN.read_text())
+    (site / BASETEMP_FILE.name).write_text(BASETEMP_FILE.read_text())
     out = tmp_path / "d"
     done = _cli("discover", str(campaign_folder), "--max-steps", "1", "--out", str(out),
                 pythonpath=str(site))
