@@ -566,3 +566,28 @@ def test_discover_with_the_example_plugin_installed_lists_it_as_left_out(
     result = json.loads((out / "discovery.json").read_text())
     assert {"effect": "basetemp", "missing_columns": ["temp_base_c"]} in result["left_out"]
     assert "basetemp" in result["library"]  # installed, registered, and not asked
+
+
+class _Asks(Effect):
+    """An effect that reads a column and fails loudly if asked anything on samples without it."""
+
+    name = "asks"
+    reads = ("temp_nowhere_c",)
+
+    def candidates(self, arm: ap.Arm, samples: Samples) -> list[Term]:
+        raise AssertionError("asked for candidates on samples without temp_nowhere_c")
+
+    def term(self, key: str) -> Term | None:
+        return None
+
+    def variables(self, arm: ap.Arm, samples: Samples) -> list[ap.Variable]:
+        raise AssertionError("asked for variables on samples without temp_nowhere_c")
+
+
+def test_the_residual_scan_asks_no_effect_without_its_column(sources: dict[str, Any]) -> None:
+    """The residual scan's variables come only from effects whose declared columns exist."""
+    from aacmm_pin.analyses.residual_scan import _variables
+
+    _, _, samples = sources["effects_sim"]
+    names = [v.name for v in _variables(samples, None, [registry.library()["thermal"], _Asks()])]
+    assert "temperature" in names
