@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from aacmm_pin.analyses.discovery import discover
     from aacmm_pin.analyses.discovery_results import Discovery
     from aacmm_pin.analyses.planning import Plan, plan
-    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign, write_simulation
+    from aacmm_pin.analyses.simulate import Simulation, SimulationConfig, simulate_campaign
     from aacmm_pin.analyses.uncertainty import MonteCarloResult, monte_carlo
     from aacmm_pin.analyses.validation import ValidationResult, validate
     from aacmm_pin.data.campaign import (
@@ -32,6 +32,7 @@ if TYPE_CHECKING:
         AngleTerm,
         BasisTerm,
         Effect,
+        FrameTerm,
         MapTerm,
         MeasurementTerm,
         ScaleTerm,
@@ -40,13 +41,10 @@ if TYPE_CHECKING:
         Variable,
     )
     from aacmm_pin.effects.calibrated import predict, stylus_jacobians, stylus_positions
-    from aacmm_pin.effects.calibrated_arm import CalibratedArm, load_calibrated
-    from aacmm_pin.effects.registry import (
-        load_effect_file,
-        read_parameters,
-        register_effect,
-        write_parameters,
-    )
+    from aacmm_pin.effects.calibrated_arm import CalibratedArm
+    from aacmm_pin.effects.calibrated_folder import load_calibrated
+    from aacmm_pin.effects.parameters_file import read_parameters, write_parameters
+    from aacmm_pin.effects.registry import load_effect_file, register_effect
     from aacmm_pin.errors import (
         AacmmError,
         ArgumentError,
@@ -69,6 +67,7 @@ if TYPE_CHECKING:
     from aacmm_pin.outputs.calibration_folder import CalibrationFolder, read_calibration
     from aacmm_pin.outputs.discovery_figures import write_discovery
     from aacmm_pin.outputs.export import write_calibration
+    from aacmm_pin.outputs.simulation_folder import write_simulation
     from aacmm_pin.outputs.viewer import View, view
 
 __version__ = "0.1.0"
@@ -89,8 +88,8 @@ __all__ = [
     "stylus_positions", "write_campaign", "write_parameters", "write_points", "write_simulation",
     "Sizes", "read_sizes", "write_sizes", "import_points", "ImportResult", "PointFormat",
     # the extension point: an effect, the ways its terms act, registration
-    "Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm", "MapTerm", "BasisTerm",
-    "Variable", "register_effect", "load_effect_file",
+    "Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "FrameTerm", "MeasurementTerm", "MapTerm",
+    "BasisTerm", "Variable", "register_effect", "load_effect_file",
 ]
 
 _PUBLIC: dict[str, tuple[str, ...]] = {
@@ -113,15 +112,17 @@ _PUBLIC: dict[str, tuple[str, ...]] = {
     "outputs.calibration_folder": ("CalibrationFolder", "read_calibration"),
     "model.kinematics": ("StylusJacobians",),
     "effects.calibrated": ("predict", "stylus_jacobians", "stylus_positions"),
-    "effects.calibrated_arm": ("CalibratedArm", "load_calibrated"),
+    "effects.calibrated_arm": ("CalibratedArm",),
+    "effects.calibrated_folder": ("load_calibrated",),
     "model.parameters": ("Parameters",),
-    "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "MeasurementTerm",
+    "effects.base": ("Effect", "Term", "AngleTerm", "ScaleTerm", "TiltTerm", "FrameTerm", "MeasurementTerm",
                      "MapTerm", "BasisTerm", "Variable"),
-    "effects.registry": ("read_parameters", "write_parameters", "register_effect",
-                         "load_effect_file"),
+    "effects.parameters_file": ("read_parameters", "write_parameters"),
+    "effects.registry": ("register_effect", "load_effect_file"),
     "analyses.planning": ("Plan", "plan"),
     "model.sizes": ("Sizes", "read_sizes", "write_sizes"),
-    "analyses.simulate": ("Simulation", "SimulationConfig", "simulate_campaign", "write_simulation"),
+    "analyses.simulate": ("Simulation", "SimulationConfig", "simulate_campaign"),
+    "outputs.simulation_folder": ("write_simulation",),
     "analyses.uncertainty": ("MonteCarloResult", "monte_carlo"),
     "analyses.validation": ("ValidationResult", "validate"),
     "outputs.viewer": ("View", "view"),

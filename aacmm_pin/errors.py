@@ -54,6 +54,10 @@ class CampaignFormatError(FileFormatError):
     """A campaign folder (spat.csv, locations.csv, lengthbar.csv, bar.csv) is malformed."""
 
 
+class AcquisitionError(AacmmError):
+    """The acquisition cannot start (ports, nest file, campaign files), with the reason."""
+
+
 class ArmModelError(AacmmError):
     """A URDF does not follow aacmm_pin's arm conventions (axes, error frames, tool)."""
 

@@ -22,7 +22,7 @@ from aacmm_pin.acquire.writer import SpatWriter, write_zero
 from aacmm_pin.cli.acquisition import add_parsers
 from aacmm_pin.cli.iso10360 import add_parsers as add_iso10360
 from aacmm_pin.data.campaign import read_campaign
-from aacmm_pin.errors import FileFormatError
+from aacmm_pin.errors import FileFormatError, StaleOutputWarning
 
 Q_DEG = [-35.063444, 78.282159, 171.07413, 35.139578, -135.639175, -78.001445, 128.347322]
 
@@ -232,6 +232,26 @@ def test_writer_refuses_other_columns_and_other_zero(tmp_path):
     assert "already has" in SpatWriter(folder, 1, zero=np.array([0.1, 0, 0])).locations_message
     message = SpatWriter(folder, 3).locations_message
     assert "no zero position for location 3" in message and "3,<x_mm>" in message
+
+
+def test_zero_positions_go_through_the_package_temporaries(tmp_path):
+    """locations.csv is replaced through ``.locations.csv.<pid>.*.tmp``; a killed run's is removed."""
+    import subprocess
+    import sys
+
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                              capture_output=True, text=True, check=True).stdout)
+    folder = tmp_path / "camp"
+    folder.mkdir()
+    leftover = folder / f".locations.csv.{dead}.abcd1234.tmp"
+    leftover.write_text("location,x_mm\n")
+    with pytest.warns(StaleOutputWarning, match="leftover of killed runs"):
+        write_zero(folder, 2, np.array([0.1, 0.2, 0.3]))
+    write_zero(folder, 1, np.array([0.0, 0.0, 0.001]))
+    assert sorted(p.name for p in folder.iterdir()) == ["locations.csv"]
+    assert (folder / "locations.csv").read_text() == (
+        "location,x_mm,y_mm,z_mm\n1,0.000000000,0.000000000,1.000000000\n"
+        "2,100.000000000,200.000000000,300.000000000\n")
 
 
 def test_port_counts():

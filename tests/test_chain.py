@@ -161,7 +161,7 @@ def test_public_kinematics_match_pinocchio_off_nominal(any_arm, frame):
     params, samples = _off_nominal(any_arm, 6)
     ref = _reference_jacobians(any_arm, params, samples, frame)
     got = kinematics.stylus_jacobians(any_arm, params, samples.q, frame, samples)
-    for name in (f for f in ref._fields if f != "tilts"):
+    for name in (f for f in ref._fields if f not in ("tilts", "frame_columns")):
         np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=TOL,
                                    err_msg=name)
     np.testing.assert_allclose(kinematics.stylus_positions(any_arm, params, samples.q, frame,

@@ -249,8 +249,9 @@ def test_readers_are_told_names_not_given_an_arm(tmp_path: Path) -> None:
 
 def test_the_readers_import_no_arm() -> None:
     """The data modules import neither the arm nor anything above them, not even for types."""
-    data = ("columns", "csv_table", "logs", "campaign", "problem_log", "json_file", "bounded_read",
-            "spreadsheet", "output_claim", "couplings", "poses")
+    data = ("columns", "csv_table", "csv_rows", "logs", "campaign", "campaign_writer", "arm_names",
+            "problem_log", "json_file", "bounded_read", "spreadsheet", "output_claim", "couplings",
+            "poses")
     allowed = {f"aacmm_pin.data.{m}" for m in data} | {  # and the foundations they use
         "aacmm_pin.errors", "aacmm_pin.units", "aacmm_pin.interrupts"}
     for name in data:

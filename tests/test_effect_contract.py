@@ -1,4 +1,4 @@
-"""The contract of every registered effect (built-in, installed plugin, and example 05's).
+"""The contract of every registered effect (built-in, installed plugin, and the example plugins').
 
 Parametrised over :func:`aacmm_pin.effects.registry.library`, so that an effect added later is
 checked without editing this file. For each effect, a few of its candidate terms on the shared
@@ -39,16 +39,20 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.effects import registry
+from aacmm_pin.effects import parameters_file, registry
 from aacmm_pin.effects.base import Effect, MapTerm, ModelSpec, Term, TiltTerm
 from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
 from aacmm_pin.model.encoder_map import EncoderMap
 from aacmm_pin.model.samples import Samples
 from tests.helpers import ENV, ROOT
 
-EXAMPLE_PLUGIN = ROOT / "examples" / "05_plugin" / "aacmm_pin_basetemp.py"
-"""Example 05's plugin module: its effect is held to the same contract."""
-EXAMPLE = "basetemp"
+EXAMPLE_PLUGINS = {
+    "basetemp": (ROOT / "examples" / "05_plugin" / "aacmm_pin_basetemp.py", "temp_base_c", 26.0),
+    "stylus_thermal": (ROOT / "examples" / "07_stylus_plugin" / "aacmm_pin_stylustemp.py",
+                       "temp_probe_c", 30.0),
+}
+"""The example plugins' effects (an angle term, a frame term), held to the same contract: effect
+-> (module, the column it reads, its last value on the samples, warming from 20 deg C)."""
 EFFECTS = [name for name, effect in registry.library().items() if not effect.in_start]
 START_EFFECTS = [name for name, effect in registry.library().items() if effect.in_start]
 PER_EFFECT = 3
@@ -195,12 +199,14 @@ def _cases(effect: Effect, sources: dict[str, Any], exhaustive: bool = False) ->
 
 @pytest.fixture(scope="module")
 def example_effect(sources: dict[str, Any]) -> Iterator[dict[str, Any]]:
-    """Example 05's effect, registered from its file, and the effects campaign with its column."""
+    """The example plugins' effects, registered from their files, and the effects campaign with
+    their columns."""
     before = dict(registry.LIBRARY)
-    registry.load_effect_file(EXAMPLE_PLUGIN)
     arm, params, samples = sources["effects_sim"]
     data = samples_arrays(samples)
-    data["column:temp_base_c"] = np.linspace(20.0, 26.0, samples.n)
+    for path, column, last in EXAMPLE_PLUGINS.values():
+        registry.load_effect_file(path)
+        data[f"column:{column}"] = np.linspace(20.0, last, samples.n)
     try:
         yield {"effects_sim": (arm, params, rebuild(arm, data))}
     finally:
@@ -209,14 +215,14 @@ def example_effect(sources: dict[str, Any]) -> Iterator[dict[str, Any]]:
 
 
 def _effect_sources(name: str, request: pytest.FixtureRequest) -> tuple[Effect, dict[str, Any]]:
-    if name == EXAMPLE:
+    if name in EXAMPLE_PLUGINS:
         extra = request.getfixturevalue("example_effect")
-        return registry.library()[EXAMPLE], extra
+        return registry.library()[name], extra
     return registry.library()[name], request.getfixturevalue("sources")
 
 
-ALL = [*EFFECTS, pytest.param(EXAMPLE, id="example-05-basetemp")] if EXAMPLE not in EFFECTS \
-    else EFFECTS
+ALL = [*EFFECTS, *(pytest.param(name, id=f"example-{name}") for name in EXAMPLE_PLUGINS
+                   if name not in EFFECTS)]
 
 
 # ------------------------------------------------------------------ (a) columns
@@ -272,8 +278,8 @@ def test_values_round_trip_through_parameters_json(name: str, request: pytest.Fi
     effect, sources = _effect_sources(name, request)
     for k, case in enumerate(_cases(effect, sources)):
         path = tmp_path / f"p{k}.json"
-        registry.write_parameters(case.params, path)
-        back = registry.read_parameters(path)
+        parameters_file.write_parameters(case.params, path)
+        back = parameters_file.read_parameters(path)
         if isinstance(case.term, MapTerm):
             np.testing.assert_array_equal(back.map(case.term.axis).values, case.values)
             continue
@@ -289,7 +295,7 @@ def second_process(sources: dict[str, Any], tmp_path_factory: pytest.TempPathFac
                    ) -> dict[str, np.ndarray]:
     """``predict`` of every default case of every registered effect, in one second process."""
     folder = tmp_path_factory.mktemp("contract")
-    cases = [c for name in EFFECTS if name != EXAMPLE
+    cases = [c for name in EFFECTS if name not in EXAMPLE_PLUGINS
              for c in _cases(registry.library()[name], sources)]
     return _predict_elsewhere(cases, folder, [])
 
@@ -298,7 +304,7 @@ def _predict_elsewhere(cases: list[Case], folder: Path, effect_files: list[str]
                        ) -> dict[str, np.ndarray]:
     job: dict[str, Any] = {"effect_files": effect_files, "cases": []}
     for k, case in enumerate(cases):
-        registry.write_parameters(case.params, folder / f"p{k}.json")
+        parameters_file.write_parameters(case.params, folder / f"p{k}.json")
         np.savez(folder / f"s{k}.npz", **samples_arrays(case.samples))
         job["cases"].append({"id": case.id, "params": str(folder / f"p{k}.json"),
                              "samples": str(folder / f"s{k}.npz")})
@@ -317,11 +323,12 @@ def test_predict_in_a_second_process_is_this_ones(name: str, request: pytest.Fix
     """predict from parameters.json in a fresh process equals predict here to 1e-12 m."""
     effect, sources = _effect_sources(name, request)
     cases = _cases(effect, sources)
-    there = (_predict_elsewhere(cases, tmp_path, [str(EXAMPLE_PLUGIN)]) if name == EXAMPLE
+    there = (_predict_elsewhere(cases, tmp_path, [str(EXAMPLE_PLUGINS[name][0])])
+             if name in EXAMPLE_PLUGINS
              else request.getfixturevalue("second_process"))
     for k, case in enumerate(cases):
-        registry.write_parameters(case.params, tmp_path / f"here{k}.json")
-        params = registry.read_parameters(tmp_path / f"here{k}.json")
+        parameters_file.write_parameters(case.params, tmp_path / f"here{k}.json")
+        params = parameters_file.read_parameters(tmp_path / f"here{k}.json")
         samples = rebuild(case.arm, samples_arrays(case.samples))
         here = ap.predict(case.arm, params, samples.q, samples, tool=samples.tool)
         np.testing.assert_allclose(there[case.id], here, rtol=0, atol=1e-12, err_msg=case.id)
@@ -368,7 +375,7 @@ def test_effects_of_every_start_model_propose_no_terms(name: str, sources: dict[
 
 def test_every_registered_effect_is_checked() -> None:
     """The contract's parameter lists are the registry's effects (a new one is checked too)."""
-    assert set(EFFECTS) | set(START_EFFECTS) == set(registry.library()) - {EXAMPLE}
+    assert set(EFFECTS) | set(START_EFFECTS) == set(registry.library()) - set(EXAMPLE_PLUGINS)
     assert {"encoder", "compliance", "lateral_compliance", "thermal", "backlash", "crosstalk",
             "rtest"} <= set(EFFECTS)
 

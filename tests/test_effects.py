@@ -140,7 +140,8 @@ def test_positive_compliance_makes_the_arm_sag(arm: ap.Arm) -> None:
             if abs(samples.gravity[0, axis - 1]) < 0.5:  # N m: hardly loaded in this posture
                 continue
             ext = {f"compliance[A{axis}]": np.array([1e-4])}
-            offsets = fx.registry.adjustment(ext, samples, arm.n_axes).offsets
+            params = ap.Parameters.nominal(arm).replace(extensions=ext)
+            offsets = fx.forward.adjustment(params, samples, arm.n_axes).offsets
             z_before = pin.centerOfMass(model, data, q)[2]
             z_after = pin.centerOfMass(model, data, q + offsets[0])[2]
             assert z_after < z_before
@@ -230,7 +231,8 @@ def test_positive_lateral_compliance_makes_the_arm_sag(which: str) -> None:
             if np.linalg.norm(samples.lateral_gravity[0, axis - 1]) < 0.5:  # N m: hardly loaded
                 continue
             ext = {f"lateral_compliance[A{axis}]": np.array([1e-4, 1e-4])}
-            tilt = fx.registry.adjustment(ext, samples, arm.n_axes).tilts[0, axis - 1]
+            params = ap.Parameters.nominal(arm).replace(extensions=ext)
+            tilt = fx.forward.adjustment(params, samples, arm.n_axes).tilts[0, axis - 1]
             joint = model.getJointId(arm.axis_names[axis - 1])
             tilted = model.copy()
             turn = pin.SE3(pin.exp3(chain.basis(joint)[:, :2] @ tilt), np.zeros(3))

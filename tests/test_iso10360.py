@@ -187,3 +187,15 @@ def test_sphere_and_ldia_subcommands(tmp_path, capsys):
     csv.write_text("x_mm,y_mm,z_mm\n1,2,abc\n")
     with pytest.raises(FileFormatError, match="line 2|:2"):
         iso.read_points(csv)
+
+
+def test_read_points_is_bounded(tmp_path, monkeypatch):
+    """A points file over the readers' size bound is refused before it is parsed, as a campaign's is."""
+    csv = tmp_path / "points.csv"
+    csv.write_text("x_mm,y_mm,z_mm\n" + "1,2,3\n" * 10)
+    assert iso.read_points(csv)[0].shape == (10, 3)
+    monkeypatch.setattr(iso, "MAX_FILE_BYTES", csv.stat().st_size - 1)
+    with pytest.raises(FileFormatError, match="points.csv: larger than 0 MiB"):
+        iso.read_points(csv)
+    with pytest.raises(FileFormatError, match="No such file"):
+        iso.read_points(tmp_path / "missing.csv")

@@ -84,3 +84,28 @@ def test_a_single_worst_node_prints_as_one_angle() -> None:
                 length_std=None).table()
     assert "-150 deg (5.0 arcsec)" in text and "30..90 deg (4.0 arcsec)" in text, text
     assert "..-150" not in text
+
+
+def test_candidate_grid_is_the_square_around_the_nests_at_each_height() -> None:
+    """The grid the CLI and plan's default share: per_side**2 nests a height, centred, ordered."""
+    from aacmm_pin.analyses.planning import candidate_grid
+
+    nests = {1: np.array([0.5, 0.1, 0.0]), 2: np.array([0.7, -0.3, 0.02])}
+    spat = SpatLog(location=np.array([1, 2]), q=np.zeros((2, 7)), displacement=np.zeros((2, 3)))
+    campaign = Campaign(spat=spat, locations=nests, lengthbar=None, bar={})
+    centre = np.mean(list(nests.values()), axis=0)
+    grid = candidate_grid(campaign, 4, 0.3, (0.0, 0.1, 0.25))
+    assert grid.shape == (4 * 4 * 3, 3)
+    assert np.allclose(grid[:16].mean(axis=0), centre, rtol=0, atol=1e-15)
+    assert np.allclose(grid[:, :2].min(axis=0), centre[:2] - 0.3, rtol=0, atol=1e-15)
+    assert np.allclose(grid[:, :2].max(axis=0), centre[:2] + 0.3, rtol=0, atol=1e-15)
+    assert np.allclose(np.unique(grid[:, 2]) - centre[2], [0.0, 0.1, 0.25], rtol=0, atol=1e-15)
+    assert (np.diff(grid[:, 2]) >= 0).all()  # by height first, then x, then y
+    assert np.array_equal(candidate_grid(campaign, 1), centre + [[0, 0, 0], [0, 0, 0.25]])
+    default = candidate_grid(campaign)  # plan's default: 3 x 3, 260 mm, table and 250 mm above
+    offsets = np.array([[dx, dy, dz] for dz in (0.0, 0.25) for dx in (-0.26, 0.0, 0.26)
+                        for dy in (-0.26, 0.0, 0.26)])
+    assert np.array_equal(default, centre + offsets)  # the same bits as before the grid moved
+    steps = np.linspace(-123.4, 123.4, 7) * 1e-3  # the CLI's grid in mm, as it always built it
+    cli = np.array([centre + [dx, dy, dz] for dz in (0.0, 0.1) for dx in steps for dy in steps])
+    assert np.array_equal(candidate_grid(campaign, 7, 123.4, (0.0, 0.1), unit=1e-3), cli)

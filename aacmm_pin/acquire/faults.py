@@ -10,15 +10,13 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any
 
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AcquisitionError
+
+__all__ = ["FAULT_KINDS", "AcquisitionError", "LineError", "PortCounts"]
 
 FAULT_KINDS = ("garbled", "checksum", "out_of_range", "timeout", "port_lost")
 """Kinds of faults counted per port: a line that does not parse, a line whose checksum does not
 match, a value outside the device's range, a silence longer than the timeout, a port that fails."""
-
-
-class AcquisitionError(AacmmError):
-    """The acquisition cannot start (ports, nest file, campaign files), with the reason."""
 
 
 class LineError(AcquisitionError):

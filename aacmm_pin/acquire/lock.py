@@ -13,20 +13,10 @@ import os
 from pathlib import Path
 
 from aacmm_pin.acquire.faults import AcquisitionError
+from aacmm_pin.data.output_claim import pid_alive
 
 LOCK_NAME = ".acquire.lock"
 """Name of the lock file inside the campaign folder."""
-
-
-def _pid_alive(pid: int) -> bool:
-    """Return whether a process ``pid`` exists (on this host)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # exists, owned by someone else
-        return True
-    return True
 
 
 class CampaignLock:
@@ -70,7 +60,7 @@ class CampaignLock:
             raise AcquisitionError(f"{self.path}: cannot take the lock (it keeps changing)")
         previous = os.read(fd, 64).decode("ascii", "replace").strip()
         if previous:
-            alive = previous.isdigit() and _pid_alive(int(previous))
+            alive = previous.isdigit() and pid_alive(int(previous))
             self.message = (f"took over the stale lock {self.path} of pid {previous} "
                             f"({'not holding it' if alive else 'no longer running'})")
         os.ftruncate(fd, 0)

@@ -52,7 +52,6 @@ with one readout per socket and placement reproduces exactly.
 
 from __future__ import annotations
 
-import csv
 import itertools
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -61,6 +60,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from aacmm_pin.data.campaign import Campaign, read_readouts
+from aacmm_pin.data.csv_rows import read_rows
+from aacmm_pin.data.csv_table import MAX_FILE_BYTES
 from aacmm_pin.effects.calibrated import stylus_positions
 from aacmm_pin.errors import AacmmError, FileFormatError, Problem
 from aacmm_pin.model.arm import Arm
@@ -405,15 +406,11 @@ def read_points(path: str | Path) -> tuple[np.ndarray | None, np.ndarray | None,
         if the file has x_mm, y_mm, z_mm, else readouts.
 
     Raises:
-        FileFormatError: listing every bad cell with line and column, or missing columns.
+        FileFormatError: listing every bad cell with line and column, or missing columns; a file
+            larger than :data:`~aacmm_pin.data.csv_table.MAX_FILE_BYTES` or unreadable.
     """
     path = Path(path)
-    try:
-        with path.open(encoding="utf-8-sig", newline="") as f:
-            rows = [(k, [c.strip() for c in row]) for k, row in enumerate(csv.reader(f), start=1)
-                    if any(c.strip() for c in row)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise FileFormatError([Problem(path, None, None, str(exc))]) from None
+    rows = read_rows(path, MAX_FILE_BYTES)
     if len(rows) < 2:
         raise FileFormatError([Problem(path, None, None, "a header row and data rows expected")])
     header = rows[0][1]

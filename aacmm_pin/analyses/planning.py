@@ -15,6 +15,7 @@ left out of the present information (the plan says so: its uncertainties are the
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -215,6 +216,28 @@ def _worst_ranges(std: np.ndarray, nodes_deg: np.ndarray, top: int = 2
     return [(lo, hi, s) for lo, hi, s, _ in ranges[:top]]
 
 
+def candidate_grid(campaign: Campaign, per_side: int = 3, half_width: float = 0.26,
+                   heights: Sequence[float] = (0.0, 0.25), *, unit: float = 1.0) -> np.ndarray:
+    """Return candidate R-Test nest positions around the present nests' centre, shape (k, 3), m.
+
+    A square of ``per_side`` x ``per_side`` positions, ``half_width`` from the centre to each
+    side (one position, the centre, for ``per_side`` 1), at each height above the nests (m),
+    ordered by height, then x, then y: ``k = per_side**2 * len(heights)``.
+
+    Args:
+        campaign: the campaign (its nests' zero positions).
+        per_side: positions along x and along y.
+        half_width: from the centre to the outer positions, in ``unit``.
+        heights: above the nests' centre, m.
+        unit: metres per unit of ``half_width`` (the CLI's ``--spacing-mm``: ``MM``); the steps
+            are spaced in that unit, then converted (the grid the CLI has always built).
+    """
+    centre = np.mean(list(campaign.locations.values()), axis=0)
+    steps = (np.linspace(-half_width, half_width, per_side) * unit if per_side > 1
+             else np.zeros(1))
+    return np.array([centre + [dx, dy, dz] for dz in heights for dx in steps for dy in steps])
+
+
 def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None,
          n_postures: int = 40, families: str = "auto", seed: int = 0,
          sigma_location: float | None = None, progress: bool = False) -> Plan:
@@ -224,7 +247,8 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
         cal: a calibration of the ``proposed`` model.
         campaign: the campaign it was identified from.
         grid: candidate R-Test nest positions in the MT-CS, shape (k, 3), m; default: a 3 x 3 grid
-            of 260 mm spacing around the present nests' centre, on their table and 250 mm above.
+            of 260 mm spacing around the present nests' centre, on their table and 250 mm above
+            (:func:`candidate_grid`).
         n_postures: postures per candidate SPAT.
         families: ``"auto"`` (any posture, plus one family per worst angular range of the worst
             axes) or ``"any"``.
@@ -251,10 +275,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
     length_now = _length_rms(length_grads, cov)
 
     if grid is None:
-        centre = np.mean(list(campaign.locations.values()), axis=0)
-        offsets = np.array([[dx, dy, dz] for dz in (0.0, 0.25) for dx in (-0.26, 0.0, 0.26)
-                            for dy in (-0.26, 0.0, 0.26)])
-        grid = centre + offsets
+        grid = candidate_grid(campaign)
     arm = u.arm
     lim = arm.joint_limits
     fams: list[tuple[str, np.ndarray | None]] = [("any posture", None)]

@@ -31,7 +31,6 @@ files. The truth is returned apart and never read by identification.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,7 +38,7 @@ import pinocchio as pin
 
 from aacmm_pin.data.campaign import Campaign, LengthBarLog, PointLog, SpatLog
 from aacmm_pin.effects.calibrated import stylus_positions
-from aacmm_pin.effects.registry import adjustment
+from aacmm_pin.effects.forward import adjustment
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
@@ -170,7 +169,7 @@ class TrueArm:
         E.g. lateral compliance, at the readouts' gravity moments, with the other effects' angle
         errors ``offsets`` (N, n_axes) added.
         """
-        change = adjustment(self.truth.extensions, Samples(self.arm, q_readout), self.arm.n_axes)
+        change = adjustment(self.truth, Samples(self.arm, q_readout), self.arm.n_axes)
         change.offsets += offsets
         return change
 
@@ -464,46 +463,3 @@ def simulate_campaign(arm: Arm, config: SimulationConfig | None = None) -> Simul
     campaign = Campaign(spat=spat, locations=measured_locations, lengthbar=lengthbar,
                         bar=dict(BAR_LENGTHS) if lengthbar is not None else {}, source=None)
     return Simulation(campaign, truth, np.concatenate(sphere_all), sockets)
-
-
-def write_simulation(sim: Simulation, folder: str | Path, force: bool = False) -> None:
-    """Write the campaign files, ``truth.json`` and the true points (``truth_*.csv``, mm).
-
-    ``truth_spheres.csv`` and ``truth_sockets.csv`` for SPATs and the bar, ``truth_points.csv``
-    for a points campaign.
-
-    The folder is written whole (:func:`~aacmm_pin.data.output_folder.output_folder`).
-
-    Raises:
-        OutputExistsError: if ``folder`` holds files and not ``force``.
-    """
-    from aacmm_pin.data.output_folder import output_folder
-
-    with output_folder(folder, force) as tmp:
-        _write_simulation_files(sim, tmp)
-
-
-def _write_simulation_files(sim: Simulation, folder: Path) -> None:
-    """Write the files of :func:`write_simulation` into an existing folder."""
-    from aacmm_pin.data.campaign import write_campaign
-    from aacmm_pin.model.parameters import write_parameters
-
-    write_campaign(sim.campaign, folder)
-    write_parameters(sim.truth, folder / "truth.json")
-    if sim.campaign.spat is None:  # instrument points: their true positions, instrument frame
-        points = sim.campaign.points
-        assert points is not None
-        tools = points.tool if points.tool is not None else [""] * len(points.q)
-        rows = ["tool,x_mm,y_mm,z_mm"] + [f"{t},{x:.9f},{y:.9f},{z:.9f}"
-                                          for t, (x, y, z) in zip(tools, sim.sphere_mt * 1e3)]
-        (folder / "truth_points.csv").write_text("\n".join(rows) + "\n")
-        return
-    rows = ["location,x_mm,y_mm,z_mm"] + [
-        f"{m},{x:.9f},{y:.9f},{z:.9f}"
-        for m, (x, y, z) in zip(sim.campaign.spat.location, sim.sphere_mt * 1e3)]
-    (folder / "truth_spheres.csv").write_text("\n".join(rows) + "\n")
-    rows = ["placement,socket,x_mm,y_mm,z_mm"] + [
-        f"{k},{s},{x:.9f},{y:.9f},{z:.9f}"
-        for k, by_socket in sim.sockets_r.items() for s, (x, y, z) in
-        ((s, p * 1e3) for s, p in by_socket.items())]
-    (folder / "truth_sockets.csv").write_text("\n".join(rows) + "\n")

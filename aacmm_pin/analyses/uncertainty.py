@@ -254,51 +254,21 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
         process.terminate()
 
 
-def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
-                sigma_rtest: float = SIGMA_RTEST, sigma_location: float = SIGMA_LOCATION, seed: int = 0,
-                executor: Executor | None = None, workers: int | None = None,
-                progress: bool = False) -> MonteCarloResult:
-    """Monte Carlo standard uncertainties of a calibration (paper Section 5).
+def _run_batches(cal: Calibration, shake: Perturbation, batches: list[list[int]],
+                 bar_only: Campaign | None, executor: Executor | None, workers: int,
+                 progress: bool) -> list[tuple[np.ndarray, int, np.ndarray | None]]:
+    """Run the trial batches (their seeds) here, on ``executor``, or on a pool of ``workers``.
 
-    Args:
-        cal: the nominal calibration (from :func:`aacmm_pin.fit.identification.identify` on ``campaign``).
-        campaign: the campaign it was identified from.
-        trials: number of trials.
-        sigma_rtest: R-Test reading perturbation per coordinate and sample, m.
-        sigma_location: R-Test zero position perturbation per coordinate and location, m.
-        seed: seed of the first trial (trial i uses seed + i: same seed, same result).
-        executor: where trials run (any ``concurrent.futures.Executor``); default: a local
-            process pool of ``workers`` processes (all cores), or in this process for ``workers=1``.
-        workers: local worker processes when no executor is given (at most the cores and
-            memory there are: :func:`aacmm_pin.machine.check_workers`).
-        progress: show a progress bar.
-
-    Raises:
-        ArgumentError: for fewer than 2 trials or more workers than
-            :func:`aacmm_pin.machine.check_workers` allows.
+    Returns each batch's (identified values, shape (trials, P); trials converged; bar length
+    errors or None), in batch order.
     """
     from aacmm_pin.progress import Progress
 
-    if trials < 2:
-        raise ValueError(f"trials: need at least 2, got {trials}")
-    shake = perturbation(cal, campaign, sigma_rtest, sigma_location)
-    if executor is None and workers is not None and workers > 1:
-        check_workers(workers)  # before any work, never a fork storm
-    workers = workers or usable_cores()
-    seeds = [seed + i for i in range(trials)]
-    parallel = executor is not None or workers > 1
-    # few large batches: each ships the calibration once and factors its Jacobian once
-    n_batches = 2 * workers if parallel else max(1, trials // 10)
-    chunk = max(1, -(-trials // n_batches))
-    batches = [seeds[i:i + chunk] for i in range(0, trials, chunk)]
-    has_bar = campaign.lengthbar is not None and bool(campaign.bar)
-    bar_only = Campaign(spat=None, locations={}, lengthbar=campaign.lengthbar,
-                        bar=campaign.bar) if has_bar else None
     results: list[tuple[np.ndarray, int, np.ndarray | None]] = []
     own = executor is None and workers > 1
     pool = (ProcessPoolExecutor(workers, initializer=_start_worker, initargs=(os.getpid(),))
             if own else executor)
-    with Progress("Monte Carlo", "trial", total=trials, enabled=progress) as bar:
+    with Progress("Monte Carlo", "trial", total=sum(len(b) for b in batches), enabled=progress) as bar:
         if pool is None:
             from aacmm_pin._blas import single_threaded_blas
 
@@ -322,6 +292,48 @@ def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
             finally:
                 if own:
                     pool.shutdown()
+    return results
+
+
+def monte_carlo(cal: Calibration, campaign: Campaign, trials: int = 100, *,
+                sigma_rtest: float = SIGMA_RTEST, sigma_location: float = SIGMA_LOCATION, seed: int = 0,
+                executor: Executor | None = None, workers: int | None = None,
+                progress: bool = False) -> MonteCarloResult:
+    """Monte Carlo standard uncertainties of a calibration (paper Section 5).
+
+    Args:
+        cal: the nominal calibration (from :func:`aacmm_pin.fit.identification.identify` on ``campaign``).
+        campaign: the campaign it was identified from.
+        trials: number of trials.
+        sigma_rtest: R-Test reading perturbation per coordinate and sample, m.
+        sigma_location: R-Test zero position perturbation per coordinate and location, m.
+        seed: seed of the first trial (trial i uses seed + i: same seed, same result).
+        executor: where trials run (any ``concurrent.futures.Executor``); default: a local
+            process pool of ``workers`` processes (all cores), or in this process for ``workers=1``.
+        workers: local worker processes when no executor is given (at most the cores and
+            memory there are: :func:`aacmm_pin.machine.check_workers`).
+        progress: show a progress bar.
+
+    Raises:
+        ArgumentError: for fewer than 2 trials or more workers than
+            :func:`aacmm_pin.machine.check_workers` allows.
+    """
+    if trials < 2:
+        raise ValueError(f"trials: need at least 2, got {trials}")
+    shake = perturbation(cal, campaign, sigma_rtest, sigma_location)
+    if executor is None and workers is not None and workers > 1:
+        check_workers(workers)  # before any work, never a fork storm
+    workers = workers or usable_cores()
+    seeds = [seed + i for i in range(trials)]
+    parallel = executor is not None or workers > 1
+    # few large batches: each ships the calibration once and factors its Jacobian once
+    n_batches = 2 * workers if parallel else max(1, trials // 10)
+    chunk = max(1, -(-trials // n_batches))
+    batches = [seeds[i:i + chunk] for i in range(0, trials, chunk)]
+    has_bar = campaign.lengthbar is not None and bool(campaign.bar)
+    bar_only = Campaign(spat=None, locations={}, lengthbar=campaign.lengthbar,
+                        bar=campaign.bar) if has_bar else None
+    results = _run_batches(cal, shake, batches, bar_only, executor, workers, progress)
     samples = np.concatenate([r[0] for r in results])
     converged = int(sum(r[1] for r in results))
     identifiable = np.ones(samples.shape[1], dtype=bool)

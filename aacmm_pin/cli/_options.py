@@ -329,3 +329,10 @@ def read_files(args: argparse.Namespace) -> list[str | None]:
     arm = getattr(args, "arm", None)
     return [arm if arm is not None and Path(arm).is_file() else None,
             *(getattr(args, "effects_file", None) or [])]
+
+
+def campaign_inputs(args: argparse.Namespace) -> list[Path]:
+    """Return what a command of a campaign and ``--arm`` reads (kept from its outputs)."""
+    from aacmm_pin.data.output_claim import input_paths
+
+    return input_paths(*read_files(args), campaigns=[args.campaign])

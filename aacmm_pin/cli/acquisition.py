@@ -205,7 +205,11 @@ def add_parsers(subparsers: Any) -> None:
                         "file is refused without --force")
     p.add_argument("--quiet", action="store_true", help="no status line or report")
     p.set_defaults(handler=_acquire)
+    _add_fake_devices_parser(subparsers)
 
+
+def _add_fake_devices_parser(subparsers: Any) -> None:
+    """Add the subcommand ``fake-devices`` to ``subparsers``."""
     p = add_command(
         subparsers, "fake-devices", "a simulated arm and R-Test gauges on pseudo-terminals",
         description="Play one R-Test location of a simulated campaign on pseudo-terminals, print "

@@ -1,4 +1,6 @@
-"""The calibration subcommands: simulate, predict, identify, discover, validate, uncertainty, plan, demo.
+"""The calibration subcommands: simulate, predict, identify, validate, uncertainty, plan, demo, axes.
+
+``discover`` is :mod:`aacmm_pin.cli.discovery` (its parser added here, in the same place).
 
 Each handler parses nothing itself: it calls the public API with the parsed arguments and prints.
 The modules that import Pinocchio, scipy or matplotlib are imported inside the handlers.
@@ -8,9 +10,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import math
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -20,6 +20,7 @@ from aacmm_pin.cli._options import (
     arm_details,
     arm_option,
     arm_source,
+    campaign_inputs,
     claim_file,
     effects_file_option,
     force_option,
@@ -37,13 +38,14 @@ from aacmm_pin.cli._options import (
     seed_option,
     write_json,
 )
+from aacmm_pin.cli.calibration_summary import print_calibration, print_sizes
+from aacmm_pin.cli.discovery import _print_discovery_step as _print_discovery_step  # tests' path
+from aacmm_pin.cli.discovery import add_discover_parser
 from aacmm_pin.data.output_claim import claim_output, input_paths
 from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
 
 if TYPE_CHECKING:
-    from aacmm_pin.analyses.discovery_results import Step
-    from aacmm_pin.fit.identification_result import Calibration
     from aacmm_pin.model.arm import Arm
 
 
@@ -59,7 +61,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _simulate_into(args: argparse.Namespace, config: Any, effects: tuple[str, ...]) -> int:
-    from aacmm_pin.analyses.simulate import simulate_campaign, write_simulation
+    from aacmm_pin.analyses.simulate import simulate_campaign
+    from aacmm_pin.outputs.simulation_folder import write_simulation
     from aacmm_pin.progress import phase
 
     if config.points:
@@ -153,7 +156,7 @@ def _identify(args: argparse.Namespace) -> int:
 
     if (why := step_problem(args.step_deg)) is not None:  # before any work
         raise ArgumentError(f"--step-deg: {why}")
-    with claim_output(args.out, args.force, _campaign_inputs(args)):
+    with claim_output(args.out, args.force, campaign_inputs(args)):
         return _identify_into(args)  # the folder held from before the work
 
 
@@ -161,7 +164,8 @@ def _identify_into(args: argparse.Namespace) -> int:
     from aacmm_pin.analyses.model_choice import AUTO, identify_model
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.data.logs import noise_summary
-    from aacmm_pin.effects.registry import check_terms, term_from_key
+    from aacmm_pin.effects.registry import term_from_key
+    from aacmm_pin.effects.term_axes import check_terms
     from aacmm_pin.outputs.export import write_calibration
     from aacmm_pin.progress import phase
 
@@ -169,7 +173,7 @@ def _identify_into(args: argparse.Namespace) -> int:
     phase("loading the arm")
     arm = load_given_arm(args)
     check_terms(terms, arm, "--terms")
-    _print_sizes(arm)
+    print_sizes(arm)
     phase(f"reading {args.campaign}")
     campaign = read_campaign(args.campaign, arm=arm)
     print("stated noise per coordinate: " + (f"{args.sigma_um:g} um (--sigma-um)" if args.sigma_um
@@ -185,154 +189,10 @@ def _identify_into(args: argparse.Namespace) -> int:
     write_calibration(cal, arm, args.out, force=args.force,
                       report=None if choice is None else {"model_choice": choice.to_dict()},
                       campaign=campaign)
-    _print_calibration(cal, args.out)
+    print_calibration(cal, args.out)
     if choice is not None and (advice := choice.advice(args.model == AUTO)):
         print(f"  {advice}")
     return 0 if cal.success else 1
-
-
-def _print_sizes(arm: Arm, indent: str = "") -> None:
-    """Print which plausible sizes the arm uses: its sizes file, or the built-in defaults."""
-    print(f"{indent}sizes: {arm.sizes_label}")
-
-
-def _print_calibration(cal: Calibration, out: Path) -> None:
-    """Print the summary of a calibration: convergence, fit RMS, what is not identifiable."""
-    from aacmm_pin.fit.robust import OUTLIER_K
-
-    state = ("converged" if cal.success else "FAILED" if cal.raw.get("success", False)
-             else "DID NOT CONVERGE")
-    by_loc = ", ".join(f"{cal.group_label(m)}: {v * 1e6:.2f}"
-                       for m, v in cal.fit_rms_by_location().items())
-    kinds = {"spat": f"SPAT {'with' if cal.use_rtest else 'without'} R-Test",
-             "points": "absolute points", "bar": "length bar"}
-    data = " + ".join(kinds[k] for k in cal.inputs)
-    print(f"{cal.model} model ({data}): {state} ({cal.nfev} evaluations), "
-          f"{cal.n_determined} parameters determined, fit RMS {cal.fit_rms * 1e6:.2f} um "
-          f"(by {'location' if 'spat' in cal.inputs else 'group'} {by_loc}), "
-          f"{cal.runtime_s:.1f} s -> {out}")
-    if cal.nests:
-        print(f"  R-Test nests {cal.nests}")
-    for line in cal.unidentifiable:
-        print(f"  not identifiable: {line}")
-    for kind, flagged in (("outlier (rejected)", cal.outliers), ("WARNING: suspect", cal.suspects)):
-        for o in flagged:
-            at = f"line {o.line}" if o.line is not None else f"row {o.row + 1}"
-            print(f"  {kind}: {o.file} {at}: residual {o.residual * 1e6:.4g} um "
-                  f"({o.sigmas:.3g} sigma)")
-    if cal.suspects:
-        print(f"  WARNING: {len(cal.suspects)} samples beyond {OUTLIER_K:g} robust sigmas: outliers "
-              "or a model that misses an effect; --robust rejects outliers")
-    if not cal.success:
-        print(f"  {cal.message}")
-    elif (note := cal.message.partition("; the residual is ")[2]):  # above the stated noise
-        print(f"  NOTE: the residual is {note}")
-    _print_urdf_loss(out)
-
-
-def _print_urdf_loss(caldir: Path) -> None:
-    """Print how far the folder's URDF alone is from the whole calibration (its report's line)."""
-    from aacmm_pin.analyses.urdf_loss import loss_line
-    from aacmm_pin.outputs.calibration_folder import COMPACT_PARAMETERS_FILE, read_report
-
-    if line := loss_line(read_report(caldir), f"{Path(caldir) / COMPACT_PARAMETERS_FILE}"):
-        print(f"  {line}")
-
-
-def _discover(args: argparse.Namespace) -> int:
-    with claim_output(args.out, args.force, _campaign_inputs(args)):
-        return _discover_into(args)  # the folder held from before the work
-
-
-def _discover_into(args: argparse.Namespace) -> int:
-    from aacmm_pin.analyses.discovery import FitCapReached, discover
-    from aacmm_pin.data.campaign import StatedNoise, read_campaign
-    from aacmm_pin.data.logs import noise_summary
-    from aacmm_pin.extras import skipped
-    from aacmm_pin.outputs.discovery_figures import write_discovery
-    from aacmm_pin.units import UM
-
-    arm = load_given_arm(args)
-    effects = None if args.effects is None else [e.strip() for e in args.effects.split(",")
-                                                 if e.strip()]
-    campaign = read_campaign(args.campaign, arm=arm)
-    given = {kind: value * UM for kind in ("rtest", "location", "point")
-             if (value := getattr(args, f"sigma_{kind}_um")) is not None}
-    try:  # the command line over campaign.json over the paper's values
-        noise = dataclasses.replace(campaign.noise or StatedNoise(), **given)
-    except ValueError as exc:
-        raise SystemExit(f"discover: --sigma-*-um: {exc}") from exc
-    try:
-        result = discover(campaign, arm, args.start, effects=effects,
-                          use_rtest=not args.no_rtest, max_steps=args.max_steps,
-                          max_nfev=args.max_nfev, progress=True, noise=noise,
-                          on_start=functools.partial(
-                              _print_discovery_start_sizes, args.start, arm,
-                              noise_summary(campaign, noise if given else None)),
-                          on_step=_print_discovery_step)  # results as they are found, figures after
-    except FitCapReached as exc:  # no model to write
-        print(exc, file=sys.stderr)
-        return 1
-    if not result.steps:
-        print("nothing is missing")
-    print(f"stopped: {result.stopped_because}")
-    if left_out := result.left_out_text():  # effects asked for whose columns the samples lack
-        print(left_out)
-    if result.widened:
-        print(f"  with the default effects the residual stayed larger than the stated noise, "
-              f"following no variable: "
-              f"also tried {', '.join(result.widened)} (not offered by default), by the same tests")
-    if result.scan is not None:
-        print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
-    sys.stdout.flush()
-    no_figures = skipped("figures", "figures")  # without matplotlib: the results, no figures
-    write_discovery(result, arm, args.out, force=args.force, campaign=campaign,
-                    figures=no_figures is None)
-    print(f"wrote {args.out / 'discovery.json'}, {'' if no_figures else 'figures and '}the final "
-          f"model (CALDIR) in {args.out} ({result.runtime_s:.1f} s)")
-    if no_figures:
-        print(f"  {no_figures}")
-    _print_urdf_loss(args.out)
-    if result.capped or result.failed:  # the steps so far are written; a fit ended the loop
-        print(f"discover: {result.stopped_because}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: float,
-                           bar_rms: float | None, size_factors: dict[str, float]) -> None:
-    """Print the start model's line as soon as it is fitted, and the stated noise.
-
-    RMS in m (the bar's is not shown); ``noise``: the stated noise the final residual is judged
-    against (:func:`aacmm_pin.data.logs.noise_summary`).
-    """
-    print(f"start {start}: held-out RMS {heldout_rms * 1e6:.2f} um, fit RMS "
-          f"{fit_rms * 1e6:.2f} um")
-    print(f"  stated noise per coordinate: {noise}")
-    if widened := {g: f for g, f in size_factors.items() if round(f, 2) > 1.0}:  # x1: no word
-        print("  the fit rejects the arm's sizes of " + ", ".join(
-            f"{g} (x{f:.3g})" for g, f in widened.items()) + ": held-out priors widened")
-    sys.stdout.flush()
-
-
-def _print_discovery_start_sizes(start: str, arm: Arm, noise: str, *values: Any) -> None:
-    """Print the start model's line (:func:`_print_discovery_start`), then the sizes used."""
-    _print_discovery_start(start, noise, *values)
-    _print_sizes(arm, indent="  ")
-
-
-def _print_discovery_step(k: int, step: Step) -> None:
-    """Print step k's lines as soon as it is found."""
-    axes = f" on {', '.join(f'A{a}' for a in step.axes)}" if step.axes else ""
-    print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
-          f"{step.heldout_rms_after * 1e6:.2f} um, fit RMS {step.fit_rms_before * 1e6:.2f} -> "
-          f"{step.fit_rms_after * 1e6:.2f} um")
-    if step.bar_rms_before is not None:
-        print(f"  length bar: {step.bar_summary()}")
-    for line in (step.bar_disagreement(), step.selection_summary()):
-        if line:
-            print(f"  {line}")
-    sys.stdout.flush()
 
 
 def _validate(args: argparse.Namespace) -> int:
@@ -380,26 +240,21 @@ def _uncertainty(args: argparse.Namespace) -> int:
         check_workers(args.workers or 1)  # before any work
     except ArgumentError as exc:
         raise ArgumentError(f"--{exc}") from None
-    with claim_output(args.out, args.force, _campaign_inputs(args)):
+    with claim_output(args.out, args.force, campaign_inputs(args)):
         return _uncertainty_into(args)  # the folder held from before the work
 
 
 def _uncertainty_into(args: argparse.Namespace) -> int:
-    import json
-
     import numpy as np
 
-    from aacmm_pin.analyses.uncertainty import monte_carlo, uncertainty_report
+    from aacmm_pin.analyses.uncertainty import monte_carlo
     from aacmm_pin.data.campaign import StatedNoise, read_campaign
-    from aacmm_pin.data.output_folder import output_folder
-    from aacmm_pin.extras import skipped
     from aacmm_pin.fit.identification import identify
-    from aacmm_pin.outputs.export import write_calibration_files, write_maps_csv
-    from aacmm_pin.outputs.plots import plot_encoder_maps
+    from aacmm_pin.outputs.uncertainty_folder import write_uncertainty
     from aacmm_pin.units import UM
 
     arm = load_given_arm(args)
-    _print_sizes(arm)
+    print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     cal = identify(campaign, arm, model=args.model, use_rtest=not args.no_rtest,
                    max_nfev=args.max_nfev, progress=True)
@@ -410,19 +265,7 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
                      sigma_location=location_um * UM, workers=args.workers,
                      seed=args.seed, progress=True)
     out = Path(args.out)
-    axes = sorted(cal.node_identifiable)
-    nodes = {a: np.degrees(cal.parameters.map(a).nodes) for a in axes}
-    std = {a: mc.node_std(a, nodes[a]) for a in axes}
-    no_figures = skipped("figures", "fig6_encoder_maps.png") if axes else None
-    with output_folder(out, args.force) as tmp:  # the folder whole, or not at all
-        write_calibration_files(cal, arm, tmp, campaign=campaign)
-        write_maps_csv(cal, tmp / "encoder_maps.csv", std=std)
-        (tmp / "uncertainty.json").write_text(json.dumps(uncertainty_report(cal, mc), indent=2)
-                                              + "\n")
-        if axes and not no_figures:
-            plot_encoder_maps({a: cal.parameters.map(a).values for a in axes},
-                              tmp / "fig6_encoder_maps.png", identifiable=cal.node_identifiable,
-                              std=std, reached=cal.node_reached)
+    no_figures = write_uncertainty(cal, arm, campaign, mc, out, args.force)
     ratio = mc.ratio()
     ratio = ratio[np.isfinite(ratio)]
     shaken = "" if campaign.spat is None else (f", sigma R-Test {rtest_um:g} um, sigma "
@@ -454,29 +297,24 @@ def _uncertainty_into(args: argparse.Namespace) -> int:
 
 
 def _plan(args: argparse.Namespace) -> int:
-    inputs = _campaign_inputs(args)
+    inputs = campaign_inputs(args)
     with claim_file(args.json, args.force, inputs):  # before the minutes of work, not after them
         return _plan_into(args, inputs)
 
 
 def _plan_into(args: argparse.Namespace, inputs: list[Path]) -> int:
-    import numpy as np
-
-    from aacmm_pin.analyses.planning import check_plannable, plan
+    from aacmm_pin.analyses.planning import candidate_grid, check_plannable, plan
     from aacmm_pin.data.campaign import read_campaign
     from aacmm_pin.fit.identification import identify
 
     arm = load_given_arm(args)
-    _print_sizes(arm)
+    print_sizes(arm)
     campaign = read_campaign(args.campaign, arm=arm)
     check_plannable(campaign)  # before minutes of identification
     cal = identify(campaign, arm, model=args.model, max_nfev=args.max_nfev,
                    progress=True)
-    centre = np.mean(list(campaign.locations.values()), axis=0)
-    steps = np.linspace(-args.spacing_mm, args.spacing_mm, args.grid) * 1e-3 if args.grid > 1 \
-        else np.zeros(1)
     heights = [float(h) * 1e-3 for h in args.heights_mm.split(",")]
-    grid = np.array([centre + [dx, dy, dz] for dz in heights for dx in steps for dy in steps])
+    grid = candidate_grid(campaign, args.grid, args.spacing_mm, heights, unit=1e-3)
     result = plan(cal, campaign, grid=grid, n_postures=args.postures, seed=args.seed,
                   progress=True)
     print(result.table(args.top))
@@ -492,18 +330,13 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _campaign_inputs(args: argparse.Namespace) -> list[Path]:
-    """Return what a command of a campaign and ``--arm`` reads (kept from its outputs)."""
-    return input_paths(*read_files(args), campaigns=[args.campaign])
-
-
 def _axes(args: argparse.Namespace) -> int:
     import numpy as np
 
     arm = load_given_arm(args)
     print(f"{arm.name}: {arm.n_axes} axes; readout columns q1_deg..q{arm.n_axes}_deg in this order "
           "(or <joint>_deg, any order)")
-    _print_sizes(arm)
+    print_sizes(arm)
     for n, (name, (lo, hi)) in enumerate(zip(arm.axis_names, np.degrees(arm.joint_limits)), 1):
         coupled = arm.couplings.get(name)
         note = f"  coupled: {coupled.formula()} (no readout needed)" if coupled else ""
@@ -641,33 +474,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                         "bar placement set")
     p.set_defaults(handler=_identify)
 
-    p = add_command(subparsers, "discover", "find what a model is missing: name the effect, add "
-                                            "it, show the held-out gap shrink",
-                    parents=[no_rtest_option("start without the R-Test displacements "
-                                             "(location means)"),
-                             arm, out_option(Path("discovery"), "output folder: discovery.json, "
-                                                                "figures, final CALDIR"),
-                             max_nfev_option(discovery=True), force_option(),
-                             effects_file_option()])
-    p.add_argument("campaign", type=input_path,
-                   help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
-                        "lengthbar.csv and bar.csv)")
-    p.add_argument("--start", choices=("dh", "proposed"), default="dh",
-                   help="start model: dh (DH errors, tool) or proposed (also encoder maps)")
-    p.add_argument("--effects", default=None,
-                   help="comma-separated library effects to try, or 'all' (default: every "
-                        "effect, built-in, installed plugins' and --effects-file's, but those "
-                        "tried only when named: lateral_compliance)")
-    p.add_argument("--max-steps", type=positive(int, zero=True), default=6,
-                   help="most effects to add")
-    for kind, what, default in (("rtest", "R-Test gauge reading", "2"),
-                                ("location", "R-Test nest (zero) position", "3"),
-                                ("point", "tool point of an instrument", "20")):
-        p.add_argument(f"--sigma-{kind}-um", type=noise_um, default=None,
-                       help=f"stated noise of a {what} per coordinate, um, which the final "
-                            f"residual is judged against (default: campaign.json's noise_um, "
-                            f"else its instrument's, else {default})")
-    p.set_defaults(handler=_discover)
+    add_discover_parser(subparsers, arm)
 
 
 def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:

@@ -23,19 +23,20 @@ the keywords ``axis_names=`` and ``tool_names=``.
 from __future__ import annotations
 
 import csv
-import json
 import math
 import warnings
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
-from aacmm_pin.data.columns import BUILT_IN, MAX_ANGLE_DEG, check_names, column, file_order
-from aacmm_pin.data.couplings import AxisCoupling
+from aacmm_pin.data.arm_names import ArmNames, couplings_of, given_names
+from aacmm_pin.data.campaign_writer import write_campaign, write_points
+from aacmm_pin.data.columns import MAX_ANGLE_DEG, check_names
 from aacmm_pin.data.csv_table import (
+    DISPLACEMENT,
     MAX_COLUMNS,
     MAX_FILE_BYTES,
     POINT,
@@ -45,7 +46,6 @@ from aacmm_pin.data.csv_table import (
     matrix,
     numbers,
     per_sample_columns,
-    q_names,
     read_table,
     usable,
 )
@@ -60,7 +60,6 @@ from aacmm_pin.data.logs import (
 )
 from aacmm_pin.data.output_claim import CALIBRATION_FILES
 from aacmm_pin.data.problem_log import ProblemLogs
-from aacmm_pin.data.spreadsheet import neutralise_formulas
 from aacmm_pin.errors import CampaignFormatError, CampaignWarning, Problem
 
 __all__ = ["MAX_ANGLE_DEG", "MAX_COLUMNS", "MAX_FILE_BYTES", "NOISE_FILE", "ArmNames", "Campaign",
@@ -68,7 +67,7 @@ __all__ = ["MAX_ANGLE_DEG", "MAX_COLUMNS", "MAX_FILE_BYTES", "NOISE_FILE", "ArmN
            "read_noise", "read_readout_columns", "read_readouts", "read_sample_columns",
            "read_tool_column", "write_campaign", "write_points"]
 
-_XYZ = {"spat": ("dx_mm", "dy_mm", "dz_mm"), "loc": POINT}
+_XYZ = {"spat": DISPLACEMENT, "loc": POINT}
 _OPTIONAL = ("t_s", "temp_c")
 # File -> (required columns besides q, has q1_deg..qn_deg, optional columns), in file order.
 _FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
@@ -82,34 +81,6 @@ _LOGS = ("spat.csv", "lengthbar.csv", "points.csv")  # files whose extra numeric
 _CAMPAIGN_COLUMNS = tuple(dict.fromkeys(c for required, _, optional in _FILES.values()
                                         for c in (*required, *optional)))
 """Every column a campaign file has: a readouts file cut from one carries them, not as unknowns."""
-
-
-class ArmNames(Protocol):
-    """What a reader needs to know of an arm: its axis (joint) names and its tool names.
-
-    An :class:`~aacmm_pin.model.arm.Arm` is one; so is any object with these two attributes.
-    """
-
-    @property
-    def axis_names(self) -> Sequence[str]:
-        """Joint name of every axis, in axis order (readout columns ``<joint name>_deg``)."""
-
-    @property
-    def tool_names(self) -> Sequence[str]:
-        """Names of the tools, in tool order (``left`` for ``tool_left``; ``tool`` for one)."""
-
-
-def _names(arm: ArmNames | None, axis_names: Sequence[str] | None,
-           tool_names: Sequence[str] | None) -> tuple[list[str] | None, list[str] | None]:
-    """Return the axis and tool names a reader is told: the keywords', else the arm's."""
-    axes = axis_names if axis_names is not None else None if arm is None else arm.axis_names
-    tools = tool_names if tool_names is not None else None if arm is None else arm.tool_names
-    return (None if axes is None else list(axes)), (None if tools is None else list(tools))
-
-
-def couplings_of(arm: ArmNames | None) -> Sequence[AxisCoupling]:
-    """Return the arm's coupled axes (its ``axis_couplings``, if it has any), for the readers."""
-    return tuple(getattr(arm, "axis_couplings", ()))
 
 
 def _first_lines(lines: Sequence[int], values: Any) -> tuple[dict[Any, int], Counter[Any]]:
@@ -334,7 +305,7 @@ def read_campaign(folder: str | Path, *, min_samples_per_location: int = 3,
         if len(found := [name for name in pair if name in present]) == 1:
             problems.append(Problem(paths[(set(pair) - set(found)).pop()], None, None,
                                     f"file not found; {found[0]} needs it (they come in a pair)"))
-    axes, tools = _names(arm, axis_names, tool_names)
+    axes, tools = given_names(arm, axis_names, tool_names)
     tables = {name: read_table(paths[name], *_FILES[name], problems, axis_names=axes,
                                extras="numbers" if name in _LOGS else "refuse",
                                couplings=couplings_of(arm))
@@ -419,7 +390,7 @@ def _readout_table(path: str | Path, optional: tuple[str, ...], arm: ArmNames | 
     A ``tool`` column is read, and checked against the tool names, if ``optional`` names it.
     """
     problems: list[Problem] = []
-    axes, tools = _names(arm, axis_names, tool_names)
+    axes, tools = given_names(arm, axis_names, tool_names)
     table = read_table(Path(path), (), True, optional, problems, extras="readouts",
                        axis_names=axes, couplings=couplings_of(arm))
     if table is not None and tools is not None and "tool" in optional and table.lines:
@@ -516,117 +487,6 @@ def read_tool_column(path: str | Path, arm: ArmNames | None = None, *,
     return np.array(table.cols["tool"], dtype=str) if "tool" in table.cols else None
 
 
-def _write_csv(path: Path, columns: Mapping[str, Iterable[Any]]) -> None:
-    """Write named columns of cells (floats with 9 decimals) under a header row."""
-    cells = [[f"{v:.9f}" if isinstance(v, float) else str(v) for v in c] for c in columns.values()]
-    with path.open("w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(columns)
-        writer.writerows(zip(*cells))
-
-
-def _file_columns(log: SpatLog | LengthBarLog | PointLog,
-                  before: Mapping[str, list[int] | list[float] | list[str]],
-                  after: Mapping[str, list[int] | list[float] | list[str]],
-                  arm: ArmNames | None = None) -> dict[str, Any]:
-    """Return a log's file columns: ``before``, q1_deg..qn_deg, ``after``, per-sample columns.
-
-    The per-sample columns in their file units: ``sigma_um``, ``t_s``, ``temp_c``, then the others
-    in the log's order. With the arm: ``<joint name>_deg`` readout columns, a coupled joint's
-    left out (the readers fill it from its coupling).
-    """
-    names = q_names(log.q.shape[1]) if arm is None else [f"{n}_deg" for n in arm.axis_names]
-    coupled = {c.axis for c in couplings_of(arm)}
-    q_deg = {name: values for k, (name, values) in enumerate(zip(names, np.degrees(log.q).T.tolist()))
-             if k not in coupled}
-    extra = {name: _cells(name, column(name).from_si(log.columns[name]).tolist())
-             for name in file_order(list(log.columns))}
-    return {**before, **q_deg, **after, **extra}
-
-
-BUILT_IN_NAMES = frozenset(c.name for c in BUILT_IN)
-"""The per-sample columns the package itself reads (written with 9 decimals, as ever)."""
-
-
-def _cells(name: str, values: list[float]) -> list[float] | list[str]:
-    """Return a per-sample column's cells: the package's own with 9 decimals, others exactly.
-
-    Any other column's values are written with 12 significant digits, whatever their size: a
-    1e-10 strain is not written as 0.
-    """
-    return values if name in BUILT_IN_NAMES else [format(v, ".12g") for v in values]
-
-
-def _mm(names: tuple[str, ...], xyz: Any) -> dict[str, list[float]]:
-    """Return points, shape (N, 3) in m, as named columns in mm."""
-    return dict(zip(names, (np.asarray(xyz, dtype=float).reshape(-1, 3) * 1e3).T.tolist()))
-
-
-def write_campaign(campaign: Campaign, folder: str | Path, arm: ArmNames | None = None) -> None:
-    """Write ``campaign`` into ``folder`` (created if needed): the files of the parts present.
-
-    Lengths are written in mm and angles in degrees, with 9 decimals; every per-sample column of a
-    log (t_s, temp_c, sigma_um, any other) in its file unit; the stated noise, when set, in
-    ``campaign.json``. Readout columns are ``q1_deg..qn_deg``, or, with ``arm``, ``<joint
-    name>_deg`` without the coupled joints' (read back with the arm).
-
-    Raises:
-        FileExistsError: if the folder holds a campaign file for a part that ``campaign`` lacks
-            (it would be read back with the new files; remove it or choose another folder).
-    """
-    folder = Path(folder)
-    parts = {"spat.csv": campaign.spat, "locations.csv": campaign.spat,
-             "lengthbar.csv": campaign.lengthbar, "bar.csv": campaign.lengthbar,
-             "points.csv": campaign.points}
-    if stale := [name for name, part in parts.items() if part is None and (folder / name).exists()]:
-        raise FileExistsError(f"{folder} already holds {', '.join(stale)}, which this campaign "
-                              "has no data for; remove it or write to another folder")
-    folder.mkdir(parents=True, exist_ok=True)
-    if (spat := campaign.spat) is not None:
-        _write_csv(folder / "spat.csv", _file_columns(spat, {"location": spat.location.tolist()},
-                                                      _mm(_XYZ["spat"], spat.displacement), arm))
-        ids = sorted(campaign.locations)
-        _write_csv(folder / "locations.csv", {"location": ids, **_mm(
-            _XYZ["loc"], [campaign.locations[k] for k in ids])})
-    if (log := campaign.lengthbar) is not None:
-        before = {"placement": log.placement.tolist(), "socket": log.socket.tolist()}
-        _write_csv(folder / "lengthbar.csv", _file_columns(log, before, {}, arm))
-        _write_csv(folder / "bar.csv", {"from": [a for a, _ in campaign.bar],
-                                        "to": [b for _, b in campaign.bar],
-                                        "length_mm": [v * 1e3 for v in campaign.bar.values()]})
-    if (pts := campaign.points) is not None:
-        first: dict[str, Any] = {"group": pts.group.tolist()}
-        if pts.tool is not None:
-            first["tool"] = pts.tool.tolist()
-        _write_csv(folder / "points.csv", _file_columns(pts, first, _mm(_XYZ["loc"], pts.point), arm))
-    if campaign.noise is not None:
-        instrument = {"instrument": campaign.noise.instrument} if campaign.noise.instrument else {}
-        (folder / NOISE_FILE).write_text(json.dumps({**instrument, "noise_um":
-                                                     campaign.noise.to_um()}, indent=2) + "\n")
-
-
-def write_points(path: str | Path, points: np.ndarray,
-                 keep: Mapping[str, list[str]] | None = None) -> None:
-    """Write points, shape (N, 3) in m, to a CSV file with columns x_mm,y_mm,z_mm (9 decimals).
-
-    ``keep``: further columns (name -> N cells, as read) written first, e.g. the id columns of
-    the readouts the points were predicted from (:func:`read_id_columns`); a cell a spreadsheet
-    would run as a formula (``=...``, ``@...``) gets a ``'`` in front
-    (:func:`~aacmm_pin.data.spreadsheet.neutralise_formula`; numbers are left as they are).
-
-    Raises:
-        ValueError: if ``points`` does not have shape (N, 3) or a kept column another length.
-    """
-    points = np.asarray(points, dtype=float)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points: shape (N, 3) expected, got {points.shape}")
-    keep = dict(keep or {})
-    if bad := [k for k, v in keep.items() if len(v) != len(points)]:
-        raise ValueError(f"keep: columns {bad} do not have {len(points)} cells")
-    keep = {name: neutralise_formulas(cells) for name, cells in keep.items()}
-    _write_csv(Path(path), {**keep, **_mm(_XYZ["loc"], points)})
-
-
 def read_id_columns(path: str | Path, arm: ArmNames | None = None, *,
                     axis_names: Sequence[str] | None = None) -> dict[str, list[str]]:
     """Return the columns of a readouts file that are neither readouts nor points, as read.
@@ -641,7 +501,7 @@ def read_id_columns(path: str | Path, arm: ArmNames | None = None, *,
     if not rows:
         return {}
     header = [h.strip() for h in rows[0]]
-    axes, _ = _names(arm, axis_names, None)
+    axes, _ = given_names(arm, axis_names, None)
     joints = {f"{n}_deg" for n in axes or []}
     skip = set(_XYZ["loc"]) | joints
     return {h: [r[i].strip() if i < len(r) else "" for r in rows[1:]]

@@ -11,7 +11,6 @@ and any extra numeric column) are checked against the column table, :mod:`aacmm_
 
 from __future__ import annotations
 
-import csv
 import itertools
 import math
 import re
@@ -23,9 +22,9 @@ from typing import Any, Literal, TypeGuard
 
 import numpy as np
 
-from aacmm_pin.data.bounded_read import read_bounded
 from aacmm_pin.data.columns import MAX_ANGLE_DEG, Column, column, has_unit
 from aacmm_pin.data.couplings import AxisCoupling, fill_or_check
+from aacmm_pin.data.csv_rows import Rows, data_rows, read_text, records
 from aacmm_pin.data.problem_log import MAX_SHOWN, ProblemLog, close_match
 from aacmm_pin.errors import Problem
 from aacmm_pin.units import (
@@ -44,6 +43,8 @@ MAX_COLUMNS = 256
 """Most columns of a CSV header (and the highest q<n>_deg readout column)."""
 POINT = ("x_mm", "y_mm", "z_mm")
 """The columns of a measured point (or a prediction)."""
+DISPLACEMENT = ("dx_mm", "dy_mm", "dz_mm")
+"""The columns of an R-Test's sphere displacement (``spat.csv``)."""
 # Column -> kind of cell; q columns are "angle", per-sample columns "column", others "number".
 _KINDS = {"location": "id", "placement": "id", "socket": "text", "from": "text", "to": "text",
           "length_mm": "length", "group": "id", "tool": "text",
@@ -231,57 +232,9 @@ class _Cells:
         self.bad = []
 
 
-Rows = Iterator[tuple[int, list[str]]]
-"""The (1-based line, stripped cells) of each data row of a CSV file, read as they come."""
-
-
 def _text(path: Path, log: ProblemLog) -> str | None:
-    """Return a CSV file's text read within the size bound, or None (its problem added)."""
-    try:
-        data = read_bounded(path, MAX_FILE_BYTES)  # a huge file or /dev/zero fails fast
-        if data is None:
-            log.add(None, None, f"larger than {MAX_FILE_BYTES // 2**20} MiB: split the campaign "
-                                "or decimate it")
-            return None
-        return data.decode("utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else f"{exc}"
-        log.add(None, None, "file not found" if isinstance(exc, FileNotFoundError) else why)
-        return None
-
-
-def _lines(text: str) -> Iterator[str]:
-    """Yield the lines of a text, each with its newline, as ``io.StringIO(text)`` iterates them.
-
-    Without StringIO's copy of the text (4 bytes a character: 860 MB for a 215 MB file).
-    """
-    start, find = 0, text.find
-    while (end := find("\n", start)) >= 0:
-        yield text[start:end + 1]
-        start = end + 1
-    if start < len(text):
-        yield text[start:]
-
-
-def _records(text: str, log: ProblemLog, strip: bool = True) -> Rows:
-    """Yield the (line, cells) of every row of a CSV text but trailing blank ones.
-
-    One row at a time: the rows are never all held. A CSV syntax error ends the rows, added as a
-    problem at its line. ``strip``: the cells stripped of surrounding spaces (else as written).
-    """
-    # the last line with content: rows after it are blank (trailing newlines, empty cells)
-    end = len(text)
-    while end and text[end - 1] in " \t\r\n,":
-        end -= 1
-    last = text.count("\n", 0, end) + 1 if end else 0
-    reader = csv.reader(_lines(text))
-    try:
-        for row in reader:
-            if reader.line_num > last:
-                return
-            yield reader.line_num, [c.strip() for c in row] if strip else row
-    except csv.Error as exc:
-        log.add(reader.line_num, None, f"{exc}")
+    """Return a CSV file's text read within :data:`MAX_FILE_BYTES`, or None (its problem added)."""
+    return read_text(path, log, MAX_FILE_BYTES)
 
 
 def _separator(header: list[str]) -> str | None:
@@ -454,14 +407,12 @@ def _wrong_axis_count(q_columns: list[str], named: list[str], line: int,
                      "(aacmm-pin axes ARM lists an arm's readout columns)")
 
 
-def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
-                log: ProblemLog, extras: Extras, axis_names: Iterable[str] | None,
-                couplings: Sequence[AxisCoupling] = ()) -> Table | None:
-    """:func:`read_table` with its problems going to ``log``."""
+def _text_and_header(path: Path, log: ProblemLog) -> tuple[str, int, list[str]] | None:
+    """Return (the file's text, the header's line, its cells), or None (its problem added)."""
     add = log.add
     if (text := _text(path, log)) is None:
         return None
-    first = next(_records(text, log), None)
+    first = next(records(text, log), None)
     if first is None and log.count:
         return None  # a CSV syntax error on the first line
     if first is None or not any(first[1]):
@@ -476,6 +427,61 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
     if len(header) > MAX_COLUMNS:
         add(top, None, f"{len(header)} columns in the header; at most {MAX_COLUMNS} are read")
         return None
+    return text, top, header
+
+
+def _read_rows(table: Table, cells: _Cells, rows: Rows, index: dict[str, int], width: int,
+               taken: list[str], log: ProblemLog) -> int:
+    """Check the data rows (cells as written) into ``table``; return their number.
+
+    Args:
+        table: where the lines of the rows kept go (its ``complete`` cleared once the file has
+            :data:`~aacmm_pin.data.problem_log.MAX_SHOWN` problems).
+        cells: the columns' parsed cells.
+        rows: the data rows, cells as written.
+        index: column name -> its index in a row.
+        width: the header's number of columns.
+        taken: the extra columns read as numbers.
+        log: the file's problems.
+    """
+    add, n_rows = log.add, 0
+    for chunk in _chunks(rows):
+        n_rows += len(chunk)
+        if cells.fast(chunk, index, width, keep := table.complete and log.count < MAX_SHOWN):
+            table.complete = keep
+            if keep:
+                table.lines.extend(line for line, _ in chunk)
+            continue
+        for line, cells_written in chunk:  # a problem: cell by cell, each problem added
+            row = [c.strip() for c in cells_written]
+            if not any(row):
+                add(line, None, "blank line among the data rows")
+                continue
+            if len(row) != width:
+                add(line, None, f"{len(row)} cells, but the header has {width} columns",
+                    kind=("cells", len(row)))
+                continue
+            keep = table.complete = table.complete and log.count < MAX_SHOWN
+            if keep:
+                table.lines.append(line)
+            for name, k in index.items():
+                value, reason, why = cells.parse(name, row[k], keep)
+                if reason and name in taken and value is None and reason.startswith("'"):
+                    reason += f"; {table.path.name}'s further columns hold numbers"
+                if reason:
+                    add(line, name, reason, kind=why, unit="cells")
+    cells.finish()
+    return n_rows
+
+
+def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tuple[str, ...],
+                log: ProblemLog, extras: Extras, axis_names: Iterable[str] | None,
+                couplings: Sequence[AxisCoupling] = ()) -> Table | None:
+    """:func:`read_table` with its problems going to ``log``."""
+    add = log.add
+    if (read := _text_and_header(path, log)) is None:
+        return None
+    text, top, header = read
     named = [f"{n}_deg" for n in axis_names or []] if has_q else []
     coupled = [c.axis for c in couplings] if has_q else []
     head = _header(header, top, required, has_q, optional, named, add, coupled)
@@ -484,7 +490,7 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
     taken: list[str] = []
     if extras != "refuse" and not head.missing:
         quiet = ProblemLog([], path)  # a syntax error is reported by the reading pass below
-        numeric = (_numeric_columns(head, _data_rows(text, quiet), len(header))
+        numeric = (_numeric_columns(head, data_rows(text, quiet), len(header))
                    if extras == "readouts" and head.unknown else set())
         taken = _take_extras(head, top, numeric, extras, add)
     if extras == "refuse" or (extras == "numbers" and head.missing):
@@ -501,47 +507,14 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
                     else _KINDS.get(name, "number")) for name in head.index}
     cells = _Cells(kinds, {name: column(name) for name in per_sample})
     table = Table(path, head.q_columns, array("q"), cells.cols, per_sample)
-    n_rows = 0
-    for chunk in _chunks(_data_rows(text, log, strip=False)):  # cells as written
-        n_rows += len(chunk)
-        if cells.fast(chunk, head.index, len(header), keep := table.complete and
-                      log.count < MAX_SHOWN):
-            table.complete = keep
-            if keep:
-                table.lines.extend(line for line, _ in chunk)
-            continue
-        for line, cells_written in chunk:  # a problem: cell by cell, each problem added
-            row = [c.strip() for c in cells_written]
-            if not any(row):
-                add(line, None, "blank line among the data rows")
-                continue
-            if len(row) != len(header):
-                add(line, None, f"{len(row)} cells, but the header has {len(header)} columns",
-                    kind=("cells", len(row)))
-                continue
-            keep = table.complete = table.complete and log.count < MAX_SHOWN
-            if keep:
-                table.lines.append(line)
-            for name, k in head.index.items():
-                value, reason, why = cells.parse(name, row[k], keep)
-                if reason and name in taken and value is None and reason.startswith("'"):
-                    reason += f"; {path.name}'s further columns hold numbers"
-                if reason:
-                    add(line, name, reason, kind=why, unit="cells")
-    cells.finish()
+    n_rows = _read_rows(table, cells, data_rows(text, log, strip=False), head.index,
+                        len(header), taken, log)
     if not n_rows:
         add(None, None, "header only: no data rows")
     if coupled and head.q_columns:
         cells.as_lists()  # a filled column holds None where a cell it needs is bad
         fill_or_check(table.cols, table.q_columns, table.lines, couplings, add)
     return table
-
-
-def _data_rows(text: str, log: ProblemLog, strip: bool = True) -> Rows:
-    """Yield the data rows of a CSV text (the rows after its header), stripped if ``strip``."""
-    rows = _records(text, log, strip)
-    next(rows, None)
-    yield from rows
 
 
 def q_names(n: int) -> list[str]:

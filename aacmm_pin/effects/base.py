@@ -13,6 +13,13 @@ and how they move the modelled point. A term acts in one of these ways (one subc
   (lateral deflection), :math:`(\delta_x, \delta_y) = B(\text{samples}) \, v` with B of shape
   (N, 2, k); the point moves by :math:`\delta_x \, u_x \times (p - o) + \delta_y \, u_y \times
   (p - o)` about the joint's origin o and lateral axes u (first order in the tilt);
+* :class:`FrameTerm`: a small motion of any frame of the arm's Pinocchio model (the tool, the
+  base, a link, a joint's or an error frame), a twist :math:`(v, \omega) = B(\text{samples}) \, v`
+  in the frame's own axes with B of shape (N, 6, k) (linear part first, m; angular, rad);
+  everything hanging from the frame moves with it, so the point moves by
+  :math:`R_f v + R_f \omega \times (p - o_f)` and the columns come from the frame Jacobian
+  (first order in the twist). A stylus that grows with its temperature, a base that drifts, a
+  link that bends, a probe that deflects along its axis are terms of this kind;
 * :class:`MeasurementTerm`: a change of the *measured* point (e.g. the R-Test's), not of the arm;
 * :class:`MapTerm`: the paper's encoder error map of one axis (its nodes are the parameters).
 
@@ -57,6 +64,9 @@ class StylusDerivatives(Protocol):
     @property
     def tilts(self) -> np.ndarray | None:
         """d(position)/d(lateral tilts), shape (N, 3, n_axes, 2), m/rad, or None."""
+
+    def twist(self, frame: str) -> np.ndarray:
+        """d(position)/d(a small twist of a frame in its own axes), shape (N, 3, 6)."""
 
 
 TIME_WITHIN_LOCATION = "time within each location"
@@ -251,7 +261,7 @@ class BasisTerm(Term):
 
     basis_of: Basis = field(repr=False, kw_only=True)
     """Samples -> basis: (N, k) for angle and scale terms, (N, 2, k) for tilt terms, (N, 3, k)
-    for measurement terms."""
+    for measurement terms, (N, 6, k) for frame terms."""
     variable_of: VariableOf = field(repr=False, kw_only=True)
     """Samples -> (label with unit, per-sample values) of the term's variable (figures)."""
 
@@ -271,7 +281,7 @@ class BasisTerm(Term):
             raise PluginOutputError(self, f"its basis raised {type(exc).__name__}: {exc}") from None
         if out.ndim not in (2, 3) or out.shape[0] != samples.n:
             raise PluginOutputError(self, f"its basis has shape {out.shape}, expected ({samples.n}, "
-                                          "k) or (N, 2 or 3, k) for these samples")
+                                          "k) or (N, 2, 3 or 6, k) for these samples")
         if not np.all(np.isfinite(out)):
             bad = int(np.flatnonzero(~np.isfinite(out).reshape(samples.n, -1).all(axis=1))[0])
             raise PluginOutputError(self, f"its basis is not finite (NaN or inf) at sample "
@@ -359,6 +369,45 @@ class TiltTerm(BasisTerm):
         angle = np.linalg.solve(gram, rhs[:, :, None])[:, :, 0]
         return f"A{self.axis} lateral tilt residual (arcsec)", np.degrees(
             np.linalg.norm(angle, axis=1)) * 3600
+
+
+@dataclass(frozen=True, eq=False)
+class FrameTerm(BasisTerm):
+    """A small motion of the frame ``frame``: basis (N, 6, k) times the values is its twist.
+
+    The twist (linear, then angular; m, rad) is in the frame's own axes (Pinocchio's ``LOCAL``);
+    ``frame`` names a frame of the arm's Pinocchio model: a link (``link6``), the tool
+    (``stylus``), a joint's frame (its child side) or an error frame.
+    """
+
+    frame: str = field(kw_only=True)
+    """Name of the moved frame in the arm's Pinocchio model."""
+
+    def adjust(self, values: np.ndarray, samples: Samples, out: Adjustment) -> None:
+        """Add the twist to the frame's."""
+        out.twist(self.frame)[:] += self._twist_basis(samples) @ values
+
+    def _twist_basis(self, samples: Samples) -> np.ndarray:
+        basis = self.basis(samples)
+        if basis.ndim != 3 or basis.shape[1] != 6:
+            raise PluginOutputError(self, f"its basis has shape {basis.shape}, expected "
+                                          f"({samples.n}, 6, k) for a frame term")
+        return basis
+
+    def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
+                touched: np.ndarray | None = None) -> np.ndarray:
+        """d(point)/d(values): the frame's twist columns times the basis, (N, 3, k)."""
+        cols: np.ndarray = np.einsum("nij,njk->nik", stylus.twist(self.frame),
+                                     self._twist_basis(samples))
+        return cols
+
+    def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
+                       origin: np.ndarray) -> tuple[str, np.ndarray]:
+        """The residual along the point's motion by the term's first parameter (um)."""
+        cols = np.einsum("nij,nj->ni", stylus.twist(self.frame), self._twist_basis(samples)[:, :, 0])
+        unit = cols / np.maximum(np.linalg.norm(cols, axis=1, keepdims=True), 1e-30)
+        return (f"residual along the motion of {self.frame} (um)",
+                np.sum(residuals * unit, axis=1) * 1e6)
 
 
 @dataclass(frozen=True, eq=False)

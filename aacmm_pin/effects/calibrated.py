@@ -13,7 +13,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from aacmm_pin.effects.base import Term, TiltTerm
-from aacmm_pin.effects.registry import adjustment
+from aacmm_pin.effects.forward import adjustment
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.kinematics import (
@@ -41,7 +41,7 @@ def extension_adjustment(arm: Arm, params: Parameters, readouts: np.ndarray,
         raise ValueError(f"readouts: need shape (N, {arm.n_axes}) in rad, got {np.shape(readouts)}")
     if samples is None or not samples.matches(q):
         samples = Samples(arm, q)
-    return adjustment(params.extensions, samples, arm.n_axes)
+    return adjustment(params, samples, arm.n_axes)
 
 
 def needs_tilts(terms: Iterable[Term]) -> bool:

@@ -1,6 +1,7 @@
 r"""A calibrated arm at run time: readouts in, true joint angles, tool placements and Jacobians out.
 
-What a robotics stack holds after loading a calibration once (:func:`load_calibrated`): one
+What a robotics stack holds after loading a calibration once
+(:func:`~aacmm_pin.effects.calibrated_folder.load_calibrated`): one
 Pinocchio model of the calibrated arm and its data, the encoder maps and the extension terms, and
 every function a control loop or a batch job calls on them:
 
@@ -37,32 +38,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from aacmm_pin.effects._plain_maps import PlainMaps
-from aacmm_pin.effects.registry import (
-    check_extensions,
-    read_parameters,
-    term_from_key,
-    terms_adjustment,
-)
+from aacmm_pin.effects.forward import term_values, terms_adjustment
+from aacmm_pin.effects.parameters_file import check_extensions
 from aacmm_pin.errors import ArgumentError
-from aacmm_pin.model.arm import Arm, load_arm, resolve_arm_path
+from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import correct_with_slopes, readouts_of_angles
 from aacmm_pin.model.kinematics import Adjustment, JointKinematics, tool_rows
 from aacmm_pin.model.parameters import Parameters, check_against_arm
 from aacmm_pin.model.samples import Samples
 
-__all__ = ["COMPACT_PARAMETERS", "CalibratedArm", "load_calibrated"]
+__all__ = ["CalibratedArm"]
 
-COMPACT_PARAMETERS = "compact.json"
-"""A calibration folder's parameters of its compact URDF (``compact.urdf``: the calibrated values
-folded into the joint origins), read first by :func:`load_calibrated`."""
-FULL_PARAMETERS = "parameters.json"
-"""A calibration folder's parameters of its error-frame URDF (``calibrated.urdf``)."""
 DEGREE_MARGIN = math.pi
 """How far beyond an axis' limits (rad) a readout may lie before it is refused as degrees given for
 radians: half a turn (a readout of a table that wraps may pass a limit by less)."""
@@ -126,8 +117,7 @@ class CalibratedArm:
         """Whether one sample may take the plain-float path (:mod:`._plain_maps`)."""
         self._fast = self._plain_ok and not params.extensions
         """... and needs no extension term either."""
-        self._terms = [(term_from_key(key), np.asarray(values, dtype=float))
-                       for key, values in params.extensions.items()]
+        self._terms = term_values(params)  # looked up where the parameters were made
         self._keys = list(params.extensions)
         self._rotation = params.rotation()
         self._translation = np.asarray(params.translation, dtype=float)
@@ -324,7 +314,7 @@ class CalibratedArm:
                 vals := self._one(readouts)) is not None:
             angles = np.array(self._plain.forward(vals, "readouts")[0])
             change = self._change(np.array([vals]), columns, direction)
-            if change is None or not change.tilted:  # else predict's tilt columns, below
+            if change is None or not change.moves_point:  # else predict's tilt or twist columns
                 if change is not None:
                     angles += change.offsets[0]
                 pin.forwardKinematics(self.model, self.data, angles)
@@ -346,7 +336,7 @@ class CalibratedArm:
         """Return the tool frame's placement, a homogeneous transform (4 x 4), m.
 
         Its translation is :meth:`position`; its rotation that of the tool link at the true
-        joint angles (lateral tilts of extension terms move the point only).
+        joint angles (lateral tilts and frame twists of extension terms move the point only).
 
         Args:
             readouts: encoder readouts, shape (n_axes,) or (N, n_axes), rad.
@@ -392,8 +382,8 @@ class CalibratedArm:
         j is d/d(readout j): the joint's column times the slope of its map and through the
         couplings (a coupled axis has no readout: a zero column). The extension terms' angle
         errors enter the angles at which it is taken, not its columns (their change with the
-        readouts is second order); a scale term scales the velocity rows; lateral tilt terms,
-        which move the point (:meth:`position`), are left out (their change is of their size times
+        readouts is second order); a scale term scales the velocity rows; lateral tilt and frame
+        terms, which move the point (:meth:`position`), are left out (their change is of their size times
         the rotation, second order too).
 
         Args:
@@ -558,41 +548,3 @@ class CalibratedArm:
         out = np.zeros((len(angles), self.model.nq))
         out[:, self._axes] = angles
         return out
-
-
-def load_calibrated(path: str | Path, arm: str | Path | None = None) -> CalibratedArm:
-    """Load a calibration for run time: a folder, or a parameters file of one.
-
-    A folder is read through its ``compact.json`` (the compact URDF, the calibrated values folded
-    into the joint origins, and the rest of the calibration) when it has one, else through its
-    ``parameters.json``: both give the same points.
-
-    Args:
-        path: a calibration folder (``aacmm-pin identify --out``) or a parameters file.
-        arm: the arm's URDF or embedded name instead of the one the parameters name (with a
-            folder: its ``parameters.json``, whose DH values the arm's error frames take).
-
-    Raises:
-        ArgumentError: for ``arm`` with parameters that hold no DH values (``compact.json``:
-            the geometry is its own URDF's).
-        FileFormatError: for a missing or bad parameters file, or parameters that do not fit
-            the arm (naming the file and the key).
-        ArmModelError: if the URDF cannot be read.
-    """
-    file = Path(path)
-    if file.is_dir():  # another arm takes the DH values of parameters.json
-        compact = file / COMPACT_PARAMETERS
-        file = compact if compact.is_file() and arm is None else file / FULL_PARAMETERS
-    params = read_parameters(file)
-    if arm is not None and not params.dh and _urdf_path(arm) != _urdf_path(params.arm):
-        raise ArgumentError(f"arm: {file} holds no DH values (its calibrated geometry is in "
-                            f"{params.arm}); give another arm with the folder or its "
-                            f"{FULL_PARAMETERS}")
-    # a compact URDF (compact.json: no DH values) is loaded as it is, without error frames
-    return CalibratedArm(load_arm(arm if arm is not None else params.arm,
-                                  error_frames=bool(params.dh)), params)
-
-
-def _urdf_path(arm: str | Path) -> Path:
-    """Return the resolved URDF path of an arm's path or embedded name."""
-    return Path(resolve_arm_path(arm)).resolve()

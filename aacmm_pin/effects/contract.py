@@ -160,10 +160,11 @@ def check_term(term: Term, samples: Samples, params: Parameters, n: int = SAMPLE
     sub = samples.select(rows)
     k = len(term.names)
     values = np.asarray(params.extensions.get(term.key, np.zeros(k)), dtype=float).reshape(-1)
-    cols = _columns(term, sub, params.replace(extensions={term.key: values}), values, params)
+    at = params.replace(extensions={term.key: values}, extension_terms={term.key: term})
+    cols = _columns(term, sub, at, values, params)
     sizes = np.abs(np.broadcast_to(np.asarray(term.sizes(sub.arm.sizes), dtype=float), (k,)))
     steps = STEP * np.where(sizes > 0, sizes, 1.0)
-    plain = params.replace(extensions={})
+    plain = params.replace(extensions={}, extension_terms={})
     rng = np.random.default_rng(k)
     direction = steps * rng.choice([-1.0, 1.0], k) * rng.uniform(0.5, 1.5, k)
     if disagreement(cols @ direction, _points(term, plain, sub, values, direction), 1.0) is None:

@@ -1,13 +1,18 @@
 """The registry of effects: the built-ins, installed plugins and a user's file, by name.
 
+It registers effects and looks them (and their terms) up, nothing else: the terms' model arithmetic
+is :mod:`aacmm_pin.effects.forward`'s, the ``parameters.json`` file
+:mod:`aacmm_pin.effects.parameters_file`'s. Importing it registers :func:`term_from_key` as the
+model layer's term lookup (:data:`aacmm_pin.model.parameters.TERM_LOOKUP`): parameters made from a
+file or a dict carry their extensions' terms from then on.
+
 Effects come from three places, in this order: the built-ins of :mod:`aacmm_pin.effects`, the
 installed packages that offer an entry point in the group ``aacmm_pin.effects`` (each entry point
 loads an :class:`~aacmm_pin.effects.base.Effect` instance or class, or a list of them), and a
 Python file a command is given (``--effects-file FILE``, :func:`load_effect_file`), which calls
 :func:`register_effect` itself. ``parameters.json`` names the plugin that brings the effect of each
-of its extensions (``"plugins": {plugin: [term keys]}``, :func:`write_parameters`, plugin being the
-distribution name or the effects file's path); reading it where that effect is not registered is
-a one-line error naming the key and the plugin (:func:`check_extensions`).
+of its extensions (``"plugins": {plugin: [term keys]}``, plugin being the distribution name or the
+effects file's path, :func:`plugins_of`).
 """
 
 from __future__ import annotations
@@ -17,15 +22,13 @@ import importlib.util
 import inspect
 import sys
 import threading
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
+from typing import Any
 
 from aacmm_pin.data.columns import set_effect_reads
-from aacmm_pin.effects.base import SOURCE_OF, Adjustment, Effect, Term
+from aacmm_pin.effects.base import SOURCE_OF, Effect, Term
 from aacmm_pin.effects.builtin.backlash import Backlash
 from aacmm_pin.effects.builtin.compliance import Compliance
 from aacmm_pin.effects.builtin.crosstalk import Crosstalk
@@ -34,12 +37,8 @@ from aacmm_pin.effects.builtin.lateral_compliance import LateralCompliance
 from aacmm_pin.effects.builtin.rtest import RTest
 from aacmm_pin.effects.builtin.thermal import Thermal
 from aacmm_pin.effects.builtin.tool import Tool
-from aacmm_pin.errors import AacmmError, ArgumentError, FileFormatError, Problem
-
-if TYPE_CHECKING:
-    from aacmm_pin.model.arm import Arm
-    from aacmm_pin.model.parameters import Parameters
-    from aacmm_pin.model.samples import Samples
+from aacmm_pin.errors import AacmmError
+from aacmm_pin.model.parameters import TERM_LOOKUP
 
 GROUP = "aacmm_pin.effects"
 """The entry-point group through which installed packages offer effects."""
@@ -234,37 +233,6 @@ def terms_of(extensions: Iterable[str]) -> list[Term]:
     return [term_from_key(k) for k in extensions]
 
 
-def axes_problem(term: Term, arm: Arm) -> str | None:
-    """Return why a term does not fit the arm's axes (an axis beyond it), or None if it does.
-
-    One line naming the term and the arm's axes, e.g. ``'compliance[A7]' acts on axis 7; the arm
-    ur5 has 6 axes, A1..A6 (shoulder_pan_joint .. wrist_3_joint)``.
-    """
-    beyond = [a for a in term.axes if not 1 <= a <= arm.n_axes]
-    if not beyond:
-        return None
-    plain = list(arm.axis_names) == [f"A{a}" for a in range(1, arm.n_axes + 1)]
-    names = "" if plain else f" ({arm.axis_names[0]} .. {arm.axis_names[-1]})"
-    return (f"{term.key!r} acts on axis {beyond[0]}; the arm {arm.name} has {arm.n_axes} axes, "
-            f"A1..A{arm.n_axes}{names}")
-
-
-def check_terms(terms: Iterable[Term], arm: Arm, where: str) -> None:
-    """Check that every term acts on axes of the arm.
-
-    Args:
-        terms: the terms (e.g. ``identify``'s ``extensions``, ``--terms``).
-        arm: the arm they are to be estimated on.
-        where: what gave them, named first in the message (``--terms``, ``extensions``).
-
-    Raises:
-        ArgumentError: one line naming ``where``, the first term beyond the arm and its axes.
-    """
-    for term in terms:
-        if (why := axes_problem(term, arm)) is not None:
-            raise ArgumentError(f"{where}: {why}")
-
-
 def effect_names(terms: Iterable[Term]) -> list[str]:
     """Return the distinct effect names of some terms, in order."""
     return list(dict.fromkeys(t.effect for t in terms))
@@ -283,157 +251,4 @@ def plugins_of(terms: Iterable[Term]) -> dict[str, list[str]]:
     return out
 
 
-def adjustment(extensions: Mapping[str, np.ndarray], samples: Samples, n_axes: int) -> Adjustment:
-    """Return how the extension terms change the arm at the samples (see :class:`Adjustment`)."""
-    return terms_adjustment([(term_from_key(key), np.asarray(values, dtype=float))
-                             for key, values in extensions.items()], samples, n_axes)
-
-
-def terms_adjustment(terms: Iterable[tuple[Term, np.ndarray]], samples: Samples, n_axes: int
-                     ) -> Adjustment:
-    """Return how terms with their values change the arm at the samples (see :class:`Adjustment`).
-
-    :func:`adjustment` with the terms looked up once (the runtime object holds them).
-    """
-    out = Adjustment(samples.n, n_axes)
-    for term, values in terms:
-        term.adjust(values, samples, out)
-    return out
-
-
-def measurement_shift(terms: Iterable[Term], extensions: Mapping[str, np.ndarray], samples: Samples
-                      ) -> np.ndarray:
-    """Return the terms' change of the measured point, shape (N, 3), m."""
-    out = np.zeros((samples.n, 3))
-    for t in terms:
-        shift = t.shift(extensions[t.key], samples)
-        if shift is not None:
-            out += shift
-    return out
-
-
-def read_parameters(path: str | Path) -> Parameters:
-    """Read ``parameters.json`` (or a calibration folder) and check its extensions' terms.
-
-    :func:`aacmm_pin.model.parameters.read_parameters` with :func:`check_extensions`: every key of
-    ``extensions`` must be a term of a registered effect (a plugin's effect is named with its
-    plugin).
-
-    Raises:
-        FileFormatError: as :func:`aacmm_pin.model.parameters.read_parameters`, or naming the
-            extension key whose effect is not registered.
-    """
-    from aacmm_pin.model.parameters import read_parameters as read_file
-
-    params = read_file(path)
-    file = Path(path)
-    check_extensions(params, None, file / "parameters.json" if file.is_dir() else file)
-    return params
-
-
-def needed_plugins(params: Parameters) -> dict[str, str]:
-    """Return extension key -> plugin, as the parameters' ``"plugins"`` entry names them."""
-    plugins = params.extra.get("plugins")
-    if not isinstance(plugins, dict):
-        return {}
-    return {str(k): str(p) for p, keys in plugins.items() if isinstance(keys, list) for k in keys}
-
-
-def with_plugins(params: Parameters) -> Parameters:
-    """Return the parameters with ``extra["plugins"]`` naming the plugin of every extension's effect.
-
-    ``{plugin: [term keys]}`` for the terms of effects that are not built in (:func:`plugins_of`);
-    no entry when every term is built in. A key whose effect is not registered here keeps the
-    plugin the parameters named for it.
-    """
-    old = needed_plugins(params)
-    plugins: dict[str, list[str]] = {}
-    for key in params.extensions:
-        try:
-            found = plugins_of([term_from_key(key)])
-        except EffectNotFound:
-            found = {old[key]: [key]} if key in old else {}
-        for plugin, keys in found.items():
-            plugins.setdefault(plugin, []).extend(keys)
-    extra = {k: v for k, v in params.extra.items() if k != "plugins"}
-    return params.replace(extra={**extra, "plugins": plugins} if plugins else extra)
-
-
-def write_parameters(params: Parameters, path: str | Path) -> None:
-    """Write ``parameters.json``, naming the plugins its extensions need (``"plugins"``).
-
-    :func:`aacmm_pin.model.parameters.write_parameters` of :func:`with_plugins`: a process without
-    a plugin's effect then says which plugin to install (:func:`check_extensions`).
-    """
-    from aacmm_pin.model.parameters import write_parameters as write_file
-
-    write_file(with_plugins(params), path)
-
-
-def _registered(key: str) -> bool:
-    """Whether a registered effect knows the term ``key``."""
-    try:
-        term_from_key(key)
-    except EffectNotFound:
-        return False
-    return True
-
-
-def _missing_plugins(needed: dict[str, str], keys: Iterable[str], where: object) -> str:
-    """Return one line naming the extension keys whose plugin is not loaded, and the plugins."""
-    by_plugin: dict[str, list[str]] = {}
-    for key in keys:
-        by_plugin.setdefault(needed[key], []).append(key)
-    parts = []
-    for plugin, its in by_plugin.items():
-        how = (f"pass --effects-file {plugin}" if plugin.endswith(".py") else
-               f"install the package {plugin} (or pass --effects-file FILE)")
-        here = [plugin_of(term_from_key(k).effect) for k in its if _registered(k)]
-        other = (f" (the effect registered here is {here[0]!r}'s, another model: the calibration "
-                 f"was made with the plugin's, which replaced it)" if here else "")
-        parts.append(f"extensions {', '.join(its)} need the effect plugin {plugin!r}, not loaded "
-                     f"here{other}: {how}")
-    return f"{where}: " + "; ".join(parts)
-
-
-def check_extensions(params: Parameters, arm: Arm | None = None, path: str | Path | None = None
-                     ) -> None:
-    """Check that every extension names a registered term with its number of values (and axes).
-
-    A calibration written with a plugin's effect names the plugin (``parameters.json``
-    ``"plugins"``); when the effect is not registered here, the error is one line naming the key
-    and the plugin to install (or the file to pass with ``--effects-file``).
-
-    Raises:
-        EffectNotFound: one line naming the file, the keys and the plugins not loaded here.
-        FileFormatError: listing every other problem, naming the file and the key.
-    """
-    where = path if path is not None else params.arm
-    needed = needed_plugins(params)
-    problems: list[Problem] = []
-    unloaded = []
-    for key, values in params.extensions.items():
-        try:
-            term = term_from_key(key)
-            if key in needed and plugin_of(term.effect) != needed[key]:
-                # made with a plugin's effect that replaced this one: another model, not it
-                unloaded.append(key)
-                continue
-        except EffectNotFound:
-            if key in needed:
-                unloaded.append(key)
-            else:
-                problems.append(Problem(where, None, f"extensions.{key}",
-                                        "not a term of the effect library (e.g. compliance[A2], "
-                                        "lateral_compliance[A2], thermal, backlash[A3], crosstalk[A2<-A3], "
-                                        "encoder_harmonic[A4], rtest)"))
-            continue
-        if values.size != len(term.names):
-            problems.append(Problem(where, None, f"extensions.{key}",
-                                    f"needs {len(term.names)} finite numbers, got {values.tolist()!r}"))
-        elif arm is not None and (why := axes_problem(term, arm)) is not None:
-            problems.append(Problem(where, None, f"extensions.{key}", why))
-    if unloaded:
-        raise EffectNotFound(_missing_plugins(needed, unloaded, where))
-    if problems:
-        raise FileFormatError(problems)
+TERM_LOOKUP[:] = [term_from_key]  # parameters made from now on carry their extensions' terms

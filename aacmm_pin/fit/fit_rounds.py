@@ -61,114 +61,159 @@ def fit_rounds(full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.
     solves); one that holds as many keeps them, so that the start's directions stand wherever the
     decision does not change.
     """
-    rows = None if keep is None else np.repeat(keep.astype(float), 3)
-    unvisited = ident.unvisited_nodes(full_u, q if keep is None else q[keep])
-    unknowns = full_u.with_fixed(unvisited)
-    n_arm = int(unknowns.free.sum())
-    x_start = np.concatenate([unknowns.vector(start),
-                              np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)])
+    rounds = _Rounds(full_u, start, q, measured, nuisance, sigma_class, weight, keep)
+    return rounds.solve(rounds.landing(on_evaluation), settings, jac, on_evaluation)
 
-    chunked = is_chunked(unknowns, len(q))  # a large campaign: never held whole
 
-    def jacobian(x: np.ndarray) -> DataJacobian:
+class _Landing(NamedTuple):
+    """Where the solves start: the decision checked where the Gauss-Newton step landed."""
+
+    now: _Decision
+    z: np.ndarray
+    """Reduced coordinates of the start of the first solve."""
+    x: np.ndarray
+    """Its full vector."""
+    f: np.ndarray | None
+    """The residual there, when the problem stayed the same."""
+    nfev: int
+    """Evaluations so far."""
+    held: list[DataJacobian]
+    """The data Jacobian at x (taken out by the solve: a campaign's can weigh hundreds of MB)."""
+
+
+class _Rounds:
+    """One :func:`fit_rounds`: the layout, the samples kept and the decisions on them."""
+
+    def __init__(self, full_u: Unknowns, start: Parameters, q: np.ndarray, measured: np.ndarray,
+                 nuisance: Nuisance, sigma_class: float, weight: np.ndarray | None,
+                 keep: np.ndarray | None):
+        self.q, self.measured, self.nuisance, self.keep = q, measured, nuisance, keep
+        self.sigma_class, self.weight = sigma_class, weight
+        self.rows = None if keep is None else np.repeat(keep.astype(float), 3)
+        self.unvisited = ident.unvisited_nodes(full_u, q if keep is None else q[keep])
+        self.unknowns = full_u.with_fixed(self.unvisited)
+        self.n_arm = int(self.unknowns.free.sum())
+        self.x_start = np.concatenate([self.unknowns.vector(start),
+                                       np.zeros(3 * nuisance.n_nests + 6 * nuisance.n_frames)])
+        self.chunked = is_chunked(self.unknowns, len(q))  # a large campaign: never held whole
+        # without row weights the solver's data Jacobian is this one: computed once per point
+        self.same = self.rows is None and weight is None
+        self.gauges: list[int] = []
+        self.gauge = sp.csr_matrix((0, self.n_arm))
+
+    def jacobian(self, x: np.ndarray) -> DataJacobian:
+        """Return the data Jacobian of the kept rows at the full vector x."""
         jac_x: DataJacobian
-        if chunked:
-            jac_x = ChunkedJacobian(unknowns, x[:n_arm], q)
+        if self.chunked:
+            jac_x = ChunkedJacobian(self.unknowns, x[:self.n_arm], self.q)
         else:
-            _, jac_x = unknowns.jacobian(x[:n_arm], q)
-        return jac_x if rows is None else jac_x.scaled(rows)
+            _, jac_x = self.unknowns.jacobian(x[:self.n_arm], self.q)
+        return jac_x if self.rows is None else jac_x.scaled(self.rows)
 
-    # without row weights the solver's data Jacobian is this one: computed once per point
-    same = rows is None and weight is None
-    jac_now = jacobian(x_start)
-    f_start: np.ndarray | None = None  # the residual at the start, when the fit has it
-    if same and isinstance(jac_now, ChunkedJacobian):
-        # the first problem's products at the start (J^T of the nuisance columns and of the
-        # residual) taken in the gauge check's pass: a pass over the chunks less
-        nuis_start, f_start = Problem.data_rows_at(unknowns, q, measured, nuisance, sigma_class,
-                                                   weight, x_start)
-        jac_now.defer(nuis_start, f_start[:3 * len(q)])
-        del nuis_start
-    gauges = ident.gauge_axes(unknowns, jac_now)
-    gauge = ident.gauge_rows(unknowns, gauges)
-
-    def decide(jac_x: DataJacobian, x: np.ndarray) -> _Decision:
+    def decide(self, jac_x: DataJacobian, x: np.ndarray, f_ref: np.ndarray | None = None
+               ) -> _Decision:
         """Held directions decided at x (``jac_x``: the Jacobian there), the problem at x."""
-        obs = ident.observability(unknowns, jac_x, gauge, sigma_class)
-        constraints = sp.csr_matrix(sp.vstack([gauge, obs.hold_rows()]))
-        return _Decision(obs, constraints, Problem(unknowns, q, measured, nuisance, constraints,
-                                                   obs.scale, x_start, x, sigma_class, weight,
-                                                   jac_x if same else None,
-                                                   f_start if x is x_start else None))
+        obs = ident.observability(self.unknowns, jac_x, self.gauge, self.sigma_class)
+        constraints = sp.csr_matrix(sp.vstack([self.gauge, obs.hold_rows()]))
+        return _Decision(obs, constraints, Problem(
+            self.unknowns, self.q, self.measured, self.nuisance, constraints, obs.scale,
+            self.x_start, x, self.sigma_class, self.weight, jac_x if self.same else None, f_ref))
 
-    def check(jac_x: DataJacobian, x: np.ndarray, now: _Decision) -> _Decision | None:
+    def check(self, jac_x: DataJacobian, x: np.ndarray, now: _Decision) -> _Decision | None:
         """The decision taken again at x if x holds another number of directions, else None."""
-        if ident.held_count(unknowns, jac_x, gauge, sigma_class) == now.obs.hold.shape[0]:
-            return None
-        return decide(jac_x, x)
+        held = ident.held_count(self.unknowns, jac_x, self.gauge, self.sigma_class)
+        return None if held == now.obs.hold.shape[0] else self.decide(jac_x, x)
 
-    now = decide(jac_now, x_start)
-    n_kept = len(q) if keep is None else int(keep.sum())
-    plausible = plausibility.plausible_rms(unknowns, jac_now, now.obs.scale, 3 * n_kept)
-    landed: list[DataJacobian] = []  # a chunked Jacobian where the step lands, with its products
-    z_now, f_at, nfev = decision_point(now.problem, jac_now if same else None, on_evaluation,
-                                       f_start, landed if same and chunked else None)
-    f_start = None
-    f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
-    x_now = now.problem.x(z_now)
-    residual = (f_at[:now.problem.n_data].reshape(-1, 3)  # the same numbers
-                if f_at is not None and now.problem.row_weight is None
-                else now.problem.data_residuals(x_now))
-    # inputs that are not this arm's, or in other units, end here (2 evaluations); the scale is
-    # the median's, so that a few outliers (the robust loop's business) do not count
-    scale = _median_scale(residual, keep)
-    if not plausibility.agrees(scale, plausible, sigma_class):
-        # a wild sample (a readout of 720 deg) drags the least-squares step and every residual
-        # with it, but not the start's: the inputs disagree only if the start's bulk does too
-        scale = min(scale, _median_scale(now.problem.data_residuals(x_start), keep))
-    plausibility.check_agreement(scale, plausible, sigma_class, nfev,
-                                 unknowns.arm.sizes_label, unknowns.arm.source)
-    if z_now.any():  # the step lowered the cost: check the decision where it landed
-        del jac_now  # one Jacobian in memory at a time
-        jac_now = landed.pop() if landed else jacobian(x_now)
-        if same and isinstance(jac_now, ChunkedJacobian):  # one pass serves the check and the
-            # solve's first step: J^T J, J^T (nuisance columns) and J^T f there (the residual's
-            # own pass where the step landed: no pass here)
-            jac_now.products(now.problem.nuisance_jacobian(x_now), f_at[:now.problem.n_data])
-        again = check(jac_now, x_now, now)
-        if again is not None:
-            # the solve starts at x_now put on the new constraints (held at the start's values),
-            # a held component away from it: x_now's Jacobian still serves the first step
-            now, z_now, f_now = again, again.problem.z(x_now), None
-    landed.clear()  # a step not taken: its Jacobian is not used
-    last: DataJacobian | None = None  # the solver's last, taken at its solution: jacobian(x_now)
-    at_solution: DataJacobian | None = None  # the data Jacobian at the final x, for the covariance
-    for _round in range(3):  # checked at the solution
-        if _round:
-            jac_now = last if last is not None else jacobian(x_now)
-            last = None
-            again = check(jac_now, x_now, now)
-            if again is None or (settings.budget is not None and settings.budget.spent):
-                at_solution = jac_now  # the decision stands (or no evaluation is left to solve)
-                break
-            now, z_now, f_now = again, again.problem.z(x_now), None
-        # the solve's first Jacobian is this one (handed over, not kept here: a campaign's
-        # Jacobian can weigh hundreds of MB)
-        handed = [jac_now] if same else []
-        del jac_now
-        solution = now.problem.solve(WarmStart(z_now, f_now, handed.pop() if handed else None,
-                                               x_now), settings, jac, on_evaluation=on_evaluation)
-        f_now = None
-        # its last Jacobian, at its solution, is jacobian(x) there without row weights
-        res, last = solution.result, solution.jacobian if same else None
-        del solution
-        nfev += res.nfev
-        z_now = res.x
+    def landing(self, on_evaluation: Callable[[float], None]) -> _Landing:
+        """Decide at the start, step (:func:`decision_point`) and check the decision there.
+
+        Raises:
+            AacmmError: for inputs that are not this arm's, or in other units (2 evaluations).
+        """
+        unknowns, keep, sigma_class, same = self.unknowns, self.keep, self.sigma_class, self.same
+        jac_now = self.jacobian(self.x_start)
+        f_start: np.ndarray | None = None  # the residual at the start, when the fit has it
+        if same and isinstance(jac_now, ChunkedJacobian):
+            # the first problem's products at the start (J^T of the nuisance columns and of the
+            # residual) taken in the gauge check's pass: a pass over the chunks less
+            nuis_start, f_start = Problem.data_rows_at(unknowns, self.q, self.measured,
+                                                       self.nuisance, sigma_class, self.weight,
+                                                       self.x_start)
+            jac_now.defer(nuis_start, f_start[:3 * len(self.q)])
+            del nuis_start
+        self.gauges = ident.gauge_axes(unknowns, jac_now)
+        self.gauge = ident.gauge_rows(unknowns, self.gauges)
+        now = self.decide(jac_now, self.x_start, f_start)
+        n_kept = len(self.q) if keep is None else int(keep.sum())
+        plausible = plausibility.plausible_rms(unknowns, jac_now, now.obs.scale, 3 * n_kept)
+        landed: list[DataJacobian] = []  # a chunked Jacobian where the step lands, with products
+        z_now, f_at, nfev = decision_point(now.problem, jac_now if same else None, on_evaluation,
+                                           f_start, landed if same and self.chunked else None)
+        f_start = None
+        f_now: np.ndarray | None = f_at  # the residual at z_now while the problem stays the same
         x_now = now.problem.x(z_now)
-    else:
-        at_solution = last  # three rounds: the last solve's (None if it kept none)
-    return Fit(unknowns, unvisited, gauges, now.obs, now.constraints, now.problem, res, x_now,
-                nfev, at_solution if same else None)
+        residual = (f_at[:now.problem.n_data].reshape(-1, 3)  # the same numbers
+                    if f_at is not None and now.problem.row_weight is None
+                    else now.problem.data_residuals(x_now))
+        # inputs that are not this arm's, or in other units, end here (2 evaluations); the scale
+        # is the median's, so that a few outliers (the robust loop's business) do not count
+        scale = _median_scale(residual, keep)
+        if not plausibility.agrees(scale, plausible, sigma_class):
+            # a wild sample (a readout of 720 deg) drags the least-squares step and every residual
+            # with it, but not the start's: the inputs disagree only if the start's bulk does too
+            scale = min(scale, _median_scale(now.problem.data_residuals(self.x_start), keep))
+        plausibility.check_agreement(scale, plausible, sigma_class, nfev,
+                                     unknowns.arm.sizes_label, unknowns.arm.source)
+        if z_now.any():  # the step lowered the cost: check the decision where it landed
+            del jac_now  # one Jacobian in memory at a time
+            jac_now = landed.pop() if landed else self.jacobian(x_now)
+            if same and isinstance(jac_now, ChunkedJacobian):  # one pass serves the check and
+                # the solve's first step: J^T J, J^T (nuisance columns) and J^T f there (the
+                # residual's own pass where the step landed: no pass here)
+                jac_now.products(now.problem.nuisance_jacobian(x_now), f_at[:now.problem.n_data])
+            again = self.check(jac_now, x_now, now)
+            if again is not None:
+                # the solve starts at x_now put on the new constraints (held at the start's
+                # values), a held component away from it: x_now's Jacobian still serves the
+                # first step
+                now, z_now, f_now = again, again.problem.z(x_now), None
+        landed.clear()  # a step not taken: its Jacobian is not used
+        return _Landing(now, z_now, x_now, f_now, nfev, [jac_now])
+
+    def solve(self, begin: _Landing, settings: SolverSettings, jac: str,
+              on_evaluation: Callable[[float], None]) -> Fit:
+        """Solve from the landing, deciding again at the solution (up to 3 solves)."""
+        now, z_now, x_now, f_now, nfev = begin.now, begin.z, begin.x, begin.f, begin.nfev
+        jac_now = begin.held.pop()
+        last: DataJacobian | None = None  # the solver's last, taken at its solution
+        at_solution: DataJacobian | None = None  # the data Jacobian at the final x (covariance)
+        for _round in range(3):  # checked at the solution
+            if _round:
+                jac_now = last if last is not None else self.jacobian(x_now)
+                last = None
+                again = self.check(jac_now, x_now, now)
+                if again is None or (settings.budget is not None and settings.budget.spent):
+                    at_solution = jac_now  # the decision stands (or no evaluation is left)
+                    break
+                now, z_now, f_now = again, again.problem.z(x_now), None
+            # the solve's first Jacobian is this one (handed over, not kept here: a campaign's
+            # Jacobian can weigh hundreds of MB)
+            handed = [jac_now] if self.same else []
+            del jac_now
+            solution = now.problem.solve(WarmStart(z_now, f_now, handed.pop() if handed else None,
+                                                   x_now), settings, jac,
+                                         on_evaluation=on_evaluation)
+            f_now = None
+            # its last Jacobian, at its solution, is jacobian(x) there without row weights
+            res, last = solution.result, solution.jacobian if self.same else None
+            del solution
+            nfev += res.nfev
+            z_now = res.x
+            x_now = now.problem.x(z_now)
+        else:
+            at_solution = last  # three rounds: the last solve's (None if it kept none)
+        return Fit(self.unknowns, self.unvisited, self.gauges, now.obs, now.constraints,
+                   now.problem, res, x_now, nfev, at_solution if self.same else None)
 
 
 def _median_scale(residual: np.ndarray, keep: np.ndarray | None) -> float:

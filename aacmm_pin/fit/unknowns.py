@@ -11,9 +11,8 @@ held fixed at its start value. Extension terms come from the effect library
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass, field
-from typing import NamedTuple, TypeAlias
+from typing import NamedTuple, TypeAlias, cast
 
 import numpy as np
 import scipy.sparse as sp
@@ -21,7 +20,8 @@ import scipy.sparse as sp
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians, stylus_positions
 from aacmm_pin.effects.contract import check_once
-from aacmm_pin.effects.registry import measurement_shift
+from aacmm_pin.effects.forward import measurement_shift
+from aacmm_pin.fit.jacobian_cache import LAST_JACOBIAN
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import EncoderMap, node_angles
 from aacmm_pin.model.kinematics import StylusJacobians, identification_configuration, tool_rows
@@ -98,9 +98,6 @@ class Unknowns:
     """Extension terms (angle, scale or measurement kind) whose parameters are estimated."""
     samples: Samples | None = field(default=None, compare=False)
     """Temperature, motion and R-Test displacement of the identification's samples."""
-    _cache: tuple[bytes, np.ndarray, tuple[np.ndarray, BlockJacobian]] | None = field(
-        default=None, init=False, repr=False, compare=False)
-    """The last Jacobian: (x bytes, the readouts array it was for, result)."""
 
     @classmethod
     def full(cls, arm: Arm, start: Parameters, map_axes: tuple[int, ...],
@@ -197,7 +194,8 @@ class Unknowns:
         return self.start.replace(
             rotation_abc=full[0:3], translation=full[3:6],
             dh=dict(zip(self.arm.error_names, full[6:6 + n_err])),
-            tool=tool[0], tools=tools, encoder_maps=maps, extensions=extensions)
+            tool=tool[0], tools=tools, encoder_maps=maps, extensions=extensions,
+            extension_terms={**self.start.extension_terms, **{t.key: t for t in self.terms}})
 
     def _samples(self, q: np.ndarray) -> Samples | None:
         return self.samples if self.samples is not None and self.samples.matches(q) else None
@@ -291,16 +289,14 @@ class Unknowns:
     def jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
         """Return predicted positions (N, 3) and d(positions)/d(free entries) as blocks.
 
-        Rows are sample-major (row 3 i + k is coordinate k of sample i). The last result is cached.
+        Rows are sample-major (row 3 i + k is coordinate k of sample i). The process' last result
+        is kept (:data:`~aacmm_pin.fit.jacobian_cache.LAST_JACOBIAN`, released before the next
+        is built).
         """
-        key = x.tobytes()
-        cache = self._cache  # read once: other threads may replace it
-        if cache is not None and cache[0] == key and cache[1] is q:
-            return cache[2]
-        # their memory is free for the new one (this frame's reference to the old one included:
-        # held here, the previous Jacobian stayed alive while the new one was built)
-        del cache
-        _release_cached_jacobians()
+        return cast(tuple[np.ndarray, BlockJacobian], LAST_JACOBIAN.get(self, x, q, self._jacobian))
+
+    def _jacobian(self, x: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, BlockJacobian]:
+        """Return :meth:`jacobian`'s result, built."""
         params = self.parameters(x)
         if not self.chain_only(params):
             position, dense, angles = self._general_blocks(params, q)
@@ -308,10 +304,7 @@ class Unknowns:
             position, dense, angles = self._chain_blocks(params, q)
         if self.terms:
             position = position + self.measurement_shift(params, q)
-        out = (position, self._with_nodes(params, q, dense, angles))
-        object.__setattr__(self, "_cache", (key, q, out))  # holds q: its identity is the key
-        _CACHED.append(weakref.ref(self))
-        return out
+        return position, self._with_nodes(params, q, dense, angles)
 
     def _with_nodes(self, params: Parameters, q: np.ndarray, dense: np.ndarray,
                     angles: np.ndarray) -> BlockJacobian:
@@ -354,18 +347,6 @@ def _buffer(work: dict[str, np.ndarray] | None, name: str, shape: tuple[int, ...
     if name not in work or work[name].shape != shape:
         work[name] = np.empty(shape)
     return work[name]
-
-
-_CACHED: list[weakref.ref[Unknowns]] = []
-"""The layouts holding a cached Jacobian (a campaign's Jacobian can weigh hundreds of MB)."""
-
-
-def _release_cached_jacobians() -> None:
-    """Drop every layout's cached Jacobian (only one is kept in a process: the newest)."""
-    while _CACHED:
-        holder = _CACHED.pop()()
-        if holder is not None:
-            object.__setattr__(holder, "_cache", None)
 
 
 CHUNK = 16384

@@ -87,6 +87,7 @@ class BatchedChain:
         self._bases = bases
         self._model = model
         self._frames: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}
+        self._ancestors: dict[int, frozenset[int]] = {}
 
     def frame(self, frame_id: int) -> tuple[int, np.ndarray, np.ndarray]:
         """Return a frame's parent joint, its supporting joints (root excluded) and its offset.
@@ -317,6 +318,58 @@ class BatchedChain:
                     for k in range(2):
                         out[lo + rows, :, col, k] = np.cross(lateral[..., k], d)
         return out
+
+    def twist_columns(self, q: np.ndarray, frames: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        r"""Return d(frame origin)/d(small twists of other frames), shape (N, 3, M, 6).
+
+        A twist :math:`(v, \omega)` of frame m, in m's own axes (Pinocchio's ``LOCAL`` convention:
+        linear first), moves every point attached after m (m among the point's frame's ancestors
+        through ``parentFrame``, or m itself) by :math:`R_m v + R_m \omega \times (p - o_m)`, so
+        the columns are :math:`[R_m, \; -[p - o_m]_\times R_m]`; zero where m is not an ancestor.
+
+        Args:
+            q: configurations, shape (N, nq).
+            frames: Pinocchio frame id of each sample's point, shape (N,).
+            moved: Pinocchio frame ids of the moved frames, shape (M,).
+        """
+        moved = np.asarray(moved, dtype=np.int64)
+        n = q.shape[0]
+        out = np.zeros((n, 3, moved.size, 6))
+        for lo in range(0, n, CHUNK):
+            pose = self._forward(q[lo:lo + CHUNK])
+            for fid, rows in _groups(frames[lo:lo + CHUNK]):
+                point = self._point(pose, fid, rows)
+                above = self.ancestors(fid)
+                for col, m in enumerate(moved.tolist()):
+                    if m not in above:
+                        continue
+                    rot = np.broadcast_to(self._rotation(pose, m, rows), (rows.size, 3, 3))
+                    arm = point - self._point(pose, m, rows)
+                    out[lo + rows, :, col, :3] = rot
+                    for k in range(3):
+                        out[lo + rows, :, col, 3 + k] = np.cross(rot[:, :, k], arm)
+        return out
+
+    def ancestors(self, frame_id: int) -> frozenset[int]:
+        """Return a frame and every frame it hangs from (``parentFrame`` up to the universe)."""
+        if frame_id not in self._ancestors:
+            chain, current = {frame_id}, frame_id
+            while current != 0:
+                current = int(self._model.frames[current].parentFrame)
+                chain.add(current)
+            self._ancestors[frame_id] = frozenset(chain)
+        return self._ancestors[frame_id]
+
+    def _rotation(self, pose: _Pose, fid: int, rows: np.ndarray) -> np.ndarray:
+        """Return frame ``fid``'s world rotation for the chunk's ``rows``, (len(rows), 3, 3) or (3, 3)."""
+        frame = self._model.frames[fid]
+        joint = int(frame.parentJoint)
+        local: np.ndarray = pose.rotation[joint] @ self._bases[joint].T @ frame.placement.rotation
+        anchor = pose.anchor[joint]
+        if anchor == 0:
+            return local
+        rotation: np.ndarray = pose.frames[anchor][rows] @ local
+        return rotation
 
     def basis(self, joint: int) -> np.ndarray:
         """Return joint ``joint``'s basis B_j in its own (Pinocchio joint) frame: z is its axis."""

@@ -48,10 +48,8 @@ Two Pinocchio views of one arm:
 from __future__ import annotations
 
 import hashlib
-import re
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -65,196 +63,38 @@ from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm_files import EMBEDDED as EMBEDDED  # re-exported: the embedded arms
 from aacmm_pin.model.arm_files import resolve_arm_path as resolve_arm_path
 from aacmm_pin.model.arm_files import resolve_sizes_path
+from aacmm_pin.model.arm_frames import ERROR_FRAME_PATTERN as ERROR_FRAME_PATTERN  # re-exported
+from aacmm_pin.model.arm_frames import (
+    MOVABLE,
+    TOOL_PATTERN,
+    axis_after,
+    read_couplings,
+    read_error_frame,
+    tool_chains,
+    tree_order,
+)
+from aacmm_pin.model.arm_frames import TOOL_JOINT as TOOL_JOINT
+from aacmm_pin.model.arm_frames import ErrorFrame as ErrorFrame
+from aacmm_pin.model.arm_frames import build_model as build_model
+from aacmm_pin.model.arm_frames import one_entry_per_axis as one_entry_per_axis
 from aacmm_pin.model.sizes import DEFAULT as DEFAULT_SIZES
 from aacmm_pin.model.sizes import Sizes, read_sizes, sizes_file
 from aacmm_pin.model.urdf_completion import Completion, add_error_frames, add_tool_joint
-from aacmm_pin.model.urdf_tree import Joint, UrdfTree, read_urdf
+from aacmm_pin.model.urdf_tree import UrdfTree, read_urdf
 
 if TYPE_CHECKING:
     import yourdfpy
 
 DEFAULT_ARM = "aacmm7"
-ERROR_FRAME_PATTERN = re.compile(r"^(dth|dx|dy|dz|a|b|c)(\d+)$")
-TOOL_JOINT = "tool"
-TOOL_PATTERN = re.compile(r"^tool(?:_([A-Za-z0-9][A-Za-z0-9_]*))?$")
-"""Names of the tool joints: ``tool`` or ``tool_<name>``."""
-_MOVABLE = ("revolute", "continuous")
 BASE_JOINTS = ("mt_x", "mt_y", "mt_z", "beta0", "alpha0", "gamma0")
 """Identification-model joints of the r-CS -> MT-CS transform, root first (Eq. 4)."""
 TOOL_JOINTS = ("tool_x", "tool_y", "tool_z")
 """Identification-model joints of the tool vector of the single ``tool`` joint."""
-_UNIT = {"x": np.array([1.0, 0, 0]), "y": np.array([0, 1.0, 0]), "z": np.array([0, 0, 1.0])}
-_ROT_LETTER = {"a": "x", "b": "y", "c": "z"}
-_TOL = 1e-12
 COUPLING_TOLERANCE = 5.0
 r"""A readout column given for a coupled joint may differ from its coupling by this many of the
 arm's plausible angle errors (the largest of ``dh_angle``, ``map_node`` and the encoder effect's
 size, :mod:`aacmm_pin.model.sizes`) times :math:`\sqrt{1 + \sum a_i^2}` (every readout in the sum
 has its error): a wrong coupling or column is off by degrees."""
-
-
-@dataclass(frozen=True, eq=False)
-class ErrorFrame:
-    """One DH error parameter: a fixed joint holding one elementary transform."""
-
-    name: str
-    """Joint name, the paper's parameter name (e.g. ``dx21``, ``a21``, ``dth30``)."""
-    is_angle: bool
-    """True for a rotation (value in rad), False for a translation (value in m)."""
-    axis: np.ndarray
-    """Unit direction of the translation or rotation axis in the parent frame, shape (3,)."""
-    nominal: float
-    """The value the URDF holds (m or rad)."""
-
-    def transform(self, value: float) -> np.ndarray:
-        """Return the joint origin for this value, a 4x4 homogeneous transform."""
-        out = np.eye(4)
-        if self.is_angle:
-            out[:3, :3] = pin.exp3(self.axis * value)
-        else:
-            out[:3, 3] = self.axis * value
-        return out
-
-
-def _chains(joints: list[Joint], path: Path | str) -> dict[str, list[Joint]]:
-    """Return tool joint name -> the joints from the root link to that tool joint, root first."""
-    by_child = {j.child: j for j in joints}
-    tools = [j for j in joints if j.type == "fixed" and TOOL_PATTERN.match(j.name)]
-    if not tools:
-        raise ArmModelError(path, f"no fixed joint named '{TOOL_JOINT}' (or 'tool_<name>') carrying "
-                                  f"the stylus (joints: {', '.join(j.name for j in joints)})")
-    if len(tools) > 1 and any(j.name == TOOL_JOINT for j in tools):
-        raise ArmModelError(path, f"tool joints {', '.join(j.name for j in tools)}: name one tool "
-                                  f"'{TOOL_JOINT}', or several 'tool_<name>', not both")
-    out = {}
-    for tool in tools:
-        chain = [tool]
-        while chain[-1].parent in by_child:
-            chain.append(by_child[chain[-1].parent])
-            if len(chain) > len(joints):
-                raise ArmModelError(path, "the joints form a loop")
-        out[tool.name] = chain[::-1]
-    return out
-
-
-def _read_couplings(arm: Arm) -> dict[str, Coupling]:
-    """Return the arm's coupled axes by name: URDF ``<mimic>`` and the sizes file's block.
-
-    Raises:
-        ArmModelError: a coupling of a joint that is no axis, one that follows a joint that is no
-            axis or is coupled itself, or a joint coupled twice (naming the file and line or key).
-    """
-    out: dict[str, Coupling] = {}
-    files: dict[str, Path | str] = {}
-    for name in arm.axis_names:
-        joint = arm._joints[name]
-        if joint.mimic is not None:
-            other, multiplier, offset = joint.mimic
-            out[name] = Coupling(name, ((other, multiplier),), offset,
-                                 f"line {joint.line}: <mimic> of '{name}'")
-            files[name] = arm.source
-    sizes = arm.sizes_file or "<sizes>"
-    for name, entry in arm.sizes.couplings.items():
-        if name in out:
-            raise ArmModelError(sizes, f"couplings.{name}: '{name}' has a <mimic> already "
-                                       f"({arm.source}: {out[name].source}); state it once")
-        if name not in arm.axis_names:
-            raise ArmModelError(sizes, f"couplings.{name}: '{name}' is not an axis of the arm "
-                                       f"(axes: {', '.join(arm.axis_names)})")
-        out[name] = Coupling(name, tuple(entry["of"].items()), entry["offset"], f"couplings.{name}")
-        files[name] = sizes
-    for c in out.values():
-        for other, _ in c.terms:
-            why = ("is not an axis of the arm" if other not in arm.axis_names else
-                   "is coupled itself: write it with the independent joints" if other in out
-                   else "")
-            if why:
-                raise ArmModelError(files[c.joint], f"{c.source}: follows '{other}', which {why}")
-    order = {name: k for k, name in enumerate(arm.axis_names)}
-    return dict(sorted(out.items(), key=lambda item: order[item[0]]))
-
-
-def _next_axis(joints: list[Joint]) -> np.ndarray | None:
-    """Return the axis of the first revolute joint of ``joints`` in the frame before them.
-
-    The origins on the way (nominal geometry, and the revolute's own) rotate it.
-    """
-    rot = np.eye(3)
-    for joint in joints:
-        rot = rot @ joint.origin[:3, :3]
-        if joint.type in _MOVABLE:
-            axis: np.ndarray = rot @ joint.axis
-            return axis
-    return None
-
-
-def one_entry_per_axis(urdf: UrdfTree) -> UrdfTree:
-    """Return the tree with every ``continuous`` joint a ``revolute`` one with wide limits.
-
-    A continuous joint is a revolute joint without limits; Pinocchio's own takes two configuration
-    entries (cos, sin), this one entry, its angle, as every other axis. The readout limits stay the
-    arm's (:attr:`Arm.joint_limits`: one turn). A tree without continuous joints is returned as is.
-    """
-    continuous = [j for j in urdf.joints() if j.type == "continuous"]
-    if not continuous:
-        return urdf
-    urdf = urdf.copy()
-    for joint in continuous:
-        urdf.make_one_dof(joint.name, "revolute", joint.axis, zero_origin=False)
-    return urdf
-
-
-def build_model(urdf: UrdfTree) -> pin.Model:
-    """Return Pinocchio's model of a URDF tree, one configuration entry per axis.
-
-    (A ``continuous`` joint as a revolute one: :func:`one_entry_per_axis`.)
-
-    Raises:
-        ArmModelError: naming the file and what Pinocchio's URDF parser said, or a chain too
-            deep for it (:meth:`UrdfTree.check_depth`).
-    """
-    urdf.check_depth(" (with the error frames and tool added in memory)")  # else a SIGSEGV
-    try:
-        return pin.buildModelFromXML(one_entry_per_axis(urdf).xml())
-    except (RuntimeError, ValueError) as exc:
-        raise ArmModelError(urdf.path, f"Pinocchio cannot build a model from it: {exc}") from None
-
-
-def _tree_order(urdf: UrdfTree) -> dict[str, int]:
-    """Return joint name -> rank in the depth-first order in which Pinocchio numbers the tree."""
-    model = build_model(urdf)
-    kinds = (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)
-    return {f.name: k for k, f in enumerate(model.frames) if f.type in kinds}
-
-
-def _error_frame(joint: Joint, next_axis: np.ndarray | None, path: Path | str) -> ErrorFrame:
-    """Read one error frame from its fixed joint, checking it holds one elementary transform."""
-    match = ERROR_FRAME_PATTERN.match(joint.name)
-    assert match is not None
-    kind = match.group(1)
-    origin = joint.origin
-    if kind == "dth":
-        if next_axis is None:
-            raise ArmModelError(path, f"line {joint.line}: error frame '{joint.name}' has no "
-                                      "revolute joint after it")
-        axis, is_angle = next_axis, True
-    elif kind in _ROT_LETTER:
-        axis, is_angle = _UNIT[_ROT_LETTER[kind]], True
-    else:
-        axis, is_angle = _UNIT[kind[1]], False
-    if is_angle:
-        omega = pin.log3(origin[:3, :3])
-        value = float(omega @ axis)
-        bad = np.linalg.norm(omega - value * axis) > 1e-9 or np.linalg.norm(origin[:3, 3]) > _TOL
-    else:
-        value = float(origin[:3, 3] @ axis)
-        bad = (np.linalg.norm(origin[:3, 3] - value * axis) > _TOL
-               or np.linalg.norm(origin[:3, :3] - np.eye(3)) > 1e-9)
-    if bad:
-        what = "rotation about" if is_angle else "translation along"
-        raise ArmModelError(path, f"line {joint.line}: error frame '{joint.name}' must hold a pure {what} "
-                                  f"{np.round(axis, 6).tolist()} (its origin is {origin.tolist()})")
-    return ErrorFrame(joint.name, is_angle, axis, value)
 
 
 class Arm:
@@ -276,12 +116,12 @@ class Arm:
         """What :func:`load_arm` added to the URDF in memory (tool joint, error frames)."""
         self._urdf = urdf
         all_joints = urdf.joints()
-        chains = _chains(all_joints, source)
-        rank = _tree_order(urdf)
+        chains = tool_chains(all_joints, source)
+        rank = tree_order(urdf)
         on_chain = {j.name: j for chain in chains.values() for j in chain}
         joints = sorted(on_chain.values(), key=lambda j: rank[j.name])
         self._joints = {j.name: j for j in all_joints}
-        self.axis_names: list[str] = [j.name for j in joints if j.type in _MOVABLE]
+        self.axis_names: list[str] = [j.name for j in joints if j.type in MOVABLE]
         """Encoder axes (revolute joints on the tools' chains) in tree order (see the module
         docstring): axis n is ``axis_names[n - 1]``, readout column ``q<n>_deg``."""
         if not self.axis_names:
@@ -299,19 +139,21 @@ class Arm:
             for i, joint in enumerate(chain):
                 if joint.type == "fixed" and ERROR_FRAME_PATTERN.match(joint.name):
                     is_dth = joint.name.startswith("dth")  # only its axis is the next one's
-                    axis = _next_axis(chain[i + 1:]) if is_dth else None
+                    axis = axis_after(chain[i + 1:]) if is_dth else None
                     seen = next_axis.setdefault(joint.name, axis)
                     if (seen is None) != (axis is None) or (
                             seen is not None and axis is not None and not np.allclose(seen, axis)):
                         raise ArmModelError(source, f"line {joint.line}: error frame "
                                                     f"'{joint.name}' sits before a branch whose "
                                                     "next revolute axes differ")
-                elif joint.type not in ("fixed", *_MOVABLE):
+                elif joint.type not in ("fixed", *MOVABLE):
                     raise ArmModelError(source, f"line {joint.line}: joint '{joint.name}' is "
                                                 f"{joint.type} on the chain to the tool; "
                                                 "only revolute, continuous and fixed joints "
                                                 "can be calibrated")
-        self.couplings: dict[str, Coupling] = _read_couplings(self)
+        self.couplings: dict[str, Coupling] = read_couplings(
+            [self._joints[n] for n in self.axis_names], self.source, self.sizes_file,
+            self.sizes.couplings)
         """Coupled joint name -> its coupling (URDF ``<mimic>`` and the sizes file's
         ``couplings``), in axis order."""
         n = self.n_axes
@@ -327,7 +169,7 @@ class Arm:
             for other, a in c.terms:
                 self.coupling_matrix[index[name], index[other]] += a
             self.coupling_offset[index[name]] = c.offset
-        self.error_frames: list[ErrorFrame] = [_error_frame(j, next_axis[j.name], source)
+        self.error_frames: list[ErrorFrame] = [read_error_frame(j, next_axis[j.name], source)
                                                for j in joints if j.name in next_axis]
         """The DH error parameters in tree order (chain order for a serial arm)."""
         self.nominal_tools: dict[str, np.ndarray] = {

@@ -9,6 +9,10 @@ check them against Pinocchio's per-sample functions). Map nodes enter through th
 :math:`\partial p / \partial \Delta\theta_{n,map}(k) = \partial p / \partial \theta_n \cdot w_k(\theta^*_n)`
 with the interpolation weights :math:`w_k` of :meth:`EncoderMap.weights`.
 
+Extension terms change the arm through an :class:`Adjustment`: angle offsets, a length scale,
+lateral tilts of joints and small twists of any frame (everything hanging from a moved frame
+moves with it; :meth:`StylusJacobians.twist` gives the point's columns of a frame's twist).
+
 Inverse kinematics (:func:`solve_ik`, the simulator's postures, the planner's candidates) needs
 only the n_axes joint columns: :class:`JointKinematics` computes them on the runtime model, not the
 identification model's DH, tool and map columns.
@@ -21,7 +25,7 @@ coupled axis' readout column is not read), so the ``angles`` columns are the cha
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import NamedTuple, TypeAlias
 
@@ -29,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.sparse as sp
 
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AacmmError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import correct_readouts, correct_with_slopes
@@ -60,6 +64,23 @@ class StylusJacobians(NamedTuple):
     tilts: np.ndarray | None = None
     """d(position)/d(lateral tilt of each axis about its two lateral axes), shape
     (N, 3, n_axes, 2), in m/rad, when asked for (``stylus_jacobians(..., tilts=True)``)."""
+    frame_columns: Callable[[str], np.ndarray] | None = None
+    """Frame name -> d(position)/d(a small twist of that frame), computed when first asked for
+    (:meth:`twist`)."""
+
+    def twist(self, frame: str) -> np.ndarray:
+        """Return d(position)/d(a small twist of a frame in its own axes), shape (N, 3, 6).
+
+        Columns in m/m (the linear part, first) and m/rad (the angular part), zero for the
+        samples whose tool does not hang from the frame (see
+        :meth:`~aacmm_pin.model._chain.BatchedChain.twist_columns`).
+
+        Raises:
+            FrameNotFound: if the model has no frame of that name (naming the frames it has).
+        """
+        if self.frame_columns is None:
+            raise ValueError("these stylus Jacobians hold no frame columns")
+        return self.frame_columns(frame)
 
     def nodes(self, params: Parameters, axis: int) -> sp.csr_matrix:
         """Return d(position)/d(map nodes of one axis), sparse, shape (3N, n_nodes), m/rad.
@@ -120,7 +141,7 @@ def _tool_values(arm: Arm, params: Parameters) -> np.ndarray:
 class Adjustment:
     """How a calibration's extension terms change the arm at N samples (SI).
 
-    Built by the effect library (:func:`aacmm_pin.effects.registry.adjustment`) and applied here.
+    Built by the effect library (:func:`aacmm_pin.effects.forward.adjustment`) and applied here.
 
     Args:
         n: number of samples.
@@ -135,16 +156,36 @@ class Adjustment:
     """Scale of every length of the arm about the r-CS origin, shape (N,)."""
     tilts: np.ndarray = field(init=False)
     """Lateral tilt of each joint about its two lateral axes, shape (N, n_axes, 2), rad."""
+    twists: dict[str, np.ndarray] = field(init=False)
+    """Frame name -> its small twist (linear, then angular) in its own axes, shape (N, 6), m and
+    rad: everything hanging from the frame moves with it (:meth:`twist`)."""
 
     def __post_init__(self) -> None:
         self.offsets = np.zeros((self.n, self.n_axes))
         self.scale = np.ones(self.n)
         self.tilts = np.zeros((self.n, self.n_axes, 2))
+        self.twists = {}
+
+    def twist(self, frame: str) -> np.ndarray:
+        """Return the twist of a frame of the arm's Pinocchio model, shape (N, 6), to add to."""
+        if frame not in self.twists:
+            self.twists[frame] = np.zeros((self.n, 6))
+        return self.twists[frame]
 
     @property
     def tilted(self) -> bool:
         """Whether any joint is tilted."""
         return bool(np.any(self.tilts != 0.0))
+
+    @property
+    def moves_frames(self) -> bool:
+        """Whether any frame moves by a twist."""
+        return any(np.any(t != 0.0) for t in self.twists.values())
+
+    @property
+    def moves_point(self) -> bool:
+        """Whether tilts or twists move the point beyond the joint angles and the scale."""
+        return self.tilted or self.moves_frames
 
 
 def _tilt_shift(chain: BatchedChain, q: np.ndarray, frames: np.ndarray, axes: np.ndarray,
@@ -156,6 +197,48 @@ def _tilt_shift(chain: BatchedChain, q: np.ndarray, frames: np.ndarray, axes: np
     """
     shift: np.ndarray = np.einsum("nijk,njk->ni", chain.tilt_columns(q, frames, axes), tilts)
     return shift
+
+
+def frame_ids(model: pin.Model, names: Iterable[str]) -> np.ndarray:
+    """Return the Pinocchio frame ids of frames named in a model, shape (M,).
+
+    Raises:
+        FrameNotFound: naming the first frame the model lacks and the links and joints it has.
+    """
+    ids = []
+    for name in names:
+        if not model.existFrame(name):
+            raise FrameNotFound(name, [f.name for f in model.frames if f.type == pin.JOINT or (
+                f.type == pin.BODY and not f.name.endswith("_frame"))])
+        ids.append(model.getFrameId(name))
+    return np.array(ids, dtype=np.int64)
+
+
+def _twist_shift(chain: BatchedChain, model: pin.Model, q: np.ndarray, frames: np.ndarray,
+                 twists: dict[str, np.ndarray]) -> np.ndarray:
+    """Return the move of the frames' points by small twists of other frames, shape (N, 3), m.
+
+    First order in the twists (frame name -> (N, 6), m and rad, in the frame's own axes): the
+    sum of each twist times its columns (:meth:`BatchedChain.twist_columns`).
+    """
+    names = [name for name, t in twists.items() if np.any(t != 0.0)]
+    cols = chain.twist_columns(q, frames, frame_ids(model, names))
+    shift: np.ndarray = np.einsum("nimk,nmk->ni", cols, np.stack([twists[n] for n in names], axis=1))
+    return shift
+
+
+def _frame_columns(chain: BatchedChain, model: pin.Model, q: np.ndarray, frames: np.ndarray,
+                   scale: np.ndarray) -> Callable[[str], np.ndarray]:
+    """Return frame name -> d(points)/d(its twist), (N, 3, 6), computed once per frame."""
+    done: dict[str, np.ndarray] = {}
+
+    def columns(name: str) -> np.ndarray:
+        if name not in done:
+            cols = chain.twist_columns(q, frames, frame_ids(model, [name]))[:, :, 0, :]
+            done[name] = cols * scale[:, None, None]
+        return done[name]
+
+    return columns
 
 
 def _adjusted(adjust: Adjustment | None, q_read: np.ndarray) -> Adjustment:
@@ -237,6 +320,8 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     out = ident.chain.positions(q, fids)
     if change.tilted:
         out = out + _tilt_shift(ident.chain, q, fids, ident.axis_idx, change.tilts)
+    if change.moves_frames:
+        out = out + _twist_shift(ident.chain, ident.model, q, fids, change.twists)
     if adjust is not None:
         out = _scaled(out, change.scale, params.translation if frame == "mt" else np.zeros(3))
     return out
@@ -275,6 +360,8 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     if change.tilted:
         assert tilt_cols is not None
         pos = pos + np.einsum("nijk,njk->ni", tilt_cols, change.tilts)
+    if change.moves_frames:
+        pos = pos + _twist_shift(ident.chain, ident.model, q, fids, change.twists)
     if adjust is not None:  # every length scaled about the r-CS origin: all but the translation
         origin = params.translation if frame == "mt" else np.zeros(3)
         pos = _scaled(pos, scale, origin)
@@ -296,6 +383,7 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         translation=translation,
         q_readout=q_read,
         tilts=None if tilt_cols is None else tilt_cols * scale[:, None, None, None],
+        frame_columns=_frame_columns(ident.chain, ident.model, q, fids, scale),
     )
 
 
@@ -362,6 +450,8 @@ class JointKinematics:
         positions: np.ndarray = self.chain.positions(q, fids)
         if change.tilted:
             positions = positions + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
+        if change.moves_frames:
+            positions = positions + _twist_shift(self.chain, self.model, q, fids, change.twists)
         scaled: np.ndarray = positions * change.scale[:, None]
         return scaled
 
@@ -372,8 +462,8 @@ class JointKinematics:
         Args:
             readouts: encoder readouts, shape (N, n_axes), in rad.
             tool: which tool each sample measures (see :data:`ToolIndex`).
-            adjust: the extension terms' change of the arm (angle offsets, lateral tilts and scale
-                enter the positions; the Jacobian holds the offsets and the scale, as
+            adjust: the extension terms' change of the arm (angle offsets, lateral tilts, frame
+                twists and scale enter the positions; the Jacobian holds the offsets and the scale, as
                 :func:`stylus_jacobians` does).
         """
         q_read = _readouts_2d(readouts, self.arm)
@@ -387,6 +477,8 @@ class JointKinematics:
         slope[:, self.arm.coupled] = 0.0  # a coupled axis has no readout: no column
         if change.tilted:
             pos = pos + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
+        if change.moves_frames:
+            pos = pos + _twist_shift(self.chain, self.model, q, fids, change.twists)
         if adjust is not None:
             pos = pos * change.scale[:, None]
             jac = jac * change.scale[:, None, None]

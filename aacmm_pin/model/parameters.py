@@ -10,7 +10,10 @@
      "encoder_maps": {"step_deg": 5.0, "axes": {"1": [72 values, rad], ...}},
      "extensions": {"compliance[A2]": [k], "thermal": [alpha], ...}}   # optional, SI
 
-Extensions are terms of the effect library (:mod:`aacmm_pin.effects`) added by discovery.
+Extensions are terms of the effect library (:mod:`aacmm_pin.effects`) added by discovery. The
+parameters carry each extension's term with its values (:attr:`Parameters.extension_terms`): a key
+becomes its term once, where the parameters are made (read from the file, or built), through the
+lookup the effect library registers (:data:`TERM_LOOKUP`; this layer cannot import it).
 
 Missing maps mean zero error. The r-CS -> MT-CS transform is
 ``p_mt = D_b(beta0) D_a(alpha0) D_c(gamma0) p_r + translation`` (paper Eq. 4). Keys this file does
@@ -21,9 +24,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -43,6 +47,41 @@ def rotation_abc(abc: np.ndarray) -> np.ndarray:
     a, b, c = np.asarray(abc, dtype=float)
     rot: np.ndarray = pin.rpy.rotate("y", b) @ pin.rpy.rotate("x", a) @ pin.rpy.rotate("z", c)
     return rot
+
+
+class ExtensionTerm(Protocol):
+    """What the model layer knows of an extension's term (an :class:`aacmm_pin.effects.Term`)."""
+
+    @property
+    def key(self) -> str:
+        """The term's key in ``parameters.json`` ``extensions``, e.g. ``compliance[A2]``."""
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of its parameters (one value each)."""
+
+
+TERM_LOOKUP: list[Callable[[str], ExtensionTerm]] = []
+"""The effect library's key -> term lookup (registered by :mod:`aacmm_pin.effects.registry`
+when it is imported); it raises a ``KeyError`` for a key no registered effect knows."""
+
+
+def _terms_of(keys: Any, known: dict[str, ExtensionTerm]) -> dict[str, ExtensionTerm]:
+    """Return key -> term for ``keys``: the ``known`` terms, the others looked up (once, here).
+
+    A key no registered effect knows has no term (the file's check names it,
+    :func:`aacmm_pin.effects.check_extensions`; evaluating it raises the lookup's error).
+    """
+    out = {}
+    for key in keys:
+        if key in known:
+            out[key] = known[key]
+        elif TERM_LOOKUP:
+            try:
+                out[key] = TERM_LOOKUP[0](key)
+            except KeyError:
+                continue
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +110,10 @@ class Parameters:
     tools: dict[str, np.ndarray] = field(default_factory=dict)
     """Tool joint name -> tool vector (in its parent's frame), shape (3,), in m, for arms with
     several tools (every tool, in the arm's tool order); empty for a single-tool arm (``tool``)."""
+    extension_terms: dict[str, ExtensionTerm] = field(default_factory=dict, repr=False)
+    """Extension key -> its term (an :class:`aacmm_pin.effects.Term`), for every key of
+    ``extensions`` that a registered effect knows: given (the terms a fit estimated, or of the
+    parameters replaced) or looked up when the parameters are made, never on evaluation."""
 
     def __post_init__(self) -> None:
         tools = {str(k): np.array(v, dtype=float).reshape(-1) for k, v in self.tools.items()}
@@ -93,6 +136,8 @@ class Parameters:
         object.__setattr__(self, "dh", {k: float(v) for k, v in self.dh.items()})
         object.__setattr__(self, "extensions", {k: np.array(v, dtype=float).reshape(-1)
                                                 for k, v in self.extensions.items()})
+        object.__setattr__(self, "extension_terms",
+                           _terms_of(self.extensions, dict(self.extension_terms)))
         for axis, emap in self.encoder_maps.items():
             if emap.step_deg != self.step_deg:
                 raise ValueError(f"encoder_maps: axis {axis} has step {emap.step_deg} deg, "
@@ -130,6 +175,15 @@ class Parameters:
                              f"parameters hold {', '.join(self.tools) or 'one tool vector'}")
         return {name: self.tools[name] for name in arm.tool_joints}
 
+    def term_values(self) -> list[tuple[ExtensionTerm, np.ndarray]]:
+        """Return every extension's term with its values, shape (k,) each, SI, in key order.
+
+        Raises:
+            KeyError: (the effect library's error) for a key no registered effect knows.
+        """
+        return [(self.extension_terms[k] if k in self.extension_terms else _looked_up(k), v)
+                for k, v in self.extensions.items()]
+
     def rotation(self) -> np.ndarray:
         """Return the r-CS -> MT-CS rotation matrix, shape (3, 3)."""
         return rotation_abc(self.rotation_abc)
@@ -157,6 +211,13 @@ class Parameters:
         }
 
 
+def _looked_up(key: str) -> ExtensionTerm:
+    """Return the term of a key unknown when the parameters were made (or raise its error)."""
+    if not TERM_LOOKUP:
+        raise KeyError(f"{key!r}: no effect library loaded (import aacmm_pin.effects)")
+    return TERM_LOOKUP[0](key)
+
+
 _KNOWN = ("arm", "units", "dh", "tool", "tools", "base_to_mt", "encoder_maps", "extensions")
 _WRITTEN = ("plugins", "effects")
 """Keys the package writes beside :data:`_KNOWN`, carried in ``extra`` (the effects' plugins, a
@@ -175,23 +236,6 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
     def bad(key: str, reason: str) -> None:
         log.add(None, key, reason)
 
-    def vector(value: Any, key: str, n: int) -> np.ndarray:
-        if not _numbers(value):  # numpy would take "0.001" and True for numbers
-            bad(key, f"needs a list of {n} numbers, got {value!r}")
-            return np.zeros(n)
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            bad(key, f"needs {n} numbers, got {value!r}")
-            return np.zeros(n)
-        if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-            bad(key, f"needs {n} finite numbers, got {value!r}")
-            return np.zeros(n)
-        if np.any(np.abs(arr) > MAX_PARAMETER):
-            bad(key, f"{value!r} is {_IMPLAUSIBLE}")
-            return np.zeros(n)
-        return arr
-
     if not isinstance(data, dict):
         raise FileFormatError([Problem(path, None, None, "the top level must be a JSON object")])
     for key in ("arm", "dh"):
@@ -201,6 +245,52 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
         bad("tool", "missing (or give 'tools': {tool joint: [x, y, z]} for several tools)")
     if data.get("units", "SI") != "SI":
         bad("units", f"must be 'SI', got {data.get('units')!r}")
+    dh = _dh(data, bad)
+    base = data.get("base_to_mt", {})
+    if not isinstance(base, dict):
+        bad("base_to_mt", "must be an object")
+        base = {}
+    rot = _vector(base.get("rotation_abc", [0, 0, 0]), "base_to_mt.rotation_abc", 3, bad)
+    trans = _vector(base.get("translation", [0, 0, 0]), "base_to_mt.translation", 3, bad)
+    tool, tools = _tools(data, bad)
+    step, maps = _maps(data.get("encoder_maps") or {}, bad)
+    extensions = _extensions(data.get("extensions") or {}, bad)
+    for problem in key_problems(path, data, (*_KNOWN, *_WRITTEN), strict=False):
+        bad(str(problem.column), problem.reason)  # a misspelt key; others are carried (extra)
+    log.close()
+    if problems:
+        raise FileFormatError(problems)
+    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, tools=tools, rotation_abc=rot,
+                      translation=trans, encoder_maps=maps, extensions=extensions,
+                      step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
+                      extra={k: v for k, v in data.items() if k not in _KNOWN})
+
+
+_Bad = Callable[[str, str], None]
+"""Reports a bad field: ``bad(JSON path, reason)``."""
+
+
+def _vector(value: Any, key: str, n: int, bad: _Bad) -> np.ndarray:
+    """Return ``value`` as n finite, plausible numbers, or zeros with the problem reported."""
+    if not _numbers(value):  # numpy would take "0.001" and True for numbers
+        bad(key, f"needs a list of {n} numbers, got {value!r}")
+        return np.zeros(n)
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        bad(key, f"needs {n} numbers, got {value!r}")
+        return np.zeros(n)
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        bad(key, f"needs {n} finite numbers, got {value!r}")
+        return np.zeros(n)
+    if np.any(np.abs(arr) > MAX_PARAMETER):
+        bad(key, f"{value!r} is {_IMPLAUSIBLE}")
+        return np.zeros(n)
+    return arr
+
+
+def _dh(data: dict[str, Any], bad: _Bad) -> dict[str, float]:
+    """Return the checked ``dh`` entries (m or rad); report bad ones."""
     dh: dict[str, float] = {}
     if isinstance(data.get("dh"), dict):
         for name, value in data["dh"].items():
@@ -213,22 +303,25 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                 dh[name] = float(value)
     elif "dh" in data:
         bad("dh", "must be an object of name: value")
-    base = data.get("base_to_mt", {})
-    if not isinstance(base, dict):
-        bad("base_to_mt", "must be an object")
-        base = {}
-    rot = vector(base.get("rotation_abc", [0, 0, 0]), "base_to_mt.rotation_abc", 3)
-    trans = vector(base.get("translation", [0, 0, 0]), "base_to_mt.translation", 3)
+    return dh
+
+
+def _tools(data: dict[str, Any], bad: _Bad) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Return the tool vector (3,) and the tools by joint name (m); report bad ones."""
     tools: dict[str, np.ndarray] = {}
     if isinstance(data.get("tools", {}), dict):
-        tools = {str(k): vector(v, f"tools.{k}", 3) for k, v in data.get("tools", {}).items()}
+        tools = {str(k): _vector(v, f"tools.{k}", 3, bad) for k, v in data.get("tools", {}).items()}
     else:
         bad("tools", "must be an object of tool joint: [x, y, z]")
-    tool = (vector(data["tool"], "tool", 3) if "tool" in data
+    tool = (_vector(data["tool"], "tool", 3, bad) if "tool" in data
             else next(iter(tools.values())) if tools else np.zeros(3))
     if tools and "tool" in data and not np.array_equal(tool, next(iter(tools.values()))):
         bad("tool", "differs from the first entry of 'tools' (give one of them)")
-    maps_data = data.get("encoder_maps") or {}
+    return tool, tools
+
+
+def _maps(maps_data: Any, bad: _Bad) -> tuple[Any, dict[int, EncoderMap]]:
+    """Return the maps' node step (deg, as written) and the checked maps by axis; report bad ones."""
     step = maps_data.get("step_deg", DEFAULT_STEP_DEG) if isinstance(maps_data, dict) else None
     maps: dict[int, EncoderMap] = {}
     axes_data = maps_data.get("axes") or {} if isinstance(maps_data, dict) else {}
@@ -251,16 +344,7 @@ def parameters_from_dict(data: Any, path: Path | str = "<parameters>") -> Parame
                 continue
             if np.any(np.abs(maps[int(key)].values) > MAX_PARAMETER):
                 bad(f"encoder_maps.axes.{key}", f"a value {_IMPLAUSIBLE}")
-    extensions = _extensions(data.get("extensions") or {}, bad)
-    for problem in key_problems(path, data, (*_KNOWN, *_WRITTEN), strict=False):
-        bad(str(problem.column), problem.reason)  # a misspelt key; others are carried (extra)
-    log.close()
-    if problems:
-        raise FileFormatError(problems)
-    return Parameters(arm=str(data["arm"]), dh=dh, tool=tool, tools=tools, rotation_abc=rot,
-                      translation=trans, encoder_maps=maps, extensions=extensions,
-                      step_deg=float(step) if step is not None else DEFAULT_STEP_DEG,
-                      extra={k: v for k, v in data.items() if k not in _KNOWN})
+    return step, maps
 
 
 def _numbers(value: Any) -> bool:
@@ -269,7 +353,7 @@ def _numbers(value: Any) -> bool:
         isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
 
 
-def _extensions(data: Any, bad: Any) -> dict[str, np.ndarray]:
+def _extensions(data: Any, bad: _Bad) -> dict[str, np.ndarray]:
     """Return the checked ``extensions`` entries; report bad ones through ``bad(key, reason)``.
 
     Only the form is checked here (a list of finite, plausible numbers per key); whether a key is a

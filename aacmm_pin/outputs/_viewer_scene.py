@@ -20,16 +20,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from aacmm_pin.analyses.validation import ValidationResult, points_in_main_frame, validate
+from aacmm_pin.analyses.campaign_residuals import ModelResiduals, campaign_residuals
 from aacmm_pin.data.campaign import Campaign
-from aacmm_pin.effects.calibrated import predict
-from aacmm_pin.effects.registry import check_extensions
+from aacmm_pin.effects.parameters_file import check_extensions
 from aacmm_pin.extras import require
-from aacmm_pin.fit.measurements import measured_positions
 from aacmm_pin.model.arm import Arm, load_arm, one_entry_per_axis
 from aacmm_pin.model.encoder_map import correct_readouts
 from aacmm_pin.model.parameters import Parameters, check_against_arm
-from aacmm_pin.model.samples import Samples
 from aacmm_pin.outputs.calibration_folder import read_calibration
 
 ARM = "arm"
@@ -75,46 +72,13 @@ class Recorder:
         self.commands.append((data["type"], data["path"], umsgpack.packb(data)))
 
 
-@dataclass(frozen=True, eq=False)
-class ModelResiduals:
-    """One calibration on the campaign: predicted and measured sphere centres, r-CS, m."""
-
-    label: str
-    """Name shown in the scene (a CALDIR's folder name); the scene path is ``models/<label>``."""
-    params: Parameters
-    """The calibration."""
-    arm: Arm
-    """Its arm."""
-    nest: np.ndarray
-    """Zero position of each SPAT sample's R-Test nest, then each absolute point's measured
-    position (deviations are magnified about it), shape (N, 3), r-CS, m."""
-    predicted: np.ndarray
-    """Predicted stylus centre of each SPAT sample, then of each absolute point (points.csv),
-    shape (N, 3), r-CS, m."""
-    measured: np.ndarray
-    """Measured sphere centre (nest + R-Test displacement) of each SPAT sample, then each absolute
-    point (mapped into the calibration's frame: :func:`~aacmm_pin.analyses.validation.points_in_main_frame`),
-    shape (N, 3), r-CS, m."""
-    validation: ValidationResult | None
-    """Length-bar errors, or None without a length bar."""
-    sockets: dict[tuple[int, str], np.ndarray]
-    """(placement, socket) -> mean predicted stylus centre, shape (3,)."""
-
-    @property
-    def residual(self) -> np.ndarray:
-        """Predicted minus measured, shape (N, 3), m."""
-        residual: np.ndarray = self.predicted - self.measured
-        return residual
-
-    @property
-    def rms(self) -> float:
-        """RMS of the residual coordinates, m: ``report.json``'s ``fit_rms_um`` (nests as estimated)."""
-        return float(np.sqrt(np.mean(self.residual ** 2))) if len(self.residual) else 0.0
-
-
 def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: str | None = None
                     ) -> ModelResiduals:
-    """Read a calibration (CALDIR, parameters.json or Parameters) and evaluate it on the campaign."""
+    """Read a calibration (CALDIR, parameters.json or Parameters) and evaluate it on the campaign.
+
+    The residuals are :func:`~aacmm_pin.analyses.campaign_residuals.campaign_residuals`'s; the
+    label is made a scene path's name (other characters than ``A-Za-z0-9_.+-`` become ``_``).
+    """
     offsets: dict[str, list[float]] = {}
     if isinstance(source, Parameters):
         params, default_label = source, "model"
@@ -125,32 +89,8 @@ def model_residuals(source: str | Path | Parameters, campaign: Campaign, label: 
     arm = load_arm(params.arm, error_frames=bool(params.dh))
     check_against_arm(params, arm)
     check_extensions(params, arm, None if isinstance(source, Parameters) else cal.file)
-    rot, trans = params.rotation(), params.translation
-    spat = campaign.spat
-    if spat is None:
-        empty = np.zeros((0, 3))
-        nest, predicted, measured = empty, empty, empty
-    else:
-        nest = (np.array([campaign.locations[int(m)] for m in spat.location]) - trans) @ rot
-        # the nests where the calibration put them (report.json), as its fit RMS counts them
-        shift = np.array([offsets.get(str(int(m)), [0.0, 0.0, 0.0]) for m in spat.location]) * 1e-6
-        measured = (measured_positions(campaign) + shift - trans) @ rot
-        predicted = predict(arm, params, spat.q, Samples.of_log(arm, spat))
-    if campaign.points is not None:  # what a points fit fitted: the points after the SPATs
-        pred_pt, meas_pt, _ = points_in_main_frame(arm, params, campaign)
-        meas_pt = (meas_pt - trans) @ rot
-        nest = np.vstack([nest, meas_pt])
-        measured = np.vstack([measured, meas_pt])
-        predicted = np.vstack([predicted, (pred_pt - trans) @ rot])
-    validation, sockets = None, {}
-    bar = campaign.lengthbar
-    if bar is not None and campaign.bar:
-        validation = validate(arm, params, campaign)
-        points = predict(arm, params, bar.q, Samples.of_log(arm, bar))
-        for k, s in dict.fromkeys(zip(bar.placement.tolist(), bar.socket.tolist())):
-            sockets[(int(k), str(s))] = points[(bar.placement == k) & (bar.socket == s)].mean(axis=0)
     name = re.sub(r"[^A-Za-z0-9_.+-]", "_", label or default_label)
-    return ModelResiduals(name, params, arm, nest, predicted, measured, validation, sockets)
+    return campaign_residuals(params, arm, campaign, name, offsets)
 
 
 class ArmPoser:

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from aacmm_pin.data.json_file import JsonKeyError, read_json
-from aacmm_pin.effects.registry import check_extensions, read_parameters
+from aacmm_pin.effects.parameters_file import check_extensions, read_parameters
 from aacmm_pin.errors import FileFormatError
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import MAX_PARAMETERS_BYTES, Parameters, check_against_arm

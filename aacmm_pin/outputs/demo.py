@@ -12,7 +12,7 @@ import json
 import time
 from pathlib import Path
 
-from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign, write_simulation
+from aacmm_pin.analyses.simulate import SimulationConfig, simulate_campaign
 from aacmm_pin.analyses.validation import ValidationResult, validate
 from aacmm_pin.data.campaign import read_campaign
 from aacmm_pin.data.output_folder import output_folder
@@ -20,6 +20,7 @@ from aacmm_pin.extras import skipped
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.model.arm import load_arm
 from aacmm_pin.outputs.export import write_calibration
+from aacmm_pin.outputs.simulation_folder import write_simulation
 
 MODELS = (("dh_rtest", "DH only, R-Test", "dh", True),
           ("proposed_no_rtest", "proposed, no R-Test", "proposed", False),

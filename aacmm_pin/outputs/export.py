@@ -26,7 +26,7 @@ import numpy as np
 from aacmm_pin.analyses.urdf_loss import REPORT_KEY, UrdfLoss, urdf_alone_loss
 from aacmm_pin.data.logs import Campaign
 from aacmm_pin.data.output_folder import output_folder
-from aacmm_pin.effects.registry import write_parameters
+from aacmm_pin.effects.parameters_file import write_parameters
 from aacmm_pin.errors import MissingColumn
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
@@ -113,7 +113,7 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path,
     """Write the files of a calibration folder into an existing ``folder`` (not atomically).
 
     ``parameters.json`` names the plugins of the extensions' effects that are not built in
-    (:func:`aacmm_pin.effects.registry.write_parameters`). ``calibrated.urdf``'s relative mesh
+    (:func:`aacmm_pin.effects.parameters_file.write_parameters`). ``calibrated.urdf``'s relative mesh
     and texture paths are rewritten to hold from ``folder`` (or a folder beside it, as the
     temporary folder of :func:`write_calibration` is: :mod:`aacmm_pin.outputs.urdf_resources`).
     ``compact.urdf`` is ``calibrated.urdf`` with its error frames folded

@@ -199,6 +199,49 @@ def plot_encoder_maps(maps: dict[int, np.ndarray], path: str | Path, *, step_deg
     return _save(fig, path)
 
 
+def _map_panel(ax: Any, axis: int, values: np.ndarray, flags: np.ndarray | None,
+               std: np.ndarray | None, truth: np.ndarray | None, reached: np.ndarray | None,
+               step_deg: float) -> np.ndarray | None:
+    """Draw one axis' map into ``ax``; return the error bars drawn (arcsec), or None.
+
+    ``values``, ``std``, ``truth``: the map's node values, their std and the true ones, rad,
+    shape (n,); ``flags``, ``reached``: which nodes are identifiable and reached (None: all).
+    """
+    n = len(values)
+    x_deg = -180.0 + step_deg * np.arange(n)
+    y = values / ARCSEC
+    hit = reached if reached is not None else np.ones(n, dtype=bool)
+    ident = flags if flags is not None else np.ones(n, dtype=bool)
+    ok = ident & hit
+    lost = ~ident & hit  # reached, yet not determined
+    err = std[ok] / ARCSEC if std is not None else None
+    top = max(float(np.max(np.abs(y[hit]), initial=0.0)), MIN_SPAN_ARCSEC)
+    if err is not None and err.size:
+        top = max(top, float(np.max(np.abs(y[ok]) + err)))
+    if truth is not None:
+        t = np.where(np.abs(truth) / ARCSEC < 1e-6, 0.0, truth / ARCSEC)  # rounding
+        top = max(top, float(np.max(np.abs(t))))
+        ax.plot(np.append(x_deg, 180.0), np.append(t, t[0]), color="black", lw=0.8, zorder=2)
+    for low, high in _unreached_spans(hit, step_deg):
+        ax.axvspan(low, high, color="0.88", lw=0, zorder=0)
+    ax.errorbar(x_deg[ok], y[ok], yerr=err, fmt="o", ms=2.5, color="#0072b2", ecolor="#0072b2",
+                elinewidth=0.9, capsize=1.5, zorder=3)
+    # at least +-MIN_SPAN_ARCSEC: an axis the data cannot see is flat, not magnified noise
+    ax.set_ylim(-1.12 * top, 1.12 * top)
+    ax.plot(x_deg[lost], y[lost], "o", ms=4.5, mfc="none", mec="0.55", mew=1.0, zorder=3)
+    ax.axhline(0.0, color="0.3", lw=0.5, zorder=1)
+    ax.set_title(f"A{axis}-axis", loc="left", fontsize="medium", fontweight="bold")
+    if (~ok).any():
+        away = "" if hit.all() else f" ({int((~hit).sum())} not reached)"
+        ax.set_title(f"{int((~ok).sum())} of {n} nodes not identifiable{away}", loc="right",
+                     fontsize="small", color="0.35")
+    ax.set_xlim(-185.0, 185.0)
+    ax.set_xticks(np.arange(-180, 181, 90))
+    ax.tick_params(labelbottom=True)
+    ax.grid(True, lw=0.4, alpha=0.5)
+    return err
+
+
 def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
                         identifiable: dict[int, np.ndarray] | None = None,
                         std: dict[int, np.ndarray] | None = None,
@@ -225,7 +268,6 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
     if not shown or any(a not in values for a in shown):
         raise ValueError(f"axes: choose one or more of {sorted(values)}, got {axes}")
 
-    x_deg = -180.0 + step_deg * np.arange(n)
     ncols = 1 if len(shown) == 1 else 2
     nrows = math.ceil(len(shown) / ncols)
     fig = new_figure(5.0 * ncols, 1.0 + 2.5 * nrows)
@@ -234,36 +276,10 @@ def _encoder_map_figure(maps: dict[int, np.ndarray], *, step_deg: float = 5.0,
         ax.remove()
     errs: list[np.ndarray] = []
     for ax, axis in zip(grid, shown):
-        y = values[axis] / ARCSEC
-        hit = seen.get(axis, np.ones(n, dtype=bool))
-        ok = flags.get(axis, np.ones(n, dtype=bool)) & hit
-        lost = ~flags.get(axis, np.ones(n, dtype=bool)) & hit  # reached, yet not determined
-        err = sigma[axis][ok] / ARCSEC if axis in sigma else None
-        top = max(float(np.max(np.abs(y[hit]), initial=0.0)), MIN_SPAN_ARCSEC)
+        err = _map_panel(ax, axis, values[axis], flags.get(axis), sigma.get(axis), true.get(axis),
+                         seen.get(axis), step_deg)
         if err is not None and err.size:
             errs.append(err)
-            top = max(top, float(np.max(np.abs(y[ok]) + err)))
-        if axis in true:
-            t = np.where(np.abs(true[axis]) / ARCSEC < 1e-6, 0.0, true[axis] / ARCSEC)  # rounding
-            top = max(top, float(np.max(np.abs(t))))
-            ax.plot(np.append(x_deg, 180.0), np.append(t, t[0]), color="black", lw=0.8, zorder=2)
-        for low, high in _unreached_spans(hit, step_deg):
-            ax.axvspan(low, high, color="0.88", lw=0, zorder=0)
-        ax.errorbar(x_deg[ok], y[ok], yerr=err, fmt="o", ms=2.5, color="#0072b2", ecolor="#0072b2",
-                    elinewidth=0.9, capsize=1.5, zorder=3)
-        # at least +-MIN_SPAN_ARCSEC: an axis the data cannot see is flat, not magnified noise
-        ax.set_ylim(-1.12 * top, 1.12 * top)
-        ax.plot(x_deg[lost], y[lost], "o", ms=4.5, mfc="none", mec="0.55", mew=1.0, zorder=3)
-        ax.axhline(0.0, color="0.3", lw=0.5, zorder=1)
-        ax.set_title(f"A{axis}-axis", loc="left", fontsize="medium", fontweight="bold")
-        if (~ok).any():
-            away = "" if hit.all() else f" ({int((~hit).sum())} not reached)"
-            ax.set_title(f"{int((~ok).sum())} of {n} nodes not identifiable{away}", loc="right",
-                         fontsize="small", color="0.35")
-        ax.set_xlim(-185.0, 185.0)
-        ax.set_xticks(np.arange(-180, 181, 90))
-        ax.tick_params(labelbottom=True)
-        ax.grid(True, lw=0.4, alpha=0.5)
     for ax in grid[len(shown) - ncols:len(shown)]:  # the lowest panel of each column
         ax.set_xlabel("nominal readout (deg)")
 
