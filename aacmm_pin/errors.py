@@ -102,6 +102,25 @@ class ArgumentError(AacmmError, ValueError):
     """
 
 
+class MissingColumn(AacmmError, KeyError):
+    """Samples (or a file) have no such per-sample column, e.g. ``temp_wrist_c``.
+
+    A ``KeyError`` too, so that an effect's code written as for a mapping catches it. Its message
+    is one line naming the column and the files that could hold it.
+    """
+
+    def __init__(self, column: str, message: str):
+        super().__init__(message)
+        self.column = column
+        """The column's name, as in the files."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        return type(self), (self.column, str(self))
+
+
 class CampaignWarning(UserWarning):
     """A campaign is read, but something in it deserves the user's eye (e.g. copied rows)."""
 

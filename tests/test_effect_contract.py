@@ -22,8 +22,10 @@ a few terms per effect; ``-m slow`` every candidate of every effect on every sam
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import json
+import os
 import pickle
 import subprocess
 import sys
@@ -376,3 +378,223 @@ def test_every_registered_effect_is_checked() -> None:
     assert set(EFFECTS) | set(START_EFFECTS) == set(registry.library()) - set(EXAMPLE_PLUGINS)
     assert {"encoder", "compliance", "lateral_compliance", "thermal", "backlash", "crosstalk",
             "rtest"} <= set(EFFECTS)
+
+
+# ------------------------------------------------------------------ (e) the contract at run time
+BASETEMP = "basetemp"
+"""Example 05's effect (an angle term on the column temp_base_c)."""
+BASETEMP_FILE = ROOT / "examples" / "05_plugin" / "aacmm_pin_basetemp.py"
+"""Example 05's plugin module, as its distribution installs it."""
+# A plugin whose term gives Jacobian columns but no forward change (issue 37: accepted by
+# discover, fitted to 18.3 ppm/K for a true 8 while the fit RMS rose): its ``adjust`` adds nothing.
+GHOST_SOURCE = '''
+"""A plugin's effect whose term has Jacobian columns but no forward change."""
+from dataclasses import dataclass
+from functools import partial
+
+from aacmm_pin import AngleTerm, Effect, register_effect
+
+
+@dataclass(frozen=True, eq=False)
+class ColumnsOnly(AngleTerm):
+    def adjust(self, values, samples, out):
+        """Nothing: the model's points ignore the term, its columns do not."""
+
+
+def _torque(axis, samples):
+    return samples.gravity[:, axis - 1:axis]
+
+
+def _variable(axis, samples):
+    return f"gravity torque on A{axis} (N m)", samples.gravity[:, axis - 1]
+
+
+def ghost(axis):
+    return ColumnsOnly(f"ghost[A{axis}]", "ghost", (f"ghost[A{axis}].k",), (1e-5,),
+                       "an angle error proportional to the gravity torque, columns only",
+                       axes=(axis,), basis_of=partial(_torque, axis),
+                       variable_of=partial(_variable, axis))
+
+
+class Ghost(Effect):
+    name = "ghost"
+    description = "columns without a forward change"
+
+    def candidates(self, arm, samples):
+        return [ghost(a) for a in (2, 3)]
+
+    def term(self, key):
+        for a in range(1, 10):
+            if key == f"ghost[A{a}]":
+                return ghost(a)
+        return None
+
+
+register_effect(Ghost)
+'''
+
+
+def _cli(*args: str, pythonpath: str = "") -> subprocess.CompletedProcess[str]:
+    """Run ``python -m aacmm_pin ARGS`` in a fresh process (``pythonpath`` before this checkout)."""
+    env = dict(ENV)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath + os.pathsep + env["PYTHONPATH"]
+    return subprocess.run([sys.executable, "-m", "aacmm_pin", *args], capture_output=True,
+                          text=True, env=env, timeout=600)
+
+
+def _error_line(done: subprocess.CompletedProcess[str]) -> str:
+    """Return the one line of a failed command's standard error (asserting it is one line)."""
+    lines = [line for line in done.stderr.splitlines() if "still working" not in line]
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def campaign_folder(tmp_path_factory: pytest.TempPathFactory, arm: ap.Arm) -> Path:
+    """A small campaign (4 x 15 SPAT samples) of DH errors and gravity compliance, as CSVs,
+    without the example plugin's column temp_base_c."""
+    folder = tmp_path_factory.mktemp("contract_cli") / "campaign"
+    config = ap.SimulationConfig(seed=1, effects=("dh", "rtest", "compliance"),
+                                 samples_per_location=15, bar_placements=1, samples_per_socket=5)
+    ap.write_simulation(ap.simulate_campaign(arm, config), folder)
+    assert "temp_base_c" not in (folder / "spat.csv").read_text().splitlines()[0]
+    return folder
+
+
+def test_columns_without_a_forward_change_are_refused_in_identify_and_discover(
+        campaign_folder: Path, tmp_path: Path) -> None:
+    """A plugin term whose columns disagree with its forward change: identify --terms and
+    discover refuse it in one line naming the term, its effect and the plugin (exit 2), and write
+    no model."""
+    plugin = tmp_path / "ghost_effect.py"
+    plugin.write_text(GHOST_SOURCE)
+    for command in (["identify", str(campaign_folder), "--model", "dh", "--terms", "ghost[A2]"],
+                    ["discover", str(campaign_folder), "--effects", "ghost", "--max-steps", "1"]):
+        out = tmp_path / command[0]
+        line = _error_line(_cli(*command, "--effects-file", str(plugin), "--out", str(out)))
+        assert "term ghost[A" in line and "effect 'ghost'" in line, line
+        assert str(plugin.resolve()) in line and "forward change" in line, line
+        assert not (out / "parameters.json").exists(), command[0]
+
+
+def test_the_run_time_check_refuses_wrong_columns_and_passes_right_ones(
+        sources: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
+    """check_term: columns without a forward change and columns 1 % off are refused; the same
+    term with its forward change passes; check_once checks a term once per process."""
+    from aacmm_pin.effects import contract
+    from aacmm_pin.effects.builtin.compliance import compliance
+
+    arm, params, samples = sources["effects_sim"]
+    right = compliance(2)
+    values = {right.key: np.asarray(right.plausible)}
+    at = params.replace(extensions=values)
+    contract.check_term(right, samples, at)
+
+    @dataclasses.dataclass(frozen=True, eq=False)
+    class Scaled(type(right)):  # type: ignore[misc]
+        factor: float = 1.0
+
+        def adjust(self, values: np.ndarray, samples: Samples, out: Any) -> None:
+            if self.factor:
+                super().adjust(values / self.factor, samples, out)
+
+    for factor, why in ((0.0, "central differences up to 0"), (1.01, "apart by")):
+        wrong = Scaled(right.key, right.effect, right.names, right.plausible, right.description,
+                       axes=right.axes, basis_of=right.basis_of, variable_of=right.variable_of,
+                       factor=factor)
+        with pytest.raises(contract.ContractBroken, match=why) as info:
+            contract.check_term(wrong, samples, at)
+        assert "\n" not in str(info.value) and f"term {right.key}" in str(info.value)
+        assert "effect 'compliance'" in str(info.value)
+
+    calls: list[str] = []
+    monkeypatch.setattr(contract, "check_term", lambda term, *args: calls.append(term.key))
+    fresh = dataclasses.replace(right, key="compliance[A2]#once")
+    for _ in range(3):
+        contract.check_once([fresh], samples, at)
+    assert calls == ["compliance[A2]#once"]
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_the_run_time_check_passes_every_effects_terms(name: str,
+                                                       request: pytest.FixtureRequest) -> None:
+    """The check that identify and discover run on a term's first use passes each term checked
+    above (a few per effect and sample set: the torso's two tools, every way of acting)."""
+    from aacmm_pin.effects import contract
+
+    effect, sources = _effect_sources(name, request)
+    for case in _cases(effect, sources):
+        contract.check_term(case.term, case.samples, case.params)
+
+
+def test_samples_without_an_effects_column_leave_it_out(sources: dict[str, Any],
+                                                        example_effect: dict[str, Any]) -> None:
+    """Samples without a declared column: the effect is left out and listed, never asked (its
+    candidates would raise); with the column it is kept. A missing column is a KeyError too."""
+    from aacmm_pin.effects.contract import LeftOut, usable_effects
+
+    arm, _, plain = sources["effects_sim"]
+    _, _, warm = example_effect["effects_sim"]
+    effect = registry.library()[BASETEMP]
+    with pytest.raises(KeyError, match=r"^no column 'temp_base_c' in the samples"):
+        plain.column("temp_base_c")
+    with pytest.raises(ap.AacmmError):
+        plain.column("temp_base_c")
+    kept, left = usable_effects([registry.library()["compliance"], effect], plain)
+    assert [e.name for e in kept] == ["compliance"]
+    assert left == [LeftOut(BASETEMP, ("temp_base_c",))]
+    assert str(left[0]) == "basetemp (no column temp_base_c)"
+    kept, left = usable_effects([effect], warm)
+    assert kept == [effect] and left == [] and effect.candidates(arm, warm)
+    no_disp = Samples(arm, plain.q, temp=plain.temp)
+    assert usable_effects([registry.library()["rtest"]], no_disp)[1] == [
+        LeftOut("rtest", ("dx_mm", "dy_mm", "dz_mm"))]
+
+
+def test_discover_with_the_example_plugin_installed_lists_it_as_left_out(
+        campaign_folder: Path, tmp_path: Path) -> None:
+    """Example 05's plugin installed (its entry point), discover on a campaign without
+    temp_base_c runs and lists the effect as left out (it stopped every discover before)."""
+    site = tmp_path / "site"
+    info = site / "aacmm_pin_basetemp-0.1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: aacmm-pin-basetemp\n"
+                                   "Version: 0.1.0\n")
+    (info / "entry_points.txt").write_text("[aacmm_pin.effects]\n"
+                                           "basetemp = aacmm_pin_basetemp:BaseTemperature\n")
+    (site / BASETEMP_FILE.name).write_text(BASETEMP_FILE.read_text())
+    out = tmp_path / "d"
+    done = _cli("discover", str(campaign_folder), "--max-steps", "1", "--out", str(out),
+                pythonpath=str(site))
+    assert done.returncode == 0, done.stderr
+    listed = [line for line in done.stdout.splitlines() if line.startswith("left out: ")]
+    assert len(listed) == 1 and "basetemp (no column temp_base_c)" in listed[0], done.stdout
+    result = json.loads((out / "discovery.json").read_text())
+    assert {"effect": "basetemp", "missing_columns": ["temp_base_c"]} in result["left_out"]
+    assert "basetemp" in result["library"]  # installed, registered, and not asked
+
+
+class _Asks(Effect):
+    """An effect that reads a column and fails loudly if asked anything on samples without it."""
+
+    name = "asks"
+    reads = ("temp_nowhere_c",)
+
+    def candidates(self, arm: ap.Arm, samples: Samples) -> list[Term]:
+        raise AssertionError("asked for candidates on samples without temp_nowhere_c")
+
+    def term(self, key: str) -> Term | None:
+        return None
+
+    def variables(self, arm: ap.Arm, samples: Samples) -> list[ap.Variable]:
+        raise AssertionError("asked for variables on samples without temp_nowhere_c")
+
+
+def test_the_residual_scan_asks_no_effect_without_its_column(sources: dict[str, Any]) -> None:
+    """The residual scan's variables come only from effects whose declared columns exist."""
+    from aacmm_pin.analyses.residual_scan import _variables
+
+    _, _, samples = sources["effects_sim"]
+    names = [v.name for v in _variables(samples, None, [registry.library()["thermal"], _Asks()])]
+    assert "temperature" in names

@@ -31,6 +31,7 @@ from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 from aacmm_pin.data.campaign import Campaign
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians
+from aacmm_pin.effects.contract import check_once
 from aacmm_pin.fit.identifiability import plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.unknowns import Unknowns
@@ -209,5 +210,6 @@ def scaled_columns(term: Term, samples: Samples, stylus: StylusJacobians, params
             parameters.
         sizes: the arm's plausible sizes (:attr:`aacmm_pin.Arm.sizes`).
     """
+    check_once((term,), samples, params)  # columns vs forward change, once per process
     cols: np.ndarray = term.columns(samples, stylus, params, touched) * term.sizes(sizes)
     return cols

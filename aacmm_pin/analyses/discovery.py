@@ -34,6 +34,7 @@ the bar).
 import dataclasses
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -45,8 +46,9 @@ from aacmm_pin.analyses.residual_scan import TIME, Scan, scan_residuals
 from aacmm_pin.analyses.term_elimination import Dropped, eliminate
 from aacmm_pin.data.campaign import Campaign, StatedNoise
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, ModelSpec, Term
+from aacmm_pin.effects.contract import usable_effects
 from aacmm_pin.effects.registry import default_effects, library
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AacmmError, MissingColumn
 from aacmm_pin.fit.identification import identify
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.measurements import Measurements, measurements, stated_noise
@@ -86,7 +88,7 @@ def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | N
         return None
     try:
         bar = LinearBar(cal, campaign, arm)
-    except AacmmError:  # e.g. a thermal term and no temp_c in lengthbar.csv
+    except MissingColumn:  # e.g. a thermal term and no temp_c in lengthbar.csv
         return None
     return bar if bar.n else None
 
@@ -164,157 +166,222 @@ def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str],
               max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise,
               report: tuple[StartReport, StepReport], widen: bool = False) -> Discovery:
     tic = time.perf_counter()
-    arm = arm or load_arm()
-    meas = measurements(campaign, arm, use_rtest, noise=noise)
-    samples = meas.samples
-    spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (), use_rtest)
-    effects = [library()[n] for n in names if not library()[n].in_start]
+    search = _Search(campaign, arm or load_arm(), start, names, use_rtest, alpha, max_nfev, noise)
+    search.begin(report[0])
+    ticker = Progress("discover", "step", total=max_steps, enabled=progress)
+    while True:
+        search.steps_up_to(max_steps, report[1], ticker)
+        if not widen or search.widened or search.capped or search.failed \
+                or len(search.steps) >= max_steps or search.missing or not search.widen():
+            break
+    ticker.close()
+    return search.result(time.perf_counter() - tic)
 
-    left = max_nfev  # evaluations left to all the fits below together
 
-    def fit(model: ModelSpec | None = None) -> Calibration:
-        nonlocal left
-        model = model or spec
-        if left <= 0:
+class _Search:
+    """The state of one discovery: the model so far, its scorer, the steps, the fits' budget.
+
+    Only the effects whose declared columns the samples have are asked anything
+    (:func:`aacmm_pin.effects.contract.usable_effects`); the others are listed in ``left_out``.
+    """
+
+    def __init__(self, campaign: Campaign, arm: Arm, start: str, names: list[str],
+                 use_rtest: bool, alpha: float, max_nfev: int, noise: StatedNoise):
+        self.campaign, self.arm, self.start, self.names = campaign, arm, start, names
+        self.alpha, self.max_nfev, self.noise = alpha, max_nfev, noise
+        self.meas = measurements(campaign, arm, use_rtest, noise=noise)
+        self.samples = self.meas.samples
+        self.spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (),
+                              use_rtest)
+        self.effects, self.left_out = usable_effects(
+            [library()[n] for n in names if not library()[n].in_start], self.samples)
+        self.left = max_nfev  # evaluations left to all the fits below together
+        self.steps: list[Step] = []
+        self.n_candidates: list[int] = []
+        self.named_in: dict[str, int] = {}  # term key -> step that named it
+        self.missing: list[dict[str, Any]] = []
+        self.stopped, self.capped, self.failed = "", False, False
+        self.widened: list[str] = []
+
+    def fit(self, model: ModelSpec | None = None) -> Calibration:
+        """Return the fit of ``model`` (default: the start model) within the budget left.
+
+        Raises:
+            _CapReached: the budget is spent, or the fit spent it.
+            _FitFailed: the fit was refused or did not converge.
+        """
+        model = model or self.spec
+        if self.left <= 0:
             raise _CapReached
-        cal = identify(campaign, arm, model="proposed" if model.map_axes else "dh",
+        cal = identify(self.campaign, self.arm, model="proposed" if model.map_axes else "dh",
                        use_rtest=model.use_rtest, map_axes=model.map_axes or None,
-                       extensions=model.terms, max_nfev=left,
+                       extensions=model.terms, max_nfev=self.left,
                        nests="estimate",  # one treatment for every model
-                       noise=noise)
-        left -= cal.nfev
+                       noise=self.noise)
+        self.left -= cal.nfev
         if _capped(cal):  # the caller ends the loop
             raise _CapReached
         if not (cal.success or cal.judged):  # a residual judged against the noise: examined
             what = "did not converge" if cal.status <= 0 else "was refused"  # scipy: > 0 converged
-            raise _FitFailed(f"the fit with {', '.join(t.key for t in model.terms) or start} "
+            raise _FitFailed(f"the fit with {', '.join(t.key for t in model.terms) or self.start} "
                              f"{what}: {cal.message}")
         return cal
 
-    try:
-        cal = first = fit()
-    except _CapReached:
-        raise FitCapReached(f"discover: the fit of the start model ({start}) reached the cap of "
-                            f"{max_nfev} evaluations before converging: raise --max-nfev "
-                            "(max_nfev)") from None
-    except _FitFailed as exc:  # nothing found yet to keep
-        raise AacmmError(f"discover: {exc}") from None
-    bar_now = _linear_bar(arm, cal, campaign)
-    lin = LinearScorer(cal, samples, bar_now)
-    steps: list[Step] = []
-    held, fits, bars = [lin.heldout_rms], [cal.fit_rms], [bar_now]
-    factors = [lin.size_factors]
-    report[0](lin.heldout_rms, cal.fit_rms, None if bar_now is None else bar_now.rms,
-              lin.size_factors)
-    n_candidates: list[int] = []
-    stopped, missing, capped, failed = "", [], False, False
-    ticker = Progress("discover", "step", total=max_steps, enabled=progress)
-    named_in: dict[str, int] = {}  # term key -> step that named it
-    def candidates() -> list[Term]:  # a term dropped as not earned is not tried again
-        out = [t for e in effects for t in e.offered(arm, samples)
-               if not t.in_model(spec) and t.key not in named_in]
-        n_candidates.append(len(out))
+    def begin(self, on_start: StartReport) -> None:
+        """Fit and score the start model, and report it.
+
+        Raises:
+            FitCapReached: the start model's fit spent the budget.
+            AacmmError: the start model's fit failed.
+        """
+        try:
+            self.cal = self.first = self.fit()
+        except _CapReached:
+            raise FitCapReached(f"discover: the fit of the start model ({self.start}) reached the "
+                                f"cap of {self.max_nfev} evaluations before converging: raise "
+                                "--max-nfev (max_nfev)") from None
+        except _FitFailed as exc:  # nothing found yet to keep
+            raise AacmmError(f"discover: {exc}") from None
+        self.bar_now = _linear_bar(self.arm, self.cal, self.campaign)
+        self.lin = LinearScorer(self.cal, self.samples, self.bar_now)
+        self.held, self.fits = [self.lin.heldout_rms], [self.cal.fit_rms]
+        self.bars, self.factors = [self.bar_now], [self.lin.size_factors]
+        on_start(self.lin.heldout_rms, self.cal.fit_rms,
+                 None if self.bar_now is None else self.bar_now.rms, self.lin.size_factors)
+
+    def candidates(self) -> list[Term]:
+        """Return the terms to try: offered, not in the model, not named before (nor dropped)."""
+        out = [t for e in self.effects for t in e.offered(self.arm, self.samples)
+               if not t.in_model(self.spec) and t.key not in self.named_in]
+        self.n_candidates.append(len(out))
         return out
 
-    widened: list[str] = []
-    while True:
-        for _ in range(max_steps - len(steps)):
-            terms_now = candidates()
+    def steps_up_to(self, max_steps: int, on_step: StepReport, ticker: Progress) -> None:
+        """Take steps until none is significant, a fit ends the loop, or ``max_steps`` are taken."""
+        for _ in range(max_steps - len(self.steps)):
+            terms_now = self.candidates()
             if not terms_now:
-                stopped = ("no candidate to try: every effect asked for is in the model or has no "
-                           "term these data can show")
-                break
-            threshold = alpha / len(terms_now)
-            scores = _scored(lin, terms_now, threshold)
-            good = [s for s in scores if s.significant]
-            if not good:
-                best = scores[0]
-                stopped = (f"no candidate is significant against the noise "
-                           f"({lin.sigma * 1e6:.2f} um): the best, {best.term.key}, changes the held-out "
-                           f"RMS by {(best.heldout_rms - lin.heldout_rms) * 1e6:+.3f} um, "
-                           f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
-                           f"{best.bic_gain:.1f}")
-                break
-            chosen = _forward(lin, good[0], terms_now, threshold)
-            new_terms = [s.term for s in chosen]
-            spec_before = spec
-            for t in new_terms:
-                spec = t.added_to(spec)
-                named_in[t.key] = len(steps) + 1
-            # every term of the model earned given all the others (a term may have stood in for an
-            # effect named later): the least significant dropped and the model refitted, until none
-            try:
-                new_cal, spec, dropped = eliminate(fit(), spec, fit, alpha, named_in)
-            except _CapReached:
-                capped = True
-                stopped = (f"the fit of step {len(steps) + 1} ({', '.join(t.key for t in new_terms)}) "
-                           f"reached the cap of {max_nfev} evaluations of all the discovery's fits "
-                           f"before converging: the {len(steps)} steps before it stand; raise "
-                           "--max-nfev (max_nfev)")
-                spec = spec_before  # the model of the steps that stand
-                break
-            except _FitFailed as exc:
-                failed = True
-                stopped = (f"the fit of step {len(steps) + 1} "
-                           f"({', '.join(t.key for t in new_terms)}) failed, the {len(steps)} steps "
-                           f"before it stand: {exc}")
-                spec = spec_before
-                break
-            new_terms = [t for t in new_terms if t.in_model(spec)]
-            new_bar = _linear_bar(arm, new_cal, campaign)
-            new_lin = LinearScorer(new_cal, samples, new_bar)
-            step = _step(new_terms, good[0], scores, (cal, lin, bar_now), (new_cal, new_lin, new_bar),
-                         samples, (chosen, dropped))
-            steps.append(step)
-            report[1](len(steps), step)
-            cal, lin, bar_now = new_cal, new_lin, new_bar
-            held.append(lin.heldout_rms)
-            factors.append(lin.size_factors)
-            fits.append(cal.fit_rms)
-            bars.append(bar_now)
+                self.stopped = ("no candidate to try: every effect asked for is in the model or "
+                                "has no term these data can show")
+                return
+            if not self._step(terms_now, on_step):
+                return
             ticker.update(1)
+        terms_now = self.candidates()
+        still = _scored(self.lin, terms_now, self.alpha / max(len(terms_now), 1))
+        self.missing = [s.to_dict() for s in still if s.significant]
+        self.stopped = (f"reached max_steps = {max_steps}" + (
+            f"; {len(self.missing)} candidates are still significant (see missing)"
+            if self.missing else "; nothing else is significant"))
+
+    def _step(self, terms_now: list[Term], on_step: StepReport) -> bool:
+        """Score the candidates, name the best with its effect's further axes and refit.
+
+        Returns whether a step was taken (else :attr:`stopped` says why).
+        """
+        lin, threshold = self.lin, self.alpha / len(terms_now)
+        scores = _scored(lin, terms_now, threshold)
+        good = [s for s in scores if s.significant]
+        if not good:
+            best = scores[0]
+            self.stopped = (f"no candidate is significant against the noise "
+                            f"({lin.sigma * 1e6:.2f} um): the best, {best.term.key}, changes the "
+                            f"held-out RMS by {(best.heldout_rms - lin.heldout_rms) * 1e6:+.3f} um, "
+                            f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
+                            f"{best.bic_gain:.1f}")
+            return False
+        chosen = _forward(lin, good[0], terms_now, threshold)
+        new_terms = [s.term for s in chosen]
+        spec_before = self.spec
+        for t in new_terms:
+            self.spec = t.added_to(self.spec)
+            self.named_in[t.key] = len(self.steps) + 1
+        # every term of the model earned given all the others (a term may have stood in for an
+        # effect named later): the least significant dropped and the model refitted, until none
+        try:
+            new_cal, self.spec, dropped = eliminate(self.fit(), self.spec, self.fit, self.alpha,
+                                                    self.named_in)
+        except (_CapReached, _FitFailed) as exc:
+            self._ended(exc, new_terms)
+            self.spec = spec_before  # the model of the steps that stand
+            return False
+        new_terms = [t for t in new_terms if t.in_model(self.spec)]
+        new_bar = _linear_bar(self.arm, new_cal, self.campaign)
+        new_lin = LinearScorer(new_cal, self.samples, new_bar)
+        step = _step(new_terms, good[0], scores, (self.cal, lin, self.bar_now),
+                     (new_cal, new_lin, new_bar), self.samples, (chosen, dropped))
+        self.steps.append(step)
+        on_step(len(self.steps), step)
+        self.cal, self.lin, self.bar_now = new_cal, new_lin, new_bar
+        self.held.append(new_lin.heldout_rms)
+        self.factors.append(new_lin.size_factors)
+        self.fits.append(new_cal.fit_rms)
+        self.bars.append(new_bar)
+        return True
+
+    def _ended(self, exc: Exception, new_terms: list[Term]) -> None:
+        """Record why a step's fit ended the loop: the budget spent, or the fit failed."""
+        keys, k = ", ".join(t.key for t in new_terms), len(self.steps)
+        if isinstance(exc, _CapReached):
+            self.capped = True
+            self.stopped = (f"the fit of step {k + 1} ({keys}) reached the cap of {self.max_nfev} "
+                            f"evaluations of all the discovery's fits before converging: the {k} "
+                            "steps before it stand; raise --max-nfev (max_nfev)")
         else:
-            terms_now = candidates()
-            still = _scored(lin, terms_now, alpha / max(len(terms_now), 1))
-            missing = [s.to_dict() for s in still if s.significant]
-            stopped = (f"reached max_steps = {max_steps}" + (
-                f"; {len(missing)} candidates are still significant (see missing)" if missing else
-                "; nothing else is significant"))
-        if not widen or widened or capped or failed or len(steps) >= max_steps or missing:
-            break
-        others = [e for e in library().values() if e.name not in names and not e.in_start]
-        scan_now = _residual_scan(arm, cal, lin, samples, campaign, meas, noise, names) \
-            if others else None
+            self.failed = True
+            self.stopped = (f"the fit of step {k + 1} ({keys}) failed, the {k} steps before it "
+                            f"stand: {exc}")
+
+    def widen(self) -> bool:
+        """Take on the effects not offered by default where the scan would blame the noise.
+
+        Returns whether it did (the search then goes on with them).
+        """
+        others, left_out = usable_effects([e for e in library().values()
+                                           if e.name not in self.names and not e.in_start],
+                                          self.samples)
+        scan_now = self.scan() if others else None
         if scan_now is None or scan_now.noise_consistent or scan_now.structure:
-            break
+            return False
         # the residual is larger than the noise and follows no variable of the effects tried:
         # the scan would blame the noise for an effect never tried. The effects not offered by
         # default may be what it asks for; scored by the same tests, named only if they pass.
         # (A residual that follows a variable is named by the scan as it is: on the UR5 grid,
         # widening there named lateral_compliance[A1], held-out 33.47 -> 33.33 um, test poses
         # 0.05998 -> 0.06009 mm: no gain the data can show.)
-        widened = [e.name for e in others]
-        effects += others
-        names = [*names, *widened]
+        self.widened = [e.name for e in others]
+        self.left_out += left_out  # the others that these samples cannot show
+        self.effects += others
+        self.names = [*self.names, *self.widened]
+        return True
 
-    ticker.close()
-    scan = _residual_scan(arm, cal, lin, samples, campaign, meas, noise, names)
-    if scan.structure:  # library terms on a variable the residual follows, not named
-        followed = {s.variable for s in scan.structure}
-        if TIME in followed:  # the scan reports time once: either of its two variables
-            followed |= {TIME_WITHIN_LOCATION, TIME_OVERALL}
-        scan = dataclasses.replace(scan, suspects=tuple(
-            t.key for e in effects for t in e.offered(arm, samples)
-            if not t.in_model(spec) and followed.intersection(t.follows)))
-    return Discovery(start=start, steps=steps, missing=missing, stopped_because=stopped,
-                     calibration=cal, start_calibration=first, heldout_rms=held, fit_rms=fits,
-                     bar_rms=[None if b is None else b.rms for b in bars],
-                     bar_covered_rms=[None if b is None else b.covered_rms for b in bars],
-                     bar_normalised=[None if b is None else lin.bar_normalised(b.errors) for b in bars],
-                     bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
-                     noise=cal.sigma, n_candidates=n_candidates,
-                     runtime_s=time.perf_counter() - tic, size_factors=factors, scan=scan,
-                     stated_noise=noise, capped=capped, failed=failed, widened=tuple(widened))
+    def scan(self) -> Scan:
+        """Return the residual scan of the model so far (:func:`_residual_scan`)."""
+        return _residual_scan(self.arm, self.cal, self.lin, self.samples, self.campaign,
+                              self.meas, self.noise, self.names)
+
+    def result(self, runtime_s: float) -> Discovery:
+        """Return the discovery: the steps, the final model and its scanned residual."""
+        scan = self.scan()
+        if scan.structure:  # library terms on a variable the residual follows, not named
+            followed = {s.variable for s in scan.structure}
+            if TIME in followed:  # the scan reports time once: either of its two variables
+                followed |= {TIME_WITHIN_LOCATION, TIME_OVERALL}
+            scan = dataclasses.replace(scan, suspects=tuple(
+                t.key for e in self.effects for t in e.offered(self.arm, self.samples)
+                if not t.in_model(self.spec) and followed.intersection(t.follows)))
+        bars, lin, bar_now = self.bars, self.lin, self.bar_now
+        return Discovery(
+            start=self.start, steps=self.steps, missing=self.missing,
+            stopped_because=self.stopped, calibration=self.cal, start_calibration=self.first,
+            heldout_rms=self.held, fit_rms=self.fits, bar_rms=[None if b is None else b.rms
+                                                               for b in bars],
+            bar_covered_rms=[None if b is None else b.covered_rms for b in bars],
+            bar_normalised=[None if b is None else lin.bar_normalised(b.errors) for b in bars],
+            bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
+            noise=self.cal.sigma, n_candidates=self.n_candidates, runtime_s=runtime_s,
+            size_factors=self.factors, scan=scan, stated_noise=self.noise, capped=self.capped,
+            failed=self.failed, widened=tuple(self.widened), left_out=tuple(self.left_out))
 
 
 def _residual_scan(arm: Arm, cal: Calibration, lin: LinearScorer, samples: Samples,

@@ -13,6 +13,7 @@ from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.analyses.term_elimination import Dropped
 from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.effects.base import Term
+from aacmm_pin.effects.contract import LeftOut
 from aacmm_pin.effects.registry import library
 from aacmm_pin.fit.identification_result import Calibration
 
@@ -214,6 +215,13 @@ class Discovery:
     failed: bool = False
     """Whether a step's fit failed (refused, or not converged) and ended the loop there
     (:attr:`stopped_because` names the step and why); the steps before it stand."""
+    left_out: tuple[LeftOut, ...] = ()
+    """Effects asked for but not tried: the samples lack a column they declare
+    (:attr:`aacmm_pin.effects.Effect.reads`; :func:`aacmm_pin.effects.contract.usable_effects`)."""
+
+    def left_out_text(self) -> str:
+        """Return ``left out: thermal (no column temp_c), ...``, or "" when none is."""
+        return "left out: " + ", ".join(map(str, self.left_out)) if self.left_out else ""
 
     @property
     def unexplained(self) -> dict[str, Any] | None:
@@ -237,6 +245,7 @@ class Discovery:
             "start": self.start, "steps": [s.to_dict() for s in self.steps],
             "missing": self.missing, "stopped_because": self.stopped_because,
             "capped": self.capped, "failed": self.failed, "widened": list(self.widened),
+            "left_out": [x.to_dict() for x in self.left_out],
             "gap": {"heldout_rms_um": [v * 1e6 for v in self.heldout_rms],
                     "fit_rms_um": [v * 1e6 for v in self.fit_rms],
                     "bar_rms_um": [_um(v) for v in self.bar_rms],

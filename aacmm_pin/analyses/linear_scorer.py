@@ -21,7 +21,7 @@ from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
 from aacmm_pin.distributions import chi2_ppf, f_sf
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import MissingColumn
 from aacmm_pin.fit.identifiability import plausible_groups, plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.encoder_map import touched_nodes
@@ -210,7 +210,7 @@ class LinearScorer:
             try:
                 out[len(self.r):] = factor * sla.solve_triangular(
                     self._bar_white[0], self.bar.columns(term, self.touched), lower=True)
-            except AacmmError:  # e.g. thermal without temp_c in lengthbar.csv: the bar abstains
+            except MissingColumn:  # e.g. thermal without temp_c in lengthbar.csv: the bar abstains
                 out[len(self.r):] = np.nan
         return out
 

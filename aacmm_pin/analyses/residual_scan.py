@@ -36,6 +36,7 @@ from aacmm_pin.data.columns import column
 from aacmm_pin.data.poses import POSE_COLUMN
 from aacmm_pin.distributions import bartlett_p, chi2_sf, f_logsf, f_sf
 from aacmm_pin.effects.base import TIME_OVERALL, TIME_WITHIN_LOCATION, Effect, Variable
+from aacmm_pin.effects.contract import usable_effects
 from aacmm_pin.effects.registry import default_effects, library
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.samples import Samples
@@ -191,7 +192,7 @@ def _variables(samples: Samples, stylus: np.ndarray | None = None,
                     samples.time_in_location(), "within"),
            Variable(OVERALL, "all", f"time ({unit})", t, "global")]
     chosen = effects if effects is not None else [library()[n] for n in default_effects()]
-    for effect in chosen:
+    for effect in usable_effects(chosen, samples)[0]:  # those whose columns the samples have
         out += effect.variables(samples.arm, samples)
     read = {c for effect in library().values() for c in effect.reads} | {"t_s", "sigma_um",
                                                                           POSE_COLUMN}  # a label

@@ -501,7 +501,9 @@ class Effect(ABC):
     description: str = ""
     """Plain-language description."""
     reads: tuple[str, ...] = ()
-    """Per-sample columns of the campaign files it reads (e.g. ``("temp_c",)``)."""
+    """Per-sample columns of the campaign files it reads (e.g. ``("temp_c",)``): on samples without
+    one of them it is asked nothing, left out and listed
+    (:func:`aacmm_pin.effects.contract.usable_effects`)."""
     in_start: bool = False
     """Whether every start model already has it (e.g. the tool vector)."""
     by_default: bool = True

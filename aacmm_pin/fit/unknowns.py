@@ -19,6 +19,7 @@ import scipy.sparse as sp
 
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.calibrated import needs_tilts, stylus_jacobians, stylus_positions
+from aacmm_pin.effects.contract import check_once
 from aacmm_pin.effects.forward import measurement_shift
 from aacmm_pin.fit.jacobian_cache import LAST_JACOBIAN
 from aacmm_pin.model.arm import Arm
@@ -212,6 +213,7 @@ class Unknowns:
         ``jac`` are the stylus Jacobians at ``params`` (:func:`stylus_jacobians`).
         """
         samples = self._samples(q) or Samples(self.arm, q)
+        check_once(self.terms, samples, params)  # columns vs forward change, once per process
         cols = [t.columns(samples, jac, params) for t in self.terms]
         return np.concatenate(cols, axis=2) if cols else np.zeros((q.shape[0], 3, 0))
 

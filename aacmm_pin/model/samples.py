@@ -17,11 +17,14 @@ import pinocchio as pin
 
 from aacmm_pin.data.logs import LengthBarLog, PointLog, SpatLog
 from aacmm_pin.data.poses import POSE_COLUMN, pose_ids
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import MissingColumn
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.arm import Arm
 
 _FILE_OF = {SpatLog: "spat.csv", LengthBarLog: "lengthbar.csv", PointLog: "points.csv"}
+_FIELD_OF = {"dx_mm": "displacement", "dy_mm": "displacement", "dz_mm": "displacement",
+             "tool": "tool", "location": "location"}
+"""Columns of the files that the samples keep as a field, not in :attr:`Samples.columns`."""
 
 
 class Samples:
@@ -128,15 +131,24 @@ class Samples:
         """Return a per-sample column by its file name, shape (N,), in SI.
 
         Raises:
-            AacmmError: if the samples have no such column (one line, naming it and the files that
-                could hold it).
+            MissingColumn: if the samples have no such column (one line, naming it and the files
+                that could hold it; an ``AacmmError`` and a ``KeyError``).
         """
         if (values := self.columns.get(name)) is not None:
             return values
         where = " or ".join(self.files) or "the readouts file"
         have = ", ".join(self.columns) or "none"
-        raise AacmmError(f"no column '{name}' in the samples: add it to {where} (columns there: "
-                         f"{have})")
+        raise MissingColumn(name, f"no column '{name}' in the samples: add it to {where} (columns "
+                                  f"there: {have})")
+
+    def has_column(self, name: str) -> bool:
+        """Whether the samples hold a column of the files by its name (``temp_c``, ``dx_mm``).
+
+        A per-sample column (:attr:`columns`), or one the samples keep as a field: the R-Test
+        displacement's ``dx_mm``, ``dy_mm``, ``dz_mm``, the ``tool`` and the ``location``.
+        """
+        field = _FIELD_OF.get(name)
+        return name in self.columns if field is None else getattr(self, field) is not None
 
     @property
     def n(self) -> int:

@@ -27,7 +27,7 @@ from aacmm_pin.analyses.urdf_loss import REPORT_KEY, UrdfLoss, urdf_alone_loss
 from aacmm_pin.data.logs import Campaign
 from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.effects.parameters_file import write_parameters
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import MissingColumn
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.compact_urdf import compact_urdf
@@ -135,7 +135,7 @@ def write_calibration_files(cal: Calibration, arm: Arm, folder: Path,
     loss: UrdfLoss | str
     try:
         loss = urdf_alone_loss(written, params, compact, poses)
-    except AacmmError as exc:  # an extension's column the fitted readouts alone do not have
+    except MissingColumn as exc:  # an extension's column the fitted readouts alone do not have
         loss = f"not computed: {exc}"
     if isinstance(loss, UrdfLoss):
         for urdf in (tree, compact):

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from aacmm_pin import AacmmError, AngleTerm, Effect, Term, Variable
+from aacmm_pin import AngleTerm, Effect, MissingColumn, Term, Variable
 
 COLUMN = "temp_base_c"
 """The per-sample column this plugin reads: the temperature of the arm's base, deg C."""
@@ -41,18 +41,18 @@ def base_temperature(samples: Any) -> np.ndarray | None:
     """Return the samples' base temperature, shape (N,), deg C, or None without the column."""
     try:
         values = samples.column(COLUMN)
-    except (KeyError, LookupError):
+    except MissingColumn:  # a KeyError too
         return None
-    return None if values is None else np.asarray(values, dtype=float)
+    return np.asarray(values, dtype=float)
 
 
 def _basis(samples: Any) -> np.ndarray:
-    """d(A1 angle)/dc = T_base - 20 deg C, shape (N, 1), K."""
-    values = base_temperature(samples)
-    if values is None:
-        raise AacmmError(f"the model has the term {KEY} (plugin aacmm-pin-basetemp): the readouts "
-                         f"need a {COLUMN} column")
-    return (values - REFERENCE_C)[:, None]
+    """d(A1 angle)/dc = T_base - 20 deg C, shape (N, 1), K.
+
+    Samples without the column raise :class:`~aacmm_pin.MissingColumn` (``samples.column``), in
+    one line naming it and the files that could hold it.
+    """
+    return (np.asarray(samples.column(COLUMN), dtype=float) - REFERENCE_C)[:, None]
 
 
 def _variable(samples: Any) -> tuple[str, np.ndarray]:

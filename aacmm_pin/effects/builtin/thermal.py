@@ -8,7 +8,7 @@ import numpy as np
 
 from aacmm_pin.data.columns import column
 from aacmm_pin.effects.base import Effect, ScaleTerm, Term, Variable, varies
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import MissingColumn
 from aacmm_pin.units import REFERENCE_TEMPERATURE_C
 
 if TYPE_CHECKING:
@@ -23,7 +23,8 @@ VARIABLE = "temperature"
 
 def _temperature(samples: Samples) -> np.ndarray:
     if samples.temp is None:
-        raise AacmmError("the model has a thermal term: the readouts need a temp_c column")
+        raise MissingColumn("temp_c", "the model has a thermal term: the readouts need a temp_c "
+                                      "column")
     return (samples.temp - REFERENCE_TEMPERATURE_C)[:, None]
 
 
