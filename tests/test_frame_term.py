@@ -374,3 +374,26 @@ def test_a_term_on_an_error_frame_survives_the_compact_urdf(arm: ap.Arm, small_s
         np.testing.assert_allclose(runtime.position(q), expected, atol=1e-12)
     finally:
         registry.LIBRARY.pop("drift", None)
+
+
+def test_an_effects_file_run_again_is_checked_again(arm: ap.Arm, tmp_path: Path) -> None:
+    """The run-time check knows a term by its registered effect too: an effects file changed and
+    run again (its frame term now without a forward change) is refused, not passed as checked."""
+    from aacmm_pin.effects import registry
+    from aacmm_pin.effects.contract import ContractBroken, check_once
+
+    effects = tmp_path / "drift.py"
+    effects.write_text(DRIFT)
+    samples = _samples(arm, n=8)
+    params = _params(arm)
+    try:
+        registry.load_effect_file(effects)
+        check_once([registry.term_from_key("drift[dx43]")], samples, params)
+        effects.write_text(DRIFT.replace("ap.FrameTerm(key", "Ghost(key").replace(
+            "class Drift", "class Ghost(ap.FrameTerm):\n    def adjust(self, values, samples, out):\n"
+            "        pass\n\n\nclass Drift"))
+        registry.load_effect_file(effects)
+        with pytest.raises(ContractBroken, match=r"drift\[dx43\].*'drift'"):
+            check_once([registry.term_from_key("drift[dx43]")], samples, params)
+    finally:
+        registry.LIBRARY.pop("drift", None)
