@@ -29,11 +29,10 @@ import pinocchio as pin
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.effects.base import FrameTerm
+from aacmm_pin.effects.base import FrameTerm, PluginOutputError
 from aacmm_pin.effects.calibrated import stylus_jacobians, stylus_positions
 from aacmm_pin.effects.calibrated_arm import CalibratedArm
 from aacmm_pin.effects.forward import terms_adjustment
-from aacmm_pin.errors import FrameNotFound
 from aacmm_pin.model import kinematics
 from aacmm_pin.model._chain import BatchedChain
 from aacmm_pin.model.kinematics import JointKinematics
@@ -192,12 +191,32 @@ def test_runtime_paths_apply_the_twist(arm: ap.Arm) -> None:
         registry.LIBRARY.update(before)
 
 
-def test_an_unknown_frame_is_named(arm: ap.Arm) -> None:
-    """A term on a frame the arm lacks: one error naming the frame and the arm's frames."""
+@pytest.mark.parametrize("frame", ["flange_x", "tool_x", "mt_x", "gamma0", "universe"])
+def test_a_frame_the_urdf_lacks_is_refused_naming_the_term(arm: ap.Arm, frame: str) -> None:
+    """A frame that is not the URDF's (a typo, or a joint only the identification model has): one
+    line naming the term, its effect and the URDF's frames, on every path."""
     samples = _samples(arm, n=3)
-    change = terms_adjustment([(_term("flange_x", seed=1), np.ones(2))], samples, arm.n_axes)
-    with pytest.raises(FrameNotFound, match="'flange_x' is not in the arm; choose from: .*link6"):
-        kinematics.predict(arm, ap.Parameters.nominal(arm), samples.q, samples, adjust=change)
+    term = _term(frame, seed=1)
+    with pytest.raises(PluginOutputError, match=rf"term moves\[{frame}\] \(effect 'moves'.*"
+                                                rf"'{frame}' is not in the arm; choose from: .*link6"):
+        terms_adjustment([(term, np.ones(2))], samples, arm.n_axes)
+    stylus = stylus_jacobians(arm, _params(arm), samples.q, samples=samples)
+    with pytest.raises(PluginOutputError, match=rf"moves\[{frame}\]"):
+        term.columns(samples, stylus, _params(arm))
+
+
+def test_a_tool_joint_moves_its_tool_alike_in_the_fit_and_at_run_time(arm: ap.Arm) -> None:
+    """The tool joint's frame (the URDF's ``tool``) is its tool link's in the identification
+    model, where the tool is three prismatic joints: the fit's path and the runtime's agree."""
+    samples = _samples(arm, n=5)
+    values = np.array([2.0, -1.0])
+    change = terms_adjustment([(_term(arm.tool_joints[0], seed=4), values)], samples, arm.n_axes)
+    params = _params(arm)
+    fit = kinematics.stylus_positions(arm, params, samples.q, "r", samples, adjust=change)
+    runtime = JointKinematics(arm, params).positions(samples.q, adjust=change)
+    np.testing.assert_allclose(fit, runtime, atol=1e-12)
+    plain = kinematics.stylus_positions(arm, params, samples.q, "r", samples)
+    assert np.abs(fit - plain).max() > 1e-6
 
 
 # ------------------------------------------------------------------ the plugin, end to end
@@ -353,5 +372,28 @@ def test_a_term_on_an_error_frame_survives_the_compact_urdf(arm: ap.Arm, small_s
         q = np.radians([[10.0, 20, 30, 40, 50, 60, 70], [-30.0, 10, 60, -20, 40, -50, 5]])
         expected = ap.predict(ap.load_arm(params.arm), params, q)
         np.testing.assert_allclose(runtime.position(q), expected, atol=1e-12)
+    finally:
+        registry.LIBRARY.pop("drift", None)
+
+
+def test_an_effects_file_run_again_is_checked_again(arm: ap.Arm, tmp_path: Path) -> None:
+    """The run-time check knows a term by its registered effect too: an effects file changed and
+    run again (its frame term now without a forward change) is refused, not passed as checked."""
+    from aacmm_pin.effects import registry
+    from aacmm_pin.effects.contract import ContractBroken, check_once
+
+    effects = tmp_path / "drift.py"
+    effects.write_text(DRIFT)
+    samples = _samples(arm, n=8)
+    params = _params(arm)
+    try:
+        registry.load_effect_file(effects)
+        check_once([registry.term_from_key("drift[dx43]")], samples, params)
+        effects.write_text(DRIFT.replace("ap.FrameTerm(key", "Ghost(key").replace(
+            "class Drift", "class Ghost(ap.FrameTerm):\n    def adjust(self, values, samples, out):\n"
+            "        pass\n\n\nclass Drift"))
+        registry.load_effect_file(effects)
+        with pytest.raises(ContractBroken, match=r"drift\[dx43\].*'drift'"):
+            check_once([registry.term_from_key("drift[dx43]")], samples, params)
     finally:
         registry.LIBRARY.pop("drift", None)

@@ -96,3 +96,15 @@ def test_the_jacobian_holds_its_entries_and_no_more(arm: ap.Arm):
     while isinstance(owner.base, np.ndarray):
         owner = owner.base
     assert owner.nbytes == dense.nbytes
+
+
+def test_the_kept_jacobian_goes_with_its_calibration(arm: ap.Arm, small_sim: ap.Simulation):
+    """A calibration released leaves no Jacobian behind (the process' slot holds it weakly)."""
+    from aacmm_pin.fit.jacobian_cache import LAST_JACOBIAN
+
+    cal = ap.identify(small_sim.campaign, arm)
+    assert LAST_JACOBIAN._held is not None  # kept for the analyses after the fit
+    del cal
+    gc.collect()
+    assert LAST_JACOBIAN._held is None
+    assert not any(isinstance(o, Unknowns) for o in gc.get_objects())

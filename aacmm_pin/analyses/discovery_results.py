@@ -14,7 +14,7 @@ from aacmm_pin.analyses.term_elimination import Dropped
 from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.effects.base import Term
 from aacmm_pin.effects.contract import LeftOut
-from aacmm_pin.effects.registry import library
+from aacmm_pin.effects.registry import BUILTIN, library, plugin_of
 from aacmm_pin.fit.identification_result import Calibration
 
 
@@ -219,9 +219,17 @@ class Discovery:
     """Effects asked for but not tried: the samples lack a column they declare
     (:attr:`aacmm_pin.effects.Effect.reads`; :func:`aacmm_pin.effects.contract.usable_effects`)."""
 
-    def left_out_text(self) -> str:
-        """Return ``left out: thermal (no column temp_c), ...``, or "" when none is."""
-        return "left out: " + ", ".join(map(str, self.left_out)) if self.left_out else ""
+    def left_out_text(self, named: bool = True) -> str:
+        """Return ``left out: basetemp (no column temp_base_c), ...``, or "" when none is.
+
+        Args:
+            named: whether the effects were named (``--effects``); else the built-in effects left
+                out are not listed (the R-Test's columns on a points campaign, the arm
+                temperature where none was recorded: nothing was asked for that), only the
+                plugins' (a plugin installed for a column these files lack).
+        """
+        listed = [e for e in self.left_out if named or plugin_of(e.effect) != BUILTIN]
+        return "left out: " + ", ".join(map(str, listed)) if listed else ""
 
     @property
     def unexplained(self) -> dict[str, Any] | None:

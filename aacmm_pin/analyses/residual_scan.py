@@ -294,6 +294,45 @@ def _merge_time(ranked: list[Structure], within_better: bool) -> list[Structure]
     return out
 
 
+def _location_spread(white: np.ndarray, sigma: np.ndarray, location: np.ndarray
+                     ) -> tuple[Structure, float] | None:
+    """Return the spread per location as a structure and its log p-value (Bartlett), or None.
+
+    The spread is in units of each sample's stated noise (white, (N, 3)): points (20 um) beside
+    SPATs (2 um) differ by what was stated, not by structure; its excess is in um of the worst
+    location's own stated noise (sigma, (N, 1), m).
+    """
+    white_centred = white.copy()
+    for m in np.unique(location):
+        white_centred[location == m] -= white_centred[location == m].mean(axis=0)
+    ids = np.unique(location)
+    groups = [white_centred[location == m].reshape(-1) for m in ids]
+    if len(groups) <= 1 or not all(g.size > 1 for g in groups):
+        return None
+    bartlett_pvalue = bartlett_p(groups)
+    var = [float(np.mean(g ** 2)) for g in groups]
+    worst = int(np.argmax(var))
+    excess_var = max(var[worst] - float(np.mean(white_centred ** 2)), 0.0)
+    worst_noise = float(np.sqrt(np.mean(sigma[location == ids[worst]] ** 2)))
+    log_p = float(np.log(max(bartlett_pvalue, 1e-300)))
+    return (Structure("the location (its spread)", "each location",
+                      float(np.sqrt(excess_var)) * worst_noise, 1.0, log_p, len(groups) - 1,
+                      location.astype(float), "location"), log_p)
+
+
+def _holm(found: list[tuple[Structure, float]]) -> list[Structure]:
+    """Return the structures by p-value, each p adjusted by Holm's step-down (monotone)."""
+    found.sort(key=lambda item: item[1])
+    ranked: list[Structure] = []
+    for i, (s, log_p) in enumerate(found):  # the i-th smallest times (m - i)
+        adjusted = min(1.0, float(np.exp(log_p)) * (len(found) - i))
+        if ranked:
+            adjusted = max(adjusted, ranked[-1].p_value)
+        ranked.append(Structure(s.variable, s.where, s.explained_rms, adjusted, log_p, s.dof,
+                                s.values, s.label))
+    return ranked
+
+
 def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray,
                    stylus: np.ndarray | None = None, effects: Iterable[Effect] | None = None
                    ) -> Scan:
@@ -349,32 +388,10 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
         log_p = min(log_p + float(np.log(len(fits))), 0.0)
         found.append((Structure(variable, where, float(np.sqrt(excess / (3 * n))) * noise_rms,
                                 1.0, log_p, k, values, label), log_p))
-    # the spread per location in units of each sample's stated noise: points (20 um) beside
-    # SPATs (2 um) differ by what was stated, not by structure
-    white_centred = white.copy()
-    for m in np.unique(location):
-        white_centred[location == m] -= white_centred[location == m].mean(axis=0)
-    ids = np.unique(location)
-    groups = [white_centred[location == m].reshape(-1) for m in ids]
-    if len(groups) > 1 and all(g.size > 1 for g in groups):
-        bartlett_pvalue = bartlett_p(groups)
-        var = [float(np.mean(g ** 2)) for g in groups]
-        worst = int(np.argmax(var))  # its excess in um: in units of its own stated noise
-        excess_var = max(var[worst] - float(np.mean(white_centred ** 2)), 0.0)
-        worst_noise = float(np.sqrt(np.mean(sigma[location == ids[worst]] ** 2)))
-        found.append((Structure("the location (its spread)", "each location",
-                                float(np.sqrt(excess_var)) * worst_noise, 1.0,
-                                float(np.log(max(bartlett_pvalue, 1e-300))), len(groups) - 1,
-                                location.astype(float), "location"),
-                      float(np.log(max(bartlett_pvalue, 1e-300)))))
-    found.sort(key=lambda item: item[1])
-    ranked: list[Structure] = []
-    for i, (s, log_p) in enumerate(found):  # Holm: the i-th smallest times (m - i), monotone
-        adjusted = min(1.0, float(np.exp(log_p)) * (len(found) - i))
-        if ranked:
-            adjusted = max(adjusted, ranked[-1].p_value)
-        ranked.append(Structure(s.variable, s.where, s.explained_rms, adjusted, log_p, s.dof,
-                                s.values, s.label))
+    spread = _location_spread(white, sigma, location)
+    if spread is not None:
+        found.append(spread)
+    ranked = _holm(found)
     if WITHIN in designs and OVERALL in designs:
         ranked = _merge_time(ranked, _within_better(designs, white, loc_design, total - ss_loc,
                                                     dof))

@@ -72,7 +72,7 @@ def _discover_into(args: argparse.Namespace) -> int:
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
-    if left_out := result.left_out_text():  # effects asked for whose columns the samples lack
+    if left_out := result.left_out_text(named=effects is not None):  # their columns missing
         print(left_out)
     if result.widened:
         print(f"  with the default effects the residual stayed larger than the stated noise, "

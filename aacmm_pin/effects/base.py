@@ -40,8 +40,9 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
-from aacmm_pin.errors import AacmmError
+from aacmm_pin.errors import AacmmError, FrameNotFound
 from aacmm_pin.model.kinematics import Adjustment as Adjustment  # re-exported: terms fill it
+from aacmm_pin.model.kinematics import frame_ids
 
 if TYPE_CHECKING:
     from aacmm_pin.model.arm import Arm
@@ -388,6 +389,16 @@ class FrameTerm(BasisTerm):
         out.twist(self.frame)[:] += self._twist_basis(samples) @ values
 
     def _twist_basis(self, samples: Samples) -> np.ndarray:
+        """Return the basis, (N, 6, k), its frame checked against the arm's URDF.
+
+        Raises:
+            PluginOutputError: naming the term, its effect and its plugin, for a frame the arm's
+                URDF has not (its links and joints listed) or a basis of another shape.
+        """
+        try:
+            frame_ids(samples.arm, samples.arm.nominal_model, [self.frame])
+        except FrameNotFound as exc:
+            raise PluginOutputError(self, f"it moves the frame {exc}") from None
         basis = self.basis(samples)
         if basis.ndim != 3 or basis.shape[1] != 6:
             raise PluginOutputError(self, f"its basis has shape {basis.shape}, expected "
@@ -397,14 +408,15 @@ class FrameTerm(BasisTerm):
     def columns(self, samples: Samples, stylus: StylusDerivatives, params: Parameters,
                 touched: np.ndarray | None = None) -> np.ndarray:
         """d(point)/d(values): the frame's twist columns times the basis, (N, 3, k)."""
-        cols: np.ndarray = np.einsum("nij,njk->nik", stylus.twist(self.frame),
-                                     self._twist_basis(samples))
+        basis = self._twist_basis(samples)  # first: its frame checked
+        cols: np.ndarray = np.einsum("nij,njk->nik", stylus.twist(self.frame), basis)
         return cols
 
     def residual_along(self, residuals: np.ndarray, samples: Samples, stylus: StylusDerivatives,
                        origin: np.ndarray) -> tuple[str, np.ndarray]:
         """The residual along the point's motion by the term's first parameter (um)."""
-        cols = np.einsum("nij,nj->ni", stylus.twist(self.frame), self._twist_basis(samples)[:, :, 0])
+        first = self._twist_basis(samples)[:, :, 0]
+        cols = np.einsum("nij,nj->ni", stylus.twist(self.frame), first)
         unit = cols / np.maximum(np.linalg.norm(cols, axis=1, keepdims=True), 1e-30)
         return (f"residual along the motion of {self.frame} (um)",
                 np.sum(residuals * unit, axis=1) * 1e6)

@@ -45,7 +45,7 @@ import numpy as np
 
 from aacmm_pin.effects.base import Effect, PluginOutputError, Term
 from aacmm_pin.effects.calibrated import needs_tilts
-from aacmm_pin.effects.registry import plugin_of
+from aacmm_pin.effects.registry import library, plugin_of
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.model import kinematics
 from aacmm_pin.model.kinematics import Adjustment, StylusJacobians
@@ -65,7 +65,7 @@ FRAME = "mt"
 """The frame the check works in: the fit's and the scorers' (the MT-CS, with X0)."""
 
 T = TypeVar("T")
-_CHECKED: set[tuple[str, str]] = set()
+_CHECKED: set[tuple[Any, ...]] = set()
 _LOCK = threading.Lock()
 _STYLUS: list[tuple[tuple[Any, ...], StylusJacobians]] = []
 """The last stylus Jacobians of an arm no term changes: (parameters, readouts, tools, tilts)."""
@@ -120,8 +120,9 @@ class ContractBroken(PluginOutputError):
 def check_once(terms: Iterable[Term], samples: Samples, params: Parameters) -> None:
     """Check each term's columns against its forward change, once per process (see module doc).
 
-    A term is known by its effect's plugin and its key: checked the first time it comes, then
-    passed at the cost of a set lookup.
+    A term is known by its effect's plugin, its key, its registered effect (an effects file run
+    again registers a new one) and its definition (class and fields: a frame term's frame, the
+    axes, the sizes): checked the first time it comes, then passed at the cost of a set lookup.
 
     Args:
         terms: the terms about to be evaluated (a fit's, a scorer's candidate).
@@ -137,7 +138,7 @@ def check_once(terms: Iterable[Term], samples: Samples, params: Parameters) -> N
         MissingColumn: as the term's own code raises it, for samples without its column.
     """
     for term in terms:
-        key = (plugin_of(term.effect), term.key)
+        key = (plugin_of(term.effect), term.key, library().get(term.effect), type(term), repr(term))
         if key in _CHECKED:
             continue
         check_term(term, samples, params)

@@ -3,12 +3,14 @@
 A campaign's Jacobian can weigh hundreds of MB, and the fit asks for it at one point several times
 (the solver's last step, the decision at the solution, the covariance, the analyses after it): one
 is kept, the newest, whatever layout it is of; it is released before the next one is built, so
-that two never share the peak. :data:`LAST_JACOBIAN` is the process' one
+that two never share the peak, and it goes with its layout (held by a weak reference: a fit's
+Jacobian is freed when its layout is). :data:`LAST_JACOBIAN` is the process' one
 (:meth:`aacmm_pin.fit.unknowns.Unknowns.jacobian` goes through it).
 """
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from typing import Any, Generic, NamedTuple, TypeVar, cast
 
@@ -18,8 +20,8 @@ T = TypeVar("T")
 
 
 class _Held(NamedTuple):
-    owner: object
-    """The layout the Jacobian is of (by identity)."""
+    owner: weakref.ref[Any]
+    """The layout the Jacobian is of (a weak reference, compared by the object's identity)."""
     key: bytes
     """The point's bytes."""
     q: np.ndarray
@@ -42,13 +44,19 @@ class JacobianCache(Generic[T]):
         """
         key = x.tobytes()
         held = self._held  # read once: other threads may replace it
-        if held is not None and held.owner is owner and held.key == key and held.q is q:
+        if held is not None and held.owner() is owner and held.key == key and held.q is q:
             return cast(T, held.result)
         del held
         self._held = None
         result = build(x, q)
-        self._held = _Held(owner, key, q, result)  # holds q: its identity is the key
+        self._held = _Held(weakref.ref(owner, self._drop), key, q, result)  # q: by identity
         return result
+
+    def _drop(self, ref: weakref.ref[Any]) -> None:
+        """Release the kept result when its layout is gone (a weak reference's callback)."""
+        held = self._held
+        if held is not None and held.owner is ref:
+            self._held = None
 
     def clear(self) -> None:
         """Release the kept result."""

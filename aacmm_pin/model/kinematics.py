@@ -199,22 +199,31 @@ def _tilt_shift(chain: BatchedChain, q: np.ndarray, frames: np.ndarray, axes: np
     return shift
 
 
-def frame_ids(model: pin.Model, names: Iterable[str]) -> np.ndarray:
-    """Return the Pinocchio frame ids of frames named in a model, shape (M,).
+def frame_ids(arm: Arm, model: pin.Model, names: Iterable[str]) -> np.ndarray:
+    """Return the Pinocchio frame ids in ``model`` of frames of the arm named in its URDF, (M,).
+
+    The names are those of the arm's URDF (:attr:`Arm.nominal_model`'s frames: links, joints,
+    error frames, the tool joints), the same for the identification model (where a tool joint's
+    frame is its tool link's, the same placement) and the runtime one.
 
     Raises:
-        FrameNotFound: naming the first frame the model lacks and the links and joints it has.
+        FrameNotFound: naming the first name that is no frame of the URDF (or of ``model``), and
+            the URDF's links and joints.
     """
+    urdf = arm.nominal_model
     ids = []
     for name in names:
-        if not model.existFrame(name):
-            raise FrameNotFound(name, [f.name for f in model.frames if f.type == pin.JOINT or (
-                f.type == pin.BODY and not f.name.endswith("_frame"))])
+        known = name != "universe" and urdf.existFrame(name)
+        if known and name in arm.tool_joints and not model.existFrame(name):
+            name = arm.tool_links[arm.tool_joints.index(name)]
+        if not known or not model.existFrame(name):
+            raise FrameNotFound(name, [f.name for f in urdf.frames if f.name != "universe"
+                                       and not f.name.endswith("_frame")])
         ids.append(model.getFrameId(name))
     return np.array(ids, dtype=np.int64)
 
 
-def _twist_shift(chain: BatchedChain, model: pin.Model, q: np.ndarray, frames: np.ndarray,
+def _twist_shift(chain: BatchedChain, arm: Arm, model: pin.Model, q: np.ndarray, frames: np.ndarray,
                  twists: dict[str, np.ndarray]) -> np.ndarray:
     """Return the move of the frames' points by small twists of other frames, shape (N, 3), m.
 
@@ -222,19 +231,19 @@ def _twist_shift(chain: BatchedChain, model: pin.Model, q: np.ndarray, frames: n
     sum of each twist times its columns (:meth:`BatchedChain.twist_columns`).
     """
     names = [name for name, t in twists.items() if np.any(t != 0.0)]
-    cols = chain.twist_columns(q, frames, frame_ids(model, names))
+    cols = chain.twist_columns(q, frames, frame_ids(arm, model, names))
     shift: np.ndarray = np.einsum("nimk,nmk->ni", cols, np.stack([twists[n] for n in names], axis=1))
     return shift
 
 
-def _frame_columns(chain: BatchedChain, model: pin.Model, q: np.ndarray, frames: np.ndarray,
+def _frame_columns(chain: BatchedChain, arm: Arm, model: pin.Model, q: np.ndarray, frames: np.ndarray,
                    scale: np.ndarray) -> Callable[[str], np.ndarray]:
     """Return frame name -> d(points)/d(its twist), (N, 3, 6), computed once per frame."""
     done: dict[str, np.ndarray] = {}
 
     def columns(name: str) -> np.ndarray:
         if name not in done:
-            cols = chain.twist_columns(q, frames, frame_ids(model, [name]))[:, :, 0, :]
+            cols = chain.twist_columns(q, frames, frame_ids(arm, model, [name]))[:, :, 0, :]
             done[name] = cols * scale[:, None, None]
         return done[name]
 
@@ -321,7 +330,7 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     if change.tilted:
         out = out + _tilt_shift(ident.chain, q, fids, ident.axis_idx, change.tilts)
     if change.moves_frames:
-        out = out + _twist_shift(ident.chain, ident.model, q, fids, change.twists)
+        out = out + _twist_shift(ident.chain, arm, ident.model, q, fids, change.twists)
     if adjust is not None:
         out = _scaled(out, change.scale, params.translation if frame == "mt" else np.zeros(3))
     return out
@@ -361,7 +370,7 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         assert tilt_cols is not None
         pos = pos + np.einsum("nijk,njk->ni", tilt_cols, change.tilts)
     if change.moves_frames:
-        pos = pos + _twist_shift(ident.chain, ident.model, q, fids, change.twists)
+        pos = pos + _twist_shift(ident.chain, arm, ident.model, q, fids, change.twists)
     if adjust is not None:  # every length scaled about the r-CS origin: all but the translation
         origin = params.translation if frame == "mt" else np.zeros(3)
         pos = _scaled(pos, scale, origin)
@@ -383,7 +392,7 @@ def stylus_jacobians(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         translation=translation,
         q_readout=q_read,
         tilts=None if tilt_cols is None else tilt_cols * scale[:, None, None, None],
-        frame_columns=_frame_columns(ident.chain, ident.model, q, fids, scale),
+        frame_columns=_frame_columns(ident.chain, arm, ident.model, q, fids, scale),
     )
 
 
@@ -451,7 +460,7 @@ class JointKinematics:
         if change.tilted:
             positions = positions + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
         if change.moves_frames:
-            positions = positions + _twist_shift(self.chain, self.model, q, fids, change.twists)
+            positions = positions + _twist_shift(self.chain, self.arm, self.model, q, fids, change.twists)
         scaled: np.ndarray = positions * change.scale[:, None]
         return scaled
 
@@ -478,7 +487,7 @@ class JointKinematics:
         if change.tilted:
             pos = pos + _tilt_shift(self.chain, q, fids, self.axes, change.tilts)
         if change.moves_frames:
-            pos = pos + _twist_shift(self.chain, self.model, q, fids, change.twists)
+            pos = pos + _twist_shift(self.chain, self.arm, self.model, q, fids, change.twists)
         if adjust is not None:
             pos = pos * change.scale[:, None]
             jac = jac * change.scale[:, None, None]
