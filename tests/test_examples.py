@@ -146,12 +146,15 @@ def test_05_plugin_keeps_a_folder_it_did_not_write(tmp_path: Path) -> None:
     assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
-def test_no_package_file_knows_the_plugins_column() -> None:
-    """The column of example 05's plugin (temp_base_c) is named nowhere in the package: a new
-    column and its effect need no edit of aacmm_pin."""
-    assert "temp_base_c" in (EXAMPLES / "05_plugin" / "aacmm_pin_basetemp.py").read_text()
+@pytest.mark.parametrize("plugin, column", [("05_plugin/aacmm_pin_basetemp.py", "temp_base_c"),
+                                            ("07_stylus_plugin/aacmm_pin_stylustemp.py",
+                                             "temp_probe_c")])
+def test_no_package_file_knows_the_plugins_column(plugin: str, column: str) -> None:
+    """The column of an example plugin (05: temp_base_c, 07: temp_probe_c) is named nowhere in
+    the package: a new column and its effect need no edit of aacmm_pin."""
+    assert column in (EXAMPLES / plugin).read_text()
     knowing = [str(path.relative_to(ROOT)) for path in (ROOT / "aacmm_pin").rglob("*")
-               if path.is_file() and b"temp_base_c" in path.read_bytes()]
+               if path.is_file() and column.encode() in path.read_bytes()]
     assert knowing == []
 
 

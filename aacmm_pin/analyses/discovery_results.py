@@ -220,7 +220,7 @@ class Discovery:
     (:attr:`aacmm_pin.effects.Effect.reads`; :func:`aacmm_pin.effects.contract.usable_effects`)."""
 
     def left_out_text(self, named: bool = True) -> str:
-        """Return ``left out: basetemp (no column temp_base_c), ...``, or "" when none is.
+        """Return ``left out: fixture_creep (no column strain_um), ...``, or "" when none is.
 
         Args:
             named: whether the effects were named (``--effects``); else the built-in effects left
