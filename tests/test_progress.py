@@ -39,7 +39,8 @@ def test_known_total_is_shown_and_disabled_is_silent(monkeypatch):
 def test_identify_command_logs_progress_when_piped(tmp_path, capsys, monkeypatch):
     """`aacmm-pin identify` into a pipe prints progress lines (evaluations, residual RMS)."""
     monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
-    assert main(["simulate", str(tmp_path / "c"), "--seed", "1"]) == 0
+    assert main(["simulate", str(tmp_path / "c"), "--seed", "1", "--samples-per-location", "15",
+                 "--samples-per-socket", "5"]) == 0  # a small campaign: progress at any size
     capsys.readouterr()
     assert main(["identify", str(tmp_path / "c"), "--model", "dh", "--out", str(tmp_path / "o")]) == 0
     err = capsys.readouterr().err
