@@ -165,7 +165,7 @@ written by Pillow at zlib level 3 as RGB (an opaque figure: the same pixels as m
 file), no tick built outside the view (`outputs.in_view_ticks`: the same pixels), and the objects
 the process holds, then matplotlib's, frozen (`gc.freeze`) while the figures are written. The
 discovery figures (`outputs.discovery_figures`) draw at most 4 intervals between ticks per axis
-(3 to 5 labelled ticks, `TICKS`), at 120 dpi (`DPI`; the package's other figures 150), and
+(2 to 5 labelled ticks, `TICKS`), at 120 dpi (`DPI`; the package's other figures 150), and
 the step figures share one figure's panels (`figure_files.PanelFigure`: built once, moved and
 emptied for each step, the same pixels as new panels). Median (range) of {REPEAT} runs per
 campaign (the figures' share: its range over the runs of this benchmark's run and of the earlier
