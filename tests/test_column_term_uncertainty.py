@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 
 import aacmm_pin as ap
-from aacmm_pin.analyses.planning import candidate_grid, plan
+from aacmm_pin.analyses.planning import candidate_grid, plan, planned_conditions
 from aacmm_pin.analyses.uncertainty import length_jacobian, monte_carlo
 from aacmm_pin.analyses.validation import validate
 from aacmm_pin.effects import registry, thermal
+from aacmm_pin.effects.calibrated import held_columns, stylus_positions
 from tests.helpers import ROOT
 
 PLUGIN = ROOT / "examples" / "07_stylus_plugin" / "aacmm_pin_stylustemp.py"
@@ -82,10 +83,19 @@ def test_monte_carlo_gives_each_terms_uncertainty(thermal_cal) -> None:
         assert abs(cal.x[i] - truth) <= 3 * mc.linear_std[i], (name, cal.x[i], mc.linear_std[i])
 
 
-def test_plan_ranks_candidates(thermal_cal) -> None:
-    """plan works on the calibration: its SPATs, bar and planned postures read the columns."""
+def test_plan_ranks_candidates(arm: ap.Arm, thermal_cal) -> None:
+    """plan works on the calibration: its SPATs, bar and planned postures read the columns; a
+    planned posture puts the stylus on its nest at the campaign's median conditions (22 deg C:
+    about 20 um from where the arm at 20 deg C would put it)."""
     campaign, cal = thermal_cal
     grid = candidate_grid(campaign, 2, 260.0, [0.0], unit=1e-3)
     result = plan(cal, campaign, grid=grid, n_postures=20, families="any", seed=0)
     assert result.candidates and result.length_std is not None
     assert all(c.worst_after < result.map_std[result.worst_axis] for c in result.candidates)
+    conditions = planned_conditions(campaign)
+    assert conditions.keys() == {"t_s", "temp_c", "temp_probe_c"}
+    for c in result.candidates:
+        at = held_columns(arm, c.postures, conditions)
+        reached = stylus_positions(arm, cal.parameters, c.postures, frame="mt", samples=at)
+        np.testing.assert_allclose(reached, np.tile(c.location_mt, (len(c.postures), 1)),
+                                   rtol=0, atol=1e-9)  # m: IK to 1e-12 m, two models' rounding
