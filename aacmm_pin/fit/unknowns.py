@@ -122,6 +122,14 @@ class Unknowns:
         """Return the same layout with another free mask."""
         return Unknowns(self.arm, self.start, self.map_axes, free, self.terms, self.samples)
 
+    def with_samples(self, samples: Samples) -> Unknowns:
+        """Return the same layout for other readouts: its terms read ``samples``' columns.
+
+        E.g. a length bar's readouts with their ``temp_c`` (:meth:`Samples.of_log`), whose
+        :meth:`jacobian` at ``samples.q`` a term that reads a per-sample column needs.
+        """
+        return Unknowns(self.arm, self.start, self.map_axes, self.free, self.terms, samples)
+
     def map_slice(self, axis: int) -> slice:
         """Slice of one map's nodes in the full layout."""
         start = self.n_dense
