@@ -6,7 +6,6 @@ import contextlib
 import threading
 from collections.abc import Iterator
 
-
 _STARTED_SINGLE_THREADED = [False]
 """Whether this process started its BLAS libraries with one thread (:func:`started_single_threaded`)."""
 

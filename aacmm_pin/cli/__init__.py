@@ -24,9 +24,9 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
+from aacmm_pin._blas import started_single_threaded
 from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
-from aacmm_pin._blas import started_single_threaded
 from aacmm_pin.errors import AacmmError, CampaignWarning, StaleOutputWarning
 from aacmm_pin.interrupts import Terminated, sigint_handler, sigterm_as_interrupt
 
