@@ -56,3 +56,25 @@ def test_identify_imports_its_floor_and_the_standard_library_only(tmp_path: Path
     for heavy in ("scipy.stats", "scipy.interpolate", "scipy.ndimage", "matplotlib", "meshcat",
                   "serial", "yourdfpy", "trimesh", "tqdm"):
         assert heavy not in used
+
+
+def test_identify_started_by_the_command_line_leaves_threadpoolctl_unloaded(tmp_path: Path,
+                                                                           small_sim: ap.Simulation
+                                                                           ) -> None:
+    """The command line starts BLAS with one thread before numpy loads; identify's BLAS limit then
+    has nothing to do and does not load threadpoolctl (which reads every loaded library's path:
+    ~20 ms of each command). The BLAS libraries run one thread each all the same."""
+    ap.write_simulation(small_sim, tmp_path / "c")
+    env = {k: v for k, v in ENV.items() if not k.endswith("_NUM_THREADS")}
+    run = ("import contextlib, io, json, sys\nfrom aacmm_pin.cli import main\n"
+           "with contextlib.redirect_stdout(io.StringIO()):\n"
+           "    assert main(['identify', 'c', '--model', 'proposed', '--out', 'cal']) == 0\n"
+           "loaded = 'threadpoolctl' in sys.modules\n"
+           "from threadpoolctl import threadpool_info\n"
+           "print(json.dumps([loaded, sorted({i['num_threads'] for i in threadpool_info()\n"
+           "                                  if i['user_api'] == 'blas'})]))\n")
+    out = subprocess.run([sys.executable, "-c", run], capture_output=True, text=True, env=env,
+                         cwd=tmp_path, check=True, timeout=300).stdout
+    loaded, threads = json.loads(out.strip().splitlines()[-1])
+    assert loaded is False
+    assert threads == [1]
