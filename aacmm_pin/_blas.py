@@ -6,6 +6,20 @@ import contextlib
 import threading
 from collections.abc import Iterator
 
+_STARTED_SINGLE_THREADED = [False]
+"""Whether this process started its BLAS libraries with one thread (:func:`started_single_threaded`)."""
+
+
+def started_single_threaded() -> None:
+    """Note that every BLAS library of this process starts with one thread.
+
+    Called by the command line, which sets the BLAS thread variables before numpy is loaded
+    (``aacmm_pin.cli.one_blas_thread_at_start``): :func:`single_threaded_blas` then has nothing
+    to limit and skips ``threadpoolctl`` (importing it and finding the libraries: ~20 ms of each
+    ``identify``).
+    """
+    _STARTED_SINGLE_THREADED[0] = True
+
 
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
@@ -16,7 +30,7 @@ def single_threaded_blas() -> Iterator[None]:
     process-wide: it is set only from a main thread (serial, or a worker process), never from the
     threads of a thread pool, which would undo each other's limits.
     """
-    if threading.current_thread() is not threading.main_thread():
+    if _STARTED_SINGLE_THREADED[0] or threading.current_thread() is not threading.main_thread():
         yield
         return
     from threadpoolctl import threadpool_limits

@@ -14,8 +14,6 @@ such an ignore (or a handler set outside Python) is kept.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import os
 import signal
 import sys
@@ -24,6 +22,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
 from typing import Any
+
+from aacmm_pin.machine import libc
 
 Handler = Callable[[int, FrameType | None], Any]
 """A Python signal handler: ``handler(signum, frame)``."""
@@ -76,9 +76,8 @@ def die_with_parent(parent: int) -> None:
     if not sys.platform.startswith("linux"):
         return
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
+        libc().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)  # type: ignore[union-attr]
+    except AttributeError:
         return
     if os.getppid() != parent:  # it ended before the prctl: no signal will come
         os._exit(1)

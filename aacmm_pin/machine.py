@@ -7,13 +7,32 @@ heavy: a command checks its option before it loads numpy, SciPy or Pinocchio.
 
 from __future__ import annotations
 
+import ctypes
 import os
+import sys
+from functools import cache
 
 from aacmm_pin.errors import ArgumentError
 
 WORKER_MEMORY = 150e6
 """Memory a local worker process takes, bytes (measured: 146 MB resident each on the shared sample
 campaign; more on larger ones)."""
+
+
+@cache
+def libc() -> ctypes.CDLL | None:
+    """Return the C library this process runs on (its global symbols, errno kept), None off Linux.
+
+    ``ctypes.CDLL(None)`` opens the process itself, which is linked to the C library: no search
+    (``ctypes.util.find_library`` starts ``ldconfig`` in a subprocess: ~10 ms of each command that
+    wrote a folder).
+    """
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        return None
 
 
 def usable_cores() -> int:

@@ -104,6 +104,60 @@ IN_PROCESS = 5
 """identify calls per round in this process (their mean is the round's evaluations)."""
 
 
+COMMAND_HEADER = ("| command | CLI CPU (s) | floor imports (s) | the command in-process, warm (s) | "
+                  "floor (s) | CLI / floor |\n|---|---|---|---|---|---|")
+PREDICT_IMPORTS = "numpy, pinocchio, lxml.etree"
+"""What ``predict`` cannot avoid importing: arrays, the kinematics, the URDF tree (no SciPy:
+``tests/test_imports.py``)."""
+FIGURE_IMPORTS = "matplotlib.figure, matplotlib.backends.backend_agg"
+"""What ``discover``'s figures cannot avoid importing beside :data:`FLOOR_IMPORTS`."""
+
+
+def _in_process(argv: list[str]) -> float:
+    """Return the CPU seconds of ``aacmm-pin ARGV`` run in this process (output discarded)."""
+    import contextlib
+    import io
+    import time
+
+    from aacmm_pin.cli import main as cli_main
+
+    tic = time.process_time()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        status = cli_main(argv)
+    elapsed = time.process_time() - tic
+    if status not in (0, 1):  # 1: a finding (e.g. discover's unexplained residual), not a failure
+        raise RuntimeError(f"aacmm-pin {' '.join(argv)} exited {status}")
+    return elapsed
+
+
+def _command_rows(cli: list[str], tmp: Path) -> list[str]:
+    """Rows of ``predict`` and ``discover`` on the paper campaign: CLI against its floor."""
+    from aacmm_pin._blas import single_threaded_blas
+
+    subprocess.run([*cli, "identify", str(tmp / "c"), "--out", str(tmp / "cc")], check=True,
+                   capture_output=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    cases = [("`aacmm-pin predict` (the paper campaign's calibration, its 800 SPAT readouts)",
+              ["predict", str(tmp / "cc"), str(tmp / "c" / "spat.csv"), "--force", "--out"],
+              "points.csv", PREDICT_IMPORTS),
+             ("`aacmm-pin discover` (the simulated paper campaign, default options)",
+              ["discover", str(tmp / "c"), "--force", "--out"], "disc",
+              f"{FLOOR_IMPORTS}, {FIGURE_IMPORTS}")]
+    rows = []
+    for label, argv, out, imports in cases:
+        runs: dict[str, list[float]] = {"cli": [], "imports": [], "work": []}
+        with single_threaded_blas():
+            _in_process([*argv, str(tmp / f"warm-{out}")])
+            for k in range(FLOOR_RUNS):
+                runs["cli"].append(cpu_of([*cli, *argv, str(tmp / f"cli{k}-{out}")], {}))
+                runs["imports"].append(cpu_of([sys.executable, "-c", f"import {imports}"], ONE))
+                runs["work"].append(_in_process([*argv, str(tmp / f"in{k}-{out}")]))
+        floor = np.add(runs["imports"], runs["work"])
+        rows.append(f"| {label} | {spread(runs['cli'])} | {spread(runs['imports'])} | "
+                    f"{spread(runs['work'], '.3f')} | {spread(floor)} | "
+                    f"{ratio(runs['cli'], floor, name=label + ': CLI / floor')} |")
+    return rows
+
+
 def floors() -> None:
     """Write the ``floors`` section: identify as a whole process against its floor."""
     import aacmm_pin as ap
@@ -149,6 +203,7 @@ def floors() -> None:
                            f"{ratio(runs['cli'], runs['hand'], name=label + ': CLI / hand')} |"
                            if hand else "- | - |"))
             notes.append(label)
+        commands = _command_rows(cli, tmp)
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
     write_section("floors", f"""## Commands against their floor (`python benchmarks/cli.py --floors`)
 
@@ -171,7 +226,16 @@ floor. The load average (1, 5 and 15 min) when this table was written: {load}.
 What lies between the CLI and its floor: the package's own modules (~0.1 s), the first call's
 set-up (the arm's identification model, caches a warm call finds built), reading and checking
 the campaign and writing the calibration folder (parameters, URDF, compact URDF and its loss,
-report).""")
+report).
+
+Other commands, each against the same command run in this process after a warm-up (its
+modules loaded, its caches built: the work itself, files written and printing included) plus
+the imports its work cannot avoid as a whole process (`predict`: `{PREDICT_IMPORTS}`, no SciPy;
+`discover`: the identify floor's and matplotlib's figure and Agg canvas, which its figures
+need); same rounds, median (range):
+
+{COMMAND_HEADER}
+{chr(10).join(commands)}""")
 
 
 if __name__ == "__main__":

@@ -109,6 +109,37 @@ def test_a_text_column_of_a_campaign_log_is_refused_cell_by_cell(tmp_path: Path)
     assert "'ok' is not a number" in problems[0].reason
 
 
+def _points(z: str, poses: list[str]) -> str:
+    """A points.csv with the documented columns sigma_um and pose; ``z``: the z column's name."""
+    return f"q1_deg,q2_deg,q3_deg,x_mm,y_mm,{z},sigma_um,pose\n" + "".join(
+        f"{k},2,3,{k}0,0,0,20,{pose}\n" for k, pose in enumerate(poses, 1))
+
+
+def test_the_pose_column_is_known_where_a_column_is_missing(tmp_path: Path) -> None:
+    """A misspelt required column of points.csv names itself as unknown, not the documented pose
+    and sigma_um columns beside it; the expected columns list pose."""
+    text = _points("zmm", ["1", "1", "2", "2"])
+    problems = problems_of(make(tmp_path, points_csv=text))
+    assert found(problems, "points.csv", 1, "zmm", "unknown column; did you mean z_mm?")
+    unknown = next(p.reason for p in problems if "unknown" in p.reason)
+    assert "pose" not in unknown.split(";")[0] and "sigma_um" not in unknown.split(";")[0]
+    assert unknown.endswith(", pose"), unknown
+    assert len(problems) == 2, problems  # z_mm missing, zmm unknown
+
+
+def test_a_pose_that_is_no_number_is_named_as_the_pose(tmp_path: Path) -> None:
+    """A text pose label in points.csv: the pose column's meaning, not "further columns"."""
+    text = _points("z_mm", ["a", "a", "b", "b"])
+    problems = problems_of(make(tmp_path, points_csv=text))
+    assert [p.line for p in problems] == [2, 3, 4, 5]
+    assert all(p.column == "pose" and "numbers each row's pose" in p.reason
+               and "further columns" not in p.reason for p in problems), problems
+    points = read_campaign(make(tmp_path / "good", points_csv=_points("z_mm", ["7", "7", "8", "8"]))
+                           ).points
+    assert points is not None
+    np.testing.assert_array_equal(points.columns["pose"], [7, 7, 8, 8])
+
+
 def test_reference_files_still_refuse_unknown_columns(tmp_path: Path) -> None:
     """locations.csv and bar.csv have no per-sample columns: an extra one is an unknown column."""
     locations = GOOD["locations.csv"].replace("z_mm", "z_mm,temp_c").replace(",0\n", ",0,20\n")

@@ -261,3 +261,30 @@ def test_identify_prints_the_loss(small_sim: ap.Simulation, tmp_path: Path) -> N
     assert f"{entry['rms']:.3g} um RMS / {entry['max']:.3g} um max" in line
     assert f"over {entry['n_poses']} poses" in line and "compact.json" in line
     assert (tmp_path / "cal" / "compact.urdf").is_file()
+
+
+def test_a_tree_read_again_gives_its_joints_and_an_edit_reads_afresh(tmp_path: Path) -> None:
+    """The joints of a tree read before come back without reading it again; an edit through the
+    tree's methods, an edit through its root, or another file name reads afresh (its values,
+    its lines, its path in messages)."""
+    from aacmm_pin.model.urdf_tree import read_urdf
+
+    tree = read_urdf(ap.load_arm("ur5").source)
+    first = tree.joints()
+    assert [j.name for j in tree.copy().joints()] == [j.name for j in first]
+    assert tree.copy().joints()[0] is first[0]  # remembered: same text, lines, path
+    with pytest.raises(ValueError):
+        first[0].origin[0, 3] = 1.0  # shared between reads: read-only
+    edited = tree.copy()
+    name = next(j.name for j in first if j.type == "revolute")
+    edited.make_fixed(name)
+    assert {j.name: j.type for j in edited.joints()}[name] == "fixed"
+    by_root = tree.copy()
+    by_root.root.find(f"joint[@name='{name}']").set("type", "prismatic")
+    assert {j.name: j.type for j in by_root.joints()}[name] == "prismatic"
+    assert {j.name: j.type for j in tree.joints()}[name] == "revolute"
+    broken = tree.copy()
+    broken.root.find(f"joint[@name='{name}']/origin").set("xyz", "0 0 nan")
+    broken.path = tmp_path / "elsewhere.urdf"
+    with pytest.raises(ap.AacmmError, match="elsewhere.urdf.*finite numbers"):
+        broken.joints()

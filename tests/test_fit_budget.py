@@ -252,34 +252,52 @@ def test_identify_prints_and_reports_its_sizes_file(tmp_path, capsys):
         assert report["sizes"] == want
 
 
-def test_a_failed_step_keeps_the_steps_before_it(tmp_path, monkeypatch):
-    """A step whose fit is refused ends discover with the steps so far written, exit 1, the step
-    and the reason named; "did not converge" is said only of a fit that did not converge."""
-    import dataclasses
-
+@pytest.fixture(scope="module")
+def compliance_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A SPAT campaign (4 x 60, 1 bar placement) whose discovery takes two steps (compliance)."""
     sim = ap.simulate_campaign(ap.load_arm(), ap.SimulationConfig(
         seed=0, effects=("dh", "encoder", "rtest", "compliance"), samples_per_location=60,
         bar_placements=1))
-    ap.write_simulation(sim, tmp_path / "camp")
+    folder = tmp_path_factory.mktemp("compliance") / "camp"
+    ap.write_simulation(sim, folder)
+    return folder
+
+
+@pytest.mark.parametrize("how", ["returned", "raised"])
+def test_a_failed_step_keeps_the_steps_before_it(tmp_path, monkeypatch, capsys,
+                                                 compliance_campaign, how):
+    """A step whose fit is refused, by a refused calibration or by raising (InputsDisagree, an
+    AacmmError), ends discover with the steps so far written, exit 1, the step and the reason
+    named; "did not converge" is said only of a fit that did not converge."""
+    import dataclasses
+
+    from aacmm_pin.fit.plausibility import InputsDisagree
+
     calls = {"n": 0}
     original = discovery.identify
 
     def refuse_third(*args: object, **kwargs: object) -> ap.Calibration:
-        cal = original(*args, **kwargs)  # type: ignore[arg-type]
         calls["n"] += 1
-        if calls["n"] == 3:  # the start, step 1, then step 2's fit: converged, but refused
+        if calls["n"] == 3 and how == "raised":  # the start, step 1, then step 2's fit
+            raise InputsDisagree("the inputs disagree, raised for the test")
+        cal = original(*args, **kwargs)  # type: ignore[arg-type]
+        if calls["n"] == 3:  # converged, but refused
             return dataclasses.replace(cal, success=False, judged=False, status=1,
                                        message="units? refused for the test")
         return cal
 
     monkeypatch.setattr(discovery, "identify", refuse_third)
-    code = main(["discover", str(tmp_path / "camp"), "--out", str(tmp_path / "disc")])
-    assert code == 1 and calls["n"] == 3
+    code = main(["discover", str(compliance_campaign), "--out", str(tmp_path / "disc")])
+    out, err = capsys.readouterr()
+    assert code == 1 and calls["n"] == 3, err
     written = json.loads((tmp_path / "disc" / "discovery.json").read_text())
     why = written["stopped_because"]
     assert written["failed"] and len(written["steps"]) == 1, why
-    assert "step 2" in why and "was refused" in why and "units? refused for the test" in why
+    reason = {"returned": "units? refused for the test",
+              "raised": "(InputsDisagree): the inputs disagree, raised for the test"}[how]
+    assert "step 2" in why and "was refused" in why and reason in why, why
     assert "did not converge" not in why
+    assert "step 1: " in out and err.strip().splitlines()[-1] == f"discover: {why}"
     assert (tmp_path / "disc" / "parameters.json").is_file()
 
 

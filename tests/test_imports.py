@@ -56,3 +56,47 @@ def test_identify_imports_its_floor_and_the_standard_library_only(tmp_path: Path
     for heavy in ("scipy.stats", "scipy.interpolate", "scipy.ndimage", "matplotlib", "meshcat",
                   "serial", "yourdfpy", "trimesh", "tqdm"):
         assert heavy not in used
+
+
+def test_identify_started_by_the_command_line_leaves_threadpoolctl_unloaded(tmp_path: Path,
+                                                                           small_sim: ap.Simulation
+                                                                           ) -> None:
+    """The command line starts BLAS with one thread before numpy loads; identify's BLAS limit then
+    has nothing to do and does not load threadpoolctl (which reads every loaded library's path:
+    ~20 ms of each command). The BLAS libraries run one thread each all the same."""
+    ap.write_simulation(small_sim, tmp_path / "c")
+    env = {k: v for k, v in ENV.items() if not k.endswith("_NUM_THREADS")}
+    run = ("import contextlib, io, json, sys\nfrom aacmm_pin.cli import main\n"
+           "with contextlib.redirect_stdout(io.StringIO()):\n"
+           "    assert main(['identify', 'c', '--model', 'proposed', '--out', 'cal']) == 0\n"
+           "loaded = 'threadpoolctl' in sys.modules\n"
+           "from threadpoolctl import threadpool_info\n"
+           "print(json.dumps([loaded, sorted({i['num_threads'] for i in threadpool_info()\n"
+           "                                  if i['user_api'] == 'blas'})]))\n")
+    out = subprocess.run([sys.executable, "-c", run], capture_output=True, text=True, env=env,
+                         cwd=tmp_path, check=True, timeout=300).stdout
+    loaded, threads = json.loads(out.strip().splitlines()[-1])
+    assert loaded is False
+    assert threads == [1]
+
+
+def test_predict_and_the_runtime_object_import_no_scipy(tmp_path: Path, arm: ap.Arm,
+                                                       small_sim: ap.Simulation) -> None:
+    """Reading a calibration and moving its arm needs arrays, Pinocchio and the URDF tree only:
+    `predict` and `load_calibrated` (what a robotics stack imports) load no SciPy (~0.6 s of
+    CPU of each process that did: `predict` 1.9 -> 0.9 s as a whole process)."""
+    ap.write_simulation(small_sim, tmp_path / "c")
+    cal = ap.identify(small_sim.campaign, arm, model="proposed")
+    ap.write_calibration(cal, arm, tmp_path / "cal")
+    run = ("import contextlib, io\nfrom aacmm_pin.cli import main\n"
+           "with contextlib.redirect_stdout(io.StringIO()):\n"
+           "    assert main(['predict', 'cal', 'c/spat.csv', '--out', 'p.csv']) == 0\n"
+           f"{MODULES}\n")
+    runtime = ("import numpy as np\nimport aacmm_pin as ap\nrt = ap.load_calibrated('cal')\n"
+               "rt.position(np.zeros(rt.n_axes)); rt.jacobian(np.zeros(rt.n_axes))\n"
+               f"rt.readouts(np.zeros(rt.n_axes))\n{MODULES}\n")
+    for code in (run, runtime):
+        used = _modules(code, tmp_path)
+        assert "pinocchio" in used  # it did the work
+        assert sorted(m for m in used if m.split(".")[0] == "scipy") == []
+        assert sorted(m for m in used if m.startswith("aacmm_pin.fit")) == []

@@ -301,7 +301,7 @@ class _Search:
         try:
             new_cal, self.spec, dropped = eliminate(self.fit(), self.spec, self.fit, self.alpha,
                                                     self.named_in)
-        except (_CapReached, _FitFailed) as exc:
+        except (_CapReached, _FitFailed, AacmmError) as exc:  # AacmmError: a fit that raised
             self._ended(exc, new_terms)
             self.spec = spec_before  # the model of the steps that stand
             return False
@@ -320,8 +320,14 @@ class _Search:
         return True
 
     def _ended(self, exc: Exception, new_terms: list[Term]) -> None:
-        """Record why a step's fit ended the loop: the budget spent, or the fit failed."""
+        """Record why a step's fit ended the loop: the budget spent, or the fit failed.
+
+        ``exc``: :class:`_CapReached`, :class:`_FitFailed` (a fit returned refused or not
+        converged) or the :class:`AacmmError` a fit raised (e.g. ``InputsDisagree``).
+        """
         keys, k = ", ".join(t.key for t in new_terms), len(self.steps)
+        if isinstance(exc, AacmmError):
+            exc = _FitFailed(f"the fit with {keys} was refused ({type(exc).__name__}): {exc}")
         if isinstance(exc, _CapReached):
             self.capped = True
             self.stopped = (f"the fit of step {k + 1} ({keys}) reached the cap of {self.max_nfev} "

@@ -213,8 +213,8 @@ class Discovery:
     """Effects not offered by default that the search took on because the residual was still
     larger than the stated noise when none of the others was significant (empty: none)."""
     failed: bool = False
-    """Whether a step's fit failed (refused, or not converged) and ended the loop there
-    (:attr:`stopped_because` names the step and why); the steps before it stand."""
+    """Whether a step's fit failed (refused, not converged, or raised an AacmmError) and ended
+    the loop there (:attr:`stopped_because` names the step and why); the steps before it stand."""
     left_out: tuple[LeftOut, ...] = ()
     """Effects asked for but not tried: the samples lack a column they declare
     (:attr:`aacmm_pin.effects.Effect.reads`; :func:`aacmm_pin.effects.contract.usable_effects`)."""

@@ -23,13 +23,14 @@ import numpy as np
 
 from aacmm_pin.analyses.validation import bar_pairs, pair_errors, pair_weights
 from aacmm_pin.data.campaign import Campaign
-from aacmm_pin.effects.calibrated import stylus_ik
+from aacmm_pin.effects.calibrated import held_columns, stylus_ik
 from aacmm_pin.errors import AacmmError
 from aacmm_pin.fit.identifiability import GAUGE_WEIGHT, plausible_sizes
 from aacmm_pin.fit.identification_result import Calibration
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.parameters import Parameters
+from aacmm_pin.model.samples import Samples
 from aacmm_pin.progress import Progress
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION
 
@@ -148,20 +149,23 @@ class _Information:
             info += np.outer(row, row) / sigma ** 2
         self.prior = info
 
-    def rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def rows(self, samples: Samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return one SPAT's rows: data A (3n, P), nest E (3n, 3), and W (3, 3).
 
-        A and E are divided by sigma; W = E^T E + the nest offset's prior, for marginalising it.
+        ``samples``: the SPAT's readouts (n, n_axes) with their columns (what the calibration's
+        extensions read, e.g. ``temp_c``). A and E are divided by sigma; W = E^T E + the nest
+        offset's prior, for marginalising it.
         """
-        _, jac = self.u.jacobian(self.x, q)
+        q = samples.q
+        _, jac = self.u.with_samples(samples).jacobian(self.x, q)
         a = jac.matmul(np.eye(self.x.size)) / self.sigma  # (3n, P)
         e = np.tile(np.eye(3), (len(q), 1)) / self.sigma  # d(rows)/d(nest)
         w = e.T @ e + np.eye(3) / self.sigma_location ** 2
         return a, e, w
 
-    def add(self, info: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Return info plus one SPAT's marginalised information."""
-        a, e, w = self.rows(q)
+    def add(self, info: np.ndarray, samples: Samples) -> np.ndarray:
+        """Return info plus one SPAT's marginalised information (its samples: :meth:`rows`)."""
+        a, e, w = self.rows(samples)
         ea = e.T @ a
         out: np.ndarray = info + a.T @ a - ea.T @ np.linalg.solve(w, ea)
         return out
@@ -183,9 +187,20 @@ def information_now(cal: Calibration, campaign: Campaign, sigma: float | None = 
     model = _Information(cal.unknowns.arm, cal.parameters, cal.unknowns.map_axes,
                          sigma or cal.sigma, _location(cal, sigma_location))
     info = model.prior.copy()
+    spat = Samples.of_spat(model.u.arm, campaign.spat)
     for m in np.unique(campaign.spat.location):
-        info = model.add(info, campaign.spat.q[campaign.spat.location == m])
+        info = model.add(info, spat.select(campaign.spat.location == m))
     return model, info
+
+
+def planned_conditions(campaign: Campaign) -> dict[str, float]:
+    """Return the per-sample columns a planned SPAT is taken at: each SPAT column's median, SI.
+
+    E.g. ``{"t_s": ..., "temp_c": 21.9}``: a calibration whose extensions read a column (thermal,
+    a plugin's) needs a value for postures never measured; the campaign's typical one.
+    """
+    assert campaign.spat is not None
+    return {k: float(np.median(v)) for k, v in campaign.spat.columns.items()}
 
 
 def _span(lo_deg: float, hi_deg: float) -> str:
@@ -293,6 +308,7 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
                 box[axis - 1] = np.radians([lo, hi])
                 fams.append((f"A{axis} in [{lo:g}, {hi:g}] deg", box))
     rng = np.random.default_rng(seed)
+    conditions = planned_conditions(campaign)
     rot, t = cal.parameters.rotation(), cal.parameters.translation
     out = []
     cells = np.atleast_2d(grid)
@@ -302,10 +318,10 @@ def plan(cal: Calibration, campaign: Campaign, *, grid: np.ndarray | None = None
         for name, box in fams:
             ticker.update(1)
             try:
-                q = stylus_ik(arm, cal.parameters, target, rng, starts=box)
+                q = stylus_ik(arm, cal.parameters, target, rng, starts=box, columns=conditions)
             except Exception:  # unreachable with this family: not a candidate
                 continue
-            new_info = model.add(info, q)
+            new_info = model.add(info, held_columns(arm, q, conditions))
             new_cov = np.linalg.inv(new_info)
             std_after = _map_std(np.diag(new_cov), u)
             rms_after = {a: float(np.sqrt(np.mean(std_after[a] ** 2))) for a in u.map_axes}
@@ -323,7 +339,8 @@ def _length_grads(cal: Calibration, campaign: Campaign, u: Unknowns) -> np.ndarr
     if log is None or not campaign.bar:
         return None
     pairs = bar_pairs(campaign)
-    pos, jac = u.jacobian(u.full_vector(cal.parameters), log.q)
+    bar = u.with_samples(Samples.of_log(u.arm, log))  # the bar's own columns (temp_c, ...)
+    pos, jac = bar.jacobian(u.full_vector(cal.parameters), log.q)
     _, unit = pair_errors(pos, pairs)
     return np.array([jac.rmatmul(w) for w in pair_weights(pairs, unit, len(log.q))])
 

@@ -30,6 +30,7 @@ from aacmm_pin.fit.solver import Factor
 from aacmm_pin.fit.unknowns import NodeKey, UnknownKey
 from aacmm_pin.interrupts import die_with_parent
 from aacmm_pin.machine import check_workers, usable_cores
+from aacmm_pin.model.samples import Samples
 from aacmm_pin.units import ARCSEC, SIGMA_LOCATION, SIGMA_RTEST
 
 AGREE = 0.2
@@ -218,7 +219,8 @@ def length_jacobian(cal: Calibration, campaign: Campaign) -> tuple[np.ndarray, n
     log = campaign.lengthbar
     assert log is not None
     n_arm = len(cal.unknowns.names)
-    pos, jac = cal.unknowns.jacobian(cal.x[:n_arm], log.q)
+    bar = cal.unknowns.with_samples(Samples.of_log(cal.unknowns.arm, log))  # its terms' columns
+    pos, jac = bar.jacobian(cal.x[:n_arm], log.q)
     pairs = bar_pairs(campaign)
     errors, unit = pair_errors(pos, pairs)
     grads = np.zeros((len(errors), cal.x.size))

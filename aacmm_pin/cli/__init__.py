@@ -24,6 +24,7 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
+from aacmm_pin._blas import started_single_threaded
 from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
 from aacmm_pin.errors import AacmmError, CampaignWarning, StaleOutputWarning
@@ -79,10 +80,14 @@ def build_parser() -> argparse.ArgumentParser:
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS",
                          "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
 """Environment variables that set a BLAS library's threads: a user's setting of any of them stands."""
+ONE_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+"""What :func:`one_blas_thread_at_start` sets to 1: each BLAS library numpy and SciPy are built on
+(OpenBLAS in their wheels, MKL or BLIS in other builds) reads its own; not OpenMP's, which other
+libraries read too."""
 
 
 def one_blas_thread_at_start() -> bool:
-    """Start OpenBLAS with one thread here and in the processes started; return whether it did.
+    """Start BLAS with one thread here and in the processes started; return whether it did.
 
     identify, discover and uncertainty run with one BLAS thread anyway (products of a few hundred
     columns: :func:`aacmm_pin._blas.single_threaded_blas`), and the other commands gain little
@@ -91,11 +96,15 @@ def one_blas_thread_at_start() -> bool:
     OpenBLAS starts a pool of threads when it is loaded, once in numpy and once in scipy: ~0.2 s
     of CPU per command (`aacmm-pin identify` of a paper-sized campaign: 0.92 -> 0.70 s;
     ``benchmarks/cli.py``). Only at the start of the program, before numpy is imported, and only
-    when the user set none of :data:`BLAS_THREAD_VARIABLES` (a user's setting stands).
+    when the user set none of :data:`BLAS_THREAD_VARIABLES` (a user's setting stands). Sets
+    :data:`ONE_THREAD_VARIABLES`, and tells :func:`~aacmm_pin._blas.single_threaded_blas` it has
+    nothing left to limit.
     """
     if "numpy" in sys.modules or any(v in os.environ for v in BLAS_THREAD_VARIABLES):
         return False
-    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    for name in ONE_THREAD_VARIABLES:
+        os.environ[name] = "1"
+    started_single_threaded()
     return True
 
 

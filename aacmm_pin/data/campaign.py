@@ -59,6 +59,7 @@ from aacmm_pin.data.logs import (
     read_noise,
 )
 from aacmm_pin.data.output_claim import CALIBRATION_FILES
+from aacmm_pin.data.poses import POSE_COLUMN
 from aacmm_pin.data.problem_log import ProblemLogs
 from aacmm_pin.errors import CampaignFormatError, CampaignWarning, Problem
 
@@ -75,7 +76,7 @@ _FILES: dict[str, tuple[tuple[str, ...], bool, tuple[str, ...]]] = {
     "locations.csv": (("location", *_XYZ["loc"]), False, ()),
     "lengthbar.csv": (("placement", "socket"), True, _OPTIONAL),
     "bar.csv": (("from", "to", "length_mm"), False, ()),
-    "points.csv": (_XYZ["loc"], True, ("group", "tool", "sigma_um", *_OPTIONAL)),
+    "points.csv": (_XYZ["loc"], True, ("group", "tool", "sigma_um", *_OPTIONAL, POSE_COLUMN)),
 }
 _LOGS = ("spat.csv", "lengthbar.csv", "points.csv")  # files whose extra numeric columns are read
 _CAMPAIGN_COLUMNS = tuple(dict.fromkeys(c for required, _, optional in _FILES.values()

@@ -22,9 +22,10 @@ from typing import Any, Literal, TypeGuard
 
 import numpy as np
 
-from aacmm_pin.data.columns import MAX_ANGLE_DEG, Column, column, has_unit
+from aacmm_pin.data.columns import MAX_ANGLE_DEG, Column, column, has_unit, registered_columns
 from aacmm_pin.data.couplings import AxisCoupling, fill_or_check
 from aacmm_pin.data.csv_rows import Rows, data_rows, read_text, records
+from aacmm_pin.data.poses import POSE_COLUMN
 from aacmm_pin.data.problem_log import MAX_SHOWN, ProblemLog, close_match
 from aacmm_pin.errors import Problem
 from aacmm_pin.units import (
@@ -466,8 +467,12 @@ def _read_rows(table: Table, cells: _Cells, rows: Rows, index: dict[str, int], w
                 table.lines.append(line)
             for name, k in index.items():
                 value, reason, why = cells.parse(name, row[k], keep)
-                if reason and name in taken and value is None and reason.startswith("'"):
-                    reason += f"; {table.path.name}'s further columns hold numbers"
+                if reason and value is None and reason.startswith("'"):
+                    if name == POSE_COLUMN:
+                        reason += ("; the pose column numbers each row's pose (rows with the same "
+                                   "number are one pose; import-points --pose numbers labels)")
+                    elif name in taken:
+                        reason += f"; {table.path.name}'s further columns hold numbers"
                 if reason:
                     add(line, name, reason, kind=why, unit="cells")
     cells.finish()
@@ -493,6 +498,9 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         numeric = (_numeric_columns(head, data_rows(text, quiet), len(header))
                    if extras == "readouts" and head.unknown else set())
         taken = _take_extras(head, top, numeric, extras, add)
+    if extras == "numbers" and head.missing:  # a declared column is carried, not misspelt
+        declared = {c.name for c in registered_columns()}
+        head.unknown = [(k, name) for k, name in head.unknown if name not in declared]
     if extras == "refuse" or (extras == "numbers" and head.missing):
         expected = [*required, *optional,
                     *([*named, *q_names(max(len(header), 9))] if has_q else [])]
@@ -500,8 +508,8 @@ def _read_table(path: Path, required: tuple[str, ...], has_q: bool, optional: tu
         if named:
             listing += f" (or {', '.join(named)} instead of q1_deg..q{len(named)}_deg)"
         _unknown_columns(head, top, expected, listing, has_q and not named, add)
-    per_sample = [name for name in header if name in taken
-                  or (name in optional and name in head.index and has_unit(name))]
+    per_sample = [name for name in header if name in taken or (name in optional and name in head.index
+                                                                and (has_unit(name) or name == POSE_COLUMN))]
     kinds = {name: ("angle" if name in head.q_columns or Q_COLUMN.fullmatch(name)
                     or name in named else "column" if name in per_sample
                     else _KINDS.get(name, "number")) for name in head.index}

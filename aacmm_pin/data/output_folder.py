@@ -15,7 +15,6 @@ the folder; the old one stays.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 import shutil
 import tempfile
@@ -32,6 +31,7 @@ from aacmm_pin.data.output_claim import (
     temp_prefix,
     umask,
 )
+from aacmm_pin.machine import libc
 
 __all__ = ["OutputExistsError", "check_output", "claim_output", "output_folder"]
 
@@ -41,11 +41,9 @@ _AT_FDCWD = -100
 
 def _exchange(a: Path, b: Path) -> bool:
     """Swap two paths atomically (Linux renameat2); return False where unsupported."""
-    name = ctypes.util.find_library("c")
     try:
-        libc = ctypes.CDLL(name, use_errno=True)
-        renameat2 = libc.renameat2
-    except (OSError, AttributeError, TypeError):
+        renameat2 = libc().renameat2  # type: ignore[union-attr]
+    except AttributeError:  # not Linux, or a C library without renameat2
         return False
     if renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
         return True

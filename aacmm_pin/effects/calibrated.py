@@ -8,7 +8,7 @@ model's kinematics.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -42,6 +42,16 @@ def extension_adjustment(arm: Arm, params: Parameters, readouts: np.ndarray,
     if samples is None or not samples.matches(q):
         samples = Samples(arm, q)
     return adjustment(params, samples, arm.n_axes)
+
+
+def held_columns(arm: Arm, readouts: np.ndarray, columns: Mapping[str, float]) -> Samples:
+    """Return samples of the readouts (N, n_axes), rad, with every column held at one value.
+
+    ``columns``: file name -> value, SI (e.g. ``{"temp_c": 21.3}``): the conditions of readouts
+    that were never measured (a planned posture).
+    """
+    q = np.atleast_2d(np.asarray(readouts, dtype=float))
+    return Samples(arm, q, columns={k: np.full(q.shape[0], float(v)) for k, v in columns.items()})
 
 
 def needs_tilts(terms: Iterable[Term]) -> bool:
@@ -105,16 +115,20 @@ def predict(arm: Arm, params: Parameters, readouts: np.ndarray, samples: Samples
 
 
 def stylus_ik(arm: Arm, params: Parameters, targets: np.ndarray, rng: np.random.Generator,
-              starts: np.ndarray | None = None, iterations: int = 25) -> np.ndarray:
+              starts: np.ndarray | None = None, iterations: int = 25, *,
+              columns: Mapping[str, float] | None = None) -> np.ndarray:
     """Return readouts (N, n_axes) putting the stylus centre of ``params`` on targets in the r-CS.
 
     See :func:`~aacmm_pin.model.kinematics.solve_ik` (the same arguments); targets shape (N, 3), m.
     The Newton steps use the joint Jacobian only (:class:`~aacmm_pin.model.kinematics.JointKinematics`).
+    ``columns``: per-sample columns (file name -> value, SI, e.g. ``temp_c``) every target is
+    reached at, for extensions that read them (None: none).
     """
     joints = JointKinematics(arm, params)
 
     def position_jacobian(q: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return joints.position_jacobian(q, adjust=extension_adjustment(arm, params, q, None))
+        samples = None if not columns else held_columns(arm, q, columns)
+        return joints.position_jacobian(q, adjust=extension_adjustment(arm, params, q, samples))
 
     return arm.fill_readouts(solve_ik(position_jacobian, targets, arm.joint_limits, rng,
                                       iterations, starts))  # coupled columns: their couplings

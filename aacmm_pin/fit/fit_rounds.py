@@ -10,11 +10,10 @@ solve; :func:`reject_outliers` is the robust loop (Huber reweighting, then hard 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import OptimizeResult
 
 from aacmm_pin.fit import identifiability as ident
 from aacmm_pin.fit import plausibility
@@ -29,6 +28,9 @@ from aacmm_pin.fit.solver import Nuisance, Problem, SolverSettings, WarmStart
 from aacmm_pin.fit.solver_values import BudgetSpent
 from aacmm_pin.fit.unknowns import Unknowns
 from aacmm_pin.model.parameters import Parameters
+
+if TYPE_CHECKING:  # the solver is imported where a fit runs
+    from scipy.optimize import OptimizeResult
 
 
 class Fit(NamedTuple):

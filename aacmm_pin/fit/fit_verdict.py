@@ -7,8 +7,9 @@ residual judged against the stated noise (:mod:`aacmm_pin.fit.noise_judgement`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from scipy.optimize import OptimizeResult
 from scipy.special import chdtrc
 
 from aacmm_pin.data.campaign import Campaign
@@ -26,6 +27,9 @@ from aacmm_pin.fit.noise_judgement import (
 )
 from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Problem
+
+if TYPE_CHECKING:  # the solver is imported where a fit runs
+    from scipy.optimize import OptimizeResult
 
 MIN_DOF_FRACTION = 0.1
 """An identification whose degrees of freedom are fewer than this fraction of its residual

@@ -9,11 +9,10 @@ content of a calibration folder's ``report.json`` (:func:`aacmm_pin.outputs.expo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import OptimizeResult
 
 from aacmm_pin.data.campaign import StatedNoise
 from aacmm_pin.fit import identifiability as ident
@@ -21,6 +20,9 @@ from aacmm_pin.fit.robust import Outlier
 from aacmm_pin.fit.solver import Problem, SolverSettings
 from aacmm_pin.fit.unknowns import NestKey, NodeKey, UnknownKey, Unknowns
 from aacmm_pin.model.parameters import Parameters
+
+if TYPE_CHECKING:  # the solver is imported where a fit runs
+    from scipy.optimize import OptimizeResult
 
 
 @dataclass(frozen=True)

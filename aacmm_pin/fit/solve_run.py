@@ -10,15 +10,17 @@ MB) never lives twice; :class:`_Handover` serves a warm start's residual and Jac
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
-from scipy.optimize import OptimizeResult, least_squares
 from scipy.sparse.linalg import LinearOperator
 
 from aacmm_pin.fit.chunked_jacobian import ChunkedJacobian, DataJacobian
 from aacmm_pin.fit.reduced_jacobian import ReducedJacobian
 from aacmm_pin.fit.solver_values import BudgetSpent, Solution, SolverSettings, WarmStart
+
+if TYPE_CHECKING:
+    from scipy.optimize import OptimizeResult
 
 T = TypeVar("T")
 
@@ -197,11 +199,15 @@ class SolveRun:
             z_best = np.array(self.z0, dtype=float)
             f_best = self.problem.fun(z_best)
             cost = 0.5 * float(f_best @ f_best)
+        from scipy.optimize import OptimizeResult
+
         return OptimizeResult(x=z_best, fun=f_best, cost=cost, status=0, success=False,
                               message=BUDGET_MESSAGE, njev=0, optimality=np.nan)
 
     def run(self) -> Solution:
         """Minimise with scipy's trust-region reflective solver; return its result (:class:`Solution`)."""
+        from scipy.optimize import least_squares  # here: reading a calibration needs no solver
+
         jac_fun: Callable[[np.ndarray], np.ndarray | LinearOperator] | str = self.jac
         if self.jac == "analytic":
             jac_fun = self.problem.jac if self.dense else self.operator

@@ -10,12 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-from scipy.optimize import OptimizeResult
 
 from aacmm_pin.fit.chunked_jacobian import DataJacobian
+
+if TYPE_CHECKING:  # the solver is imported where a fit runs
+    from scipy.optimize import OptimizeResult
 
 
 @dataclass(frozen=True)

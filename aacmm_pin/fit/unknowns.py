@@ -12,6 +12,7 @@ held fixed at its start value. Extension terms come from the effect library
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import NamedTuple, TypeAlias, cast
 
 import numpy as np
@@ -122,6 +123,14 @@ class Unknowns:
         """Return the same layout with another free mask."""
         return Unknowns(self.arm, self.start, self.map_axes, free, self.terms, self.samples)
 
+    def with_samples(self, samples: Samples) -> Unknowns:
+        """Return the same layout for other readouts: its terms read ``samples``' columns.
+
+        E.g. a length bar's readouts with their ``temp_c`` (:meth:`Samples.of_log`), whose
+        :meth:`jacobian` at ``samples.q`` a term that reads a per-sample column needs.
+        """
+        return Unknowns(self.arm, self.start, self.map_axes, self.free, self.terms, samples)
+
     def map_slice(self, axis: int) -> slice:
         """Slice of one map's nodes in the full layout."""
         start = self.n_dense
@@ -135,11 +144,16 @@ class Unknowns:
     @property
     def full_keys(self) -> list[UnknownKey]:
         """Keys of every entry of the full layout."""
+        return list(self._full_keys)
+
+    @cached_property
+    def _full_keys(self) -> tuple[UnknownKey, ...]:
+        """:attr:`full_keys`, made once (a fit asks for them tens of times)."""
         keys: list[UnknownKey] = [*BASE_NAMES, *self.arm.error_names, *self.arm.tool_unknowns]
         keys += [n for t in self.terms for n in t.names]
         for a in self.map_axes:
             keys += [NodeKey.at(a, d) for d in np.degrees(node_angles(self.start.step_deg))]
-        return keys
+        return tuple(keys)
 
     @property
     def keys(self) -> list[UnknownKey]:

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from aacmm_pin.errors import ArgumentError
+
+if TYPE_CHECKING:  # sparse matrices are made where an identification asks for them
+    import scipy.sparse as sp
 
 TWO_PI = 2.0 * np.pi
 DEFAULT_STEP_DEG = 5.0
@@ -139,6 +142,8 @@ class EncoderMap:
         Args:
             readout: encoder readouts, shape (N,), in rad.
         """
+        import scipy.sparse as sp
+
         readout = np.asarray(readout, dtype=float).reshape(-1)
         lower, upper, frac = self.neighbours(readout)
         rows = np.repeat(np.arange(readout.size), 2)
@@ -161,6 +166,8 @@ class EncoderMap:
             Sparse, shape (3N, n_columns), rows sample-major (row ``3 i + k`` is coordinate k of
             point i), at most two entries per point and coordinate (none where a weight is 0).
         """
+        import scipy.sparse as sp
+
         readout = np.asarray(readout, dtype=float).reshape(-1)
         keep_nodes = np.ones(self.n_nodes, dtype=bool) if nodes is None else np.asarray(nodes, bool)
         n_cols = int(keep_nodes.sum())

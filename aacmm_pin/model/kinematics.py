@@ -27,11 +27,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import NamedTuple, TypeAlias
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias
 
 import numpy as np
 import pinocchio as pin
-import scipy.sparse as sp
 
 from aacmm_pin.errors import AacmmError, FrameNotFound
 from aacmm_pin.model._chain import BatchedChain
@@ -39,6 +38,9 @@ from aacmm_pin.model.arm import Arm
 from aacmm_pin.model.encoder_map import correct_readouts, correct_with_slopes
 from aacmm_pin.model.parameters import Parameters
 from aacmm_pin.model.samples import Samples
+
+if TYPE_CHECKING:  # sparse matrices are made where an identification asks for them
+    import scipy.sparse as sp
 
 
 class StylusJacobians(NamedTuple):
@@ -87,6 +89,8 @@ class StylusJacobians(NamedTuple):
 
         Rows are ordered sample-major: row ``3 * i + k`` is coordinate k of sample i.
         """
+        import scipy.sparse as sp
+
         return sp.csr_matrix(params.map(axis).node_columns(self.q_readout[:, axis - 1],
                                                            self.angles[:, :, axis - 1]))
 

@@ -10,14 +10,15 @@ MT-CS points into a group's frame, so that they compare with that instrument's d
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from aacmm_pin.errors import AacmmError
-from aacmm_pin.fit.identification_result import Calibration
-from aacmm_pin.fit.unknowns import FrameKey
 from aacmm_pin.units import MM
+
+if TYPE_CHECKING:  # predict reads frames and needs no fit
+    from aacmm_pin.fit.identification_result import Calibration
 
 FRAMES_KEY = "instrument_frames"
 """Key of ``report.json``: instrument group -> ``{"rotation": 3x3, "translation_mm": [x, y, z]}``,
@@ -30,6 +31,8 @@ def instrument_frames(cal: Calibration) -> dict[str, dict[str, list[Any]]]:
     Empty for a calibration without points. The main group (without SPAT: the lowest) is the
     identity: its points were fitted in the MT-CS itself.
     """
+    from aacmm_pin.fit.unknowns import FrameKey
+
     if "points" not in cal.inputs:
         return {}
     out: dict[str, dict[str, list[Any]]] = {}
