@@ -1,13 +1,16 @@
-"""What the figures cost in ``aacmm-pin discover`` on the paper campaign: CPU of the whole process
-and of its figures, split in the same run.
+"""What the figures cost in ``aacmm-pin discover`` on the sample campaign, the simulated paper
+campaign and the UR5 grid: CPU of the whole process and of its figures, split in the same run.
 
 Run: ``python benchmarks/figures.py [--before DIR]`` (about a minute; writes its section of
 BENCHMARKS.md). ``--before DIR``: a checkout of the code before a change (``git worktree add DIR
 REF``), measured in the same runs, interleaved with this one's: on a loaded machine the CPU of
 both grows, and only runs side by side compare.
 Campaigns: the sample campaign (``../shared/sample-campaign``: 4 R-Test locations x 200 SPAT
-samples and 7 length-bar placements; skipped where it is absent) and the simulated paper campaign
-(``aacmm-pin simulate``, seed 0, the same sizes). Each run is a whole
+samples and 7 length-bar placements; skipped where it is absent), the simulated paper campaign
+(``aacmm-pin simulate``, seed 0, the same sizes) and the UR5 grid (1000 laser-tracker points,
+``aacmm-pin import-points`` of the public file, ``--arm ur5``; skipped where absent): issue 41's
+target is the figures at most 25 % of the command's CPU on the sample campaign and the UR5 grid.
+Each run is a whole
 process (``python benchmarks/figures.py --child CAMPAIGN OUT ROOT``) that runs the CLI's ``main``
 (``aacmm-pin discover CAMPAIGN --out OUT``) with the discovery's figure functions wrapped in a
 CPU clock: the figures' share includes importing matplotlib (only the figures need it). CPU is
@@ -157,12 +160,17 @@ CPU = user + system; the figures' CPU is measured in the same process around the
 `write_discovery` calls and the entry and exit of their `figure_batch` (importing matplotlib
 included: only the figures need it). The figures are drawn after the results are
 printed, with fixed margins (no constrained layout) and one legend per step figure, by
-`outputs.figure_files`: text unhinted (`text.hinting` "none"), PNG through matplotlib's own Pillow
-writer at zlib level 3, no tick built outside the view (`outputs.in_view_ticks`: the same pixels),
-and the objects the process holds, then matplotlib's, frozen (`gc.freeze`) while the figures are
-written. Median (range) of {REPEAT} runs per campaign (the figures' share: its range over the runs
-of this benchmark's run and of the earlier ones named below); issue 28's target: figures <= 25 % of the
-command's CPU.{rows_before} The load average (1, 5 and 15 min) when this table was written: {load}:
+`outputs.figure_files`: text unhinted (`text.hinting` "none"), drawn on the figure's Agg canvas and
+written by Pillow at zlib level 3 as RGB (an opaque figure: the same pixels as matplotlib's RGBA
+file), no tick built outside the view (`outputs.in_view_ticks`: the same pixels), and the objects
+the process holds, then matplotlib's, frozen (`gc.freeze`) while the figures are written. The
+discovery figures (`outputs.discovery_figures`) draw at most 4 intervals between ticks per axis
+(2 to 5 labelled ticks, `TICKS`), at 120 dpi (`DPI`; the package's other figures 150), and
+the step figures share one figure's panels (`figure_files.PanelFigure`: built once, moved and
+emptied for each step, the same pixels as new panels). Median (range) of {REPEAT} runs per
+campaign (the figures' share: its range over the runs of this benchmark's run and of the earlier
+ones named below); issue 41's target: figures <= 25 % of the command's CPU on the sample campaign
+and the UR5 grid.{rows_before} The load average (1, 5 and 15 min) when this table was written: {load}:
 CPU times grow with the load.
 
 | campaign | command CPU (s) | figures CPU (s) | figures' share (%) | PNGs written |

@@ -3,7 +3,8 @@
 Issue 28: a discovery's figures were 30 % of ``discover``'s CPU; they are written unhinted, at
 zlib level 3, with ticks built only where they are drawn, and with the objects the process holds
 frozen while they are written. The figures carry the same information (same pixels where only the
-ticks out of view are left out).
+ticks out of view are left out). Issue 41: written from the Agg canvas as RGB (the pixels
+matplotlib writes), the step figures sharing one figure's panels (the pixels of new panels).
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ import numpy as np
 import pytest
 
 from aacmm_pin.outputs import figure_files
-from aacmm_pin.outputs.discovery_figures import _step_figure, step_figure
-from aacmm_pin.outputs.figure_files import DPI, figure_batch, fixed_figure, write_png
+from aacmm_pin.outputs.discovery_figures import TICKS, _step_figure, step_figure
+from aacmm_pin.outputs.figure_files import DPI, PanelFigure, figure_batch, fixed_figure, write_png
 
 
 def _step() -> Any:
@@ -31,34 +32,20 @@ def _step() -> Any:
                            heldout_rms_before=12e-6, heldout_rms_after=2e-6)
 
 
-def _drawn_figures(monkeypatch) -> list[Any]:
-    """Collect the figures ``Figure.savefig`` writes (after they are drawn)."""
-    from matplotlib.figure import Figure
-
-    written: list[Any] = []
-    save = Figure.savefig
-
-    def keep(fig: Any, *args: Any, **kwargs: Any) -> None:
-        import matplotlib
-
-        save(fig, *args, **kwargs)
-        written.append((fig, matplotlib.rcParams["text.hinting"], kwargs))
-
-    monkeypatch.setattr(Figure, "savefig", keep)
-    return written
-
-
-def test_step_figure_builds_ticks_only_in_the_view(tmp_path, monkeypatch):
+@pytest.mark.parametrize("nbins", ["auto", TICKS])
+def test_step_figure_builds_ticks_only_in_the_view(tmp_path, nbins):
     """A discovery step figure builds no tick object outside its panels' views (they were a third
-    of the ticks built, never drawn), and every tick drawn is still there."""
-    written = _drawn_figures(monkeypatch)
-    step_figure(_step(), 1, tmp_path / "s.png")
-    (fig, _, _), = written
+    of the ticks built, never drawn), and every tick drawn is still there; with at most TICKS
+    intervals (the discovery figures') each axis still has 2 or more labelled ticks and fewer
+    than matplotlib's default."""
+    fig = _step_figure(_step(), 1)
+    write_png(fig, tmp_path / "s.png", nbins)
     for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
             low, high = sorted(axis.get_view_interval())
             locs = axis.get_majorticklocs()
-            assert len(locs) >= 3  # the scale is still read
+            assert len(locs) >= (3 if nbins == "auto" else 2)  # the scale is still read
+            assert len(locs) <= (9 if nbins == "auto" else TICKS + 1)
             assert np.all((locs >= low - 1e-9 * (high - low)) & (locs <= high + 1e-9 * (high - low)))
             assert len(axis.majorTicks) == len(locs)  # no tick built beyond those drawn
 
@@ -73,7 +60,7 @@ def test_in_view_ticks_leave_the_pixels_unchanged(tmp_path):
     fig = _step_figure(_step(), 1)
     fig.set_dpi(DPI)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(in_view_ticks, "ticks_in_view", lambda _fig: None)
+        patch.setattr(in_view_ticks, "ticks_in_view", lambda _fig, _nbins: None)
         write_png(fig, tmp_path / "b.png")
     built = sum(len(ax.yaxis.majorTicks) for ax in fig.axes)
     locs = [(ax.yaxis.get_majorticklocs(), sorted(ax.get_ylim())) for ax in fig.axes]
@@ -81,21 +68,93 @@ def test_in_view_ticks_leave_the_pixels_unchanged(tmp_path):
     assert np.array_equal(imread(tmp_path / "a.png"), imread(tmp_path / "b.png"))
 
 
-def test_figures_are_written_unhinted_at_a_fast_zlib_level(tmp_path, monkeypatch):
-    """write_png draws with unhinted text and asks Pillow for PNG_LEVEL, and leaves
-    matplotlib's settings as they were; the file is a PNG of the figure's size at DPI."""
+def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeypatch):
+    """write_png draws with unhinted text, asks Pillow for PNG_LEVEL, and writes the pixels
+    matplotlib's own writer writes (RGB: the figure is opaque), at the dpi asked for, with
+    matplotlib's metadata; matplotlib's settings and the figure's dpi are left as they were."""
     import matplotlib
     from matplotlib.image import imread
+    from PIL import Image
 
-    written = _drawn_figures(monkeypatch)
+    saved: list[dict[str, Any]] = []
+    save = Image.Image.save
+    hinting: list[str] = []
+
+    def keep(image: Any, *args: Any, **kwargs: Any) -> None:
+        saved.append(dict(kwargs, mode=image.mode))
+        save(image, *args, **kwargs)
+
     before = matplotlib.rcParams["text.hinting"]
-    step_figure(_step(), 1, tmp_path / "s.png")
-    (fig, hinting, kwargs), = written
-    assert hinting == figure_files.TEXT_HINTING == "none"
-    assert kwargs["pil_kwargs"] == {"compress_level": figure_files.PNG_LEVEL}
+    fig = _step_figure(_step(), 1)
+    draw = fig.canvas.draw
+
+    def drawn() -> None:
+        hinting.append(matplotlib.rcParams["text.hinting"])
+        draw()
+
+    own = fig.get_dpi()
+    for dpi in (DPI, 120):
+        monkeypatch.setattr(Image.Image, "save", keep)
+        monkeypatch.setattr(fig.canvas, "draw", drawn)
+        write_png(fig, tmp_path / f"ours{dpi}.png", dpi=dpi)
+        monkeypatch.undo()
+        assert fig.get_dpi() == own
+        with matplotlib.rc_context({"text.hinting": figure_files.TEXT_HINTING}):
+            fig.savefig(tmp_path / f"theirs{dpi}.png", format="png", dpi=dpi)
+        ours, theirs = imread(tmp_path / f"ours{dpi}.png"), imread(tmp_path / f"theirs{dpi}.png")
+        assert ours.shape[2] == 3 and np.all(theirs[..., 3] == 1.0)  # opaque: RGB, nothing lost
+        assert np.array_equal(ours, theirs[..., :3])
+        width, height = fig.get_size_inches()
+        assert ours.shape[:2] == (round(height * dpi), round(width * dpi))
+        with Image.open(tmp_path / f"ours{dpi}.png") as image:
+            assert image.info["dpi"] == pytest.approx((dpi, dpi), abs=0.05)  # in px per m
+            assert image.info["Software"].startswith("Matplotlib version")
+    assert [(s["mode"], s["compress_level"]) for s in saved] == [("RGB", figure_files.PNG_LEVEL)] * 2
+    assert hinting == [figure_files.TEXT_HINTING] * 2 and figure_files.TEXT_HINTING == "none"
     assert matplotlib.rcParams["text.hinting"] == before
-    width, height = fig.get_size_inches()
-    assert imread(tmp_path / "s.png").shape[:2] == (round(height * DPI), round(width * DPI))
+
+
+def test_a_figure_with_transparent_pixels_keeps_its_alpha(tmp_path):
+    """A figure whose face is transparent is written as RGBA: no pixel loses its alpha."""
+    from matplotlib.image import imread
+
+    fig, _ = fixed_figure(2.0, 1.5)
+    fig.patch.set_alpha(0.0)
+    write_png(fig, tmp_path / "t.png")
+    image = imread(tmp_path / "t.png")
+    assert image.shape[2] == 4 and image[..., 3].min() == 0.0
+
+
+def test_step_figures_on_shared_panels_draw_the_pixels_of_new_ones(tmp_path):
+    """Issue 41: the step figures of a discovery share one figure's panels (built once, moved to
+    each layout, emptied); each PNG is the one a figure of its own writes, pixel for pixel, in
+    either order (more panels after fewer and fewer after more, another grid shape), including
+    a panel's limits set by the robust scale (off-scale samples) and then left to follow its
+    data again."""
+    from matplotlib.image import imread
+
+    wild = _step()
+    wild.views[0]["before"] = np.r_[np.random.default_rng(5).normal(0.0, 5.0, 297), 2e4, -2e4, 9e3]
+    six = _step()
+    six.views = [dict(six.views[k % 2], term=f"t{k}") for k in range(6)]
+    one = _step()
+    one.views = one.views[:1]
+    steps = [wild, six, one, _step(), six]
+    shared = PanelFigure()
+    for k, step in enumerate(steps, start=1):
+        step_figure(step, k, tmp_path / f"shared{k}.png", shared)
+        step_figure(step, k, tmp_path / f"own{k}.png")
+        assert np.array_equal(imread(tmp_path / f"shared{k}.png"), imread(tmp_path / f"own{k}.png")), k
+    assert len(shared.axes) == 6  # built once: as many panels as the largest step's
+    assert sum(ax.get_visible() for ax in shared.axes) == 6
+
+
+def test_panel_boxes_match_fixed_figures_grid():
+    """PanelFigure's layout is fixed_figure's: the same panel positions for the same margins."""
+    fig, grid = fixed_figure(12.6, 6.6, 2, 3, margins=(1.0, 0.15, 0.55, 0.6), gaps=(1.1, 0.8))
+    boxes = figure_files.panel_boxes(12.6, 6.6, 6, 3, (1.0, 0.15, 0.55, 0.6), (1.1, 0.8))
+    for ax, box in zip(grid.ravel(), boxes):
+        assert np.allclose(ax.get_position().bounds, box, atol=1e-12)
 
 
 def _in_generations() -> set[int]:

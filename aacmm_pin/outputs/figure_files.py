@@ -2,10 +2,11 @@
 
 Every PNG figure of the package (:mod:`aacmm_pin.outputs.plots`,
 :mod:`aacmm_pin.outputs.discovery_figures`) is a ``matplotlib.figure.Figure`` on its own
-``FigureCanvasAgg`` (:func:`new_figure`, :func:`fixed_figure`): pyplot is never imported, so no
+``FigureCanvasAgg`` (:func:`new_figure`, :func:`fixed_figure`, :class:`PanelFigure`: panels
+shared by figures written one after another): pyplot is never imported, so no
 GUI backend is looked for and no figure registry keeps figures alive. :func:`write_png` draws a
-figure with its text unhinted (:data:`TEXT_HINTING`) and writes it through matplotlib's own PNG
-writer (Pillow) at zlib level :data:`PNG_LEVEL`; :func:`figure_batch` keeps the garbage collector
+figure on its canvas with its text unhinted (:data:`TEXT_HINTING`) and writes its pixels through
+Pillow at zlib level :data:`PNG_LEVEL` (RGB when opaque); :func:`figure_batch` keeps the garbage collector
 out of the way while a command writes its figures. matplotlib (the ``figures`` extra) is imported
 inside the functions only; without it they raise :class:`~aacmm_pin.errors.MissingExtraError`.
 """
@@ -34,7 +35,9 @@ less of a discovery figure's drawing."""
 PNG_LEVEL = 3
 """zlib level of the PNG files (Pillow's ``compress_level``; matplotlib leaves Pillow's 6). The
 file holds the same pixels; on a discovery step figure level 3 takes two thirds of level 6's CPU
-(60 against 89 ms) for a file 6 % larger (334 against 314 kB)."""
+(60 against 89 ms) for a file 6 % larger (334 against 314 kB). Written as RGB (an opaque
+figure), a UR5 discovery's step, gap and unexplained figures take 93 against 116 ms at level 3
+(their RGBA files), 572 against 643 kB; levels 1 and 2 are no faster."""
 FIGURES = "writing figures"
 """What needs matplotlib, in the message of a missing ``figures`` extra."""
 
@@ -93,12 +96,98 @@ def fixed_figure(width_in: float, height_in: float, nrows: int = 1, ncols: int =
     return fig, axes
 
 
-def write_png(fig: Figure, path: str | Path) -> Path:
-    """Draw ``fig`` at :data:`DPI`, text unhinted (:data:`TEXT_HINTING`), and write it as PNG.
+class PanelFigure:
+    """One Figure on its Agg canvas whose panels are laid out anew for each figure written.
 
-    ``fig.savefig`` (matplotlib's PNG writer, Pillow) to ``path`` at zlib level :data:`PNG_LEVEL`,
-    parent folders created; ticks are built only where they are drawn
-    (:func:`~aacmm_pin.outputs.in_view_ticks.ticks_in_view`). Returns ``path`` as a Path.
+    A discovery writes a step figure per step (four on the UR5 grid), each a grid of panels with
+    fixed margins. Building the panels (Axes, their axes and first ticks) and the ticks their
+    first drawing adds cost about as much as drawing them again (the UR5 grid's first step
+    figure, 5 panels: 81 and 77 ms, against 220 ms for a second drawing); :meth:`panels` hands
+    the panels of the
+    previous figure back, moved to the new layout and emptied of what was drawn on them (lines,
+    texts, patches, collections, title, labels, the figure's legends), their ticks kept, and
+    builds only the panels the previous figure lacked; panels beyond those asked for are hidden.
+    A panel handed back draws the same pixels as a new one (``tests/test_figure_files.py``).
+    The panels' axes must be left linear with their own limits (no shared or twin axes, no
+    log scales, no fixed ticks): they are not reset; their locators are kept (the ``nbins`` the
+    first :func:`write_png` of them gave).
+    """
+
+    def __init__(self) -> None:
+        self.fig: Figure | None = None
+        self.axes: list[Any] = []
+
+    def panels(self, width_in: float, height_in: float, n: int, ncols: int,
+               margins: tuple[float, float, float, float], gaps: tuple[float, float]
+               ) -> tuple[Figure, list[Any]]:
+        """The figure, ``width_in`` x ``height_in`` in, and ``n`` empty panels in rows of ``ncols``.
+
+        ``margins`` (left, right, bottom, top) and ``gaps`` (between columns, rows), in, as
+        :func:`fixed_figure`'s. Returns the figure and its ``n`` visible panels, row by row.
+        """
+        boxes = panel_boxes(width_in, height_in, n, ncols, margins, gaps)
+        if self.fig is None:
+            self.fig = new_figure(width_in, height_in, layout=None)
+        else:
+            self.fig.set_size_inches(width_in, height_in)
+            for legend in list(self.fig.legends):
+                legend.remove()
+        for k, ax in enumerate(self.axes):
+            ax.set_visible(k < n)
+            if k < n:
+                ax.set_position(boxes[k])
+                _empty(ax)
+        self.axes += [self.fig.add_axes(box) for box in boxes[len(self.axes):]]
+        return self.fig, self.axes[:n]
+
+
+def panel_boxes(width_in: float, height_in: float, n: int, ncols: int,
+                margins: tuple[float, float, float, float], gaps: tuple[float, float]
+                ) -> list[tuple[float, float, float, float]]:
+    """Positions of ``n`` panels in rows of ``ncols``, row by row from the top.
+
+    The panels fill a ``width_in`` x ``height_in`` in figure less its ``margins`` and ``gaps``
+    (in, as :func:`fixed_figure`'s). Returns (left, bottom, width, height) of each, in figure
+    fractions.
+    """
+    left, right, bottom, top = margins
+    nrows = max(1, -(-n // ncols))
+    panel_w = (width_in - left - right - (ncols - 1) * gaps[0]) / ncols
+    panel_h = (height_in - bottom - top - (nrows - 1) * gaps[1]) / nrows
+    boxes = []
+    for k in range(n):
+        row, col = divmod(k, ncols)
+        x0 = left + col * (panel_w + gaps[0])
+        y0 = height_in - top - row * (panel_h + gaps[1]) - panel_h
+        boxes.append((x0 / width_in, y0 / height_in, panel_w / width_in, panel_h / height_in))
+    return boxes
+
+
+def _empty(ax: Any) -> None:
+    """Remove what was drawn on panel ``ax`` (artists, title, labels).
+
+    Its limits follow its data again (autoscaled, as a new panel's).
+    """
+    for artist in [*ax.lines, *ax.texts, *ax.patches, *ax.collections]:
+        artist.remove()
+    ax.set_title("")
+    ax.set_xlabel("")
+    ax.set_ylabel("")
+    ax.relim()
+    ax.set_autoscale_on(True)
+
+
+def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: float = DPI) -> Path:
+    """Draw ``fig`` at ``dpi`` (dots per inch; :data:`DPI`), text unhinted, and write it as PNG.
+
+    The figure is drawn on its Agg canvas (text hinting :data:`TEXT_HINTING`) and its pixels
+    written by Pillow at zlib level :data:`PNG_LEVEL`, with matplotlib's own metadata (software,
+    resolution), parent folders created; an opaque figure (every pixel's alpha 255: a figure's
+    default white face) as RGB, the same pixels as matplotlib's RGBA file with a quarter less to
+    compress (:func:`png_image`).
+    Ticks are built only where they are drawn, at most ``nbins`` intervals per axis
+    (:func:`~aacmm_pin.outputs.in_view_ticks.ticks_in_view`). The figure's own dpi is restored
+    after. Returns ``path`` as a Path.
     """
     require("figures", FIGURES)
     import matplotlib
@@ -107,10 +196,36 @@ def write_png(fig: Figure, path: str | Path) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ticks_in_view(fig)
-    with matplotlib.rc_context({"text.hinting": TEXT_HINTING}):
-        fig.savefig(path, format="png", dpi=DPI, pil_kwargs={"compress_level": PNG_LEVEL})
+    ticks_in_view(fig, nbins)
+    own = fig.get_dpi()
+    fig.set_dpi(dpi)
+    try:
+        with matplotlib.rc_context({"text.hinting": TEXT_HINTING}):
+            fig.canvas.draw()
+        image, info = png_image(fig)
+        image.save(path, format="png", compress_level=PNG_LEVEL, pnginfo=info, dpi=(dpi, dpi))
+    finally:
+        fig.set_dpi(own)
     return path
+
+
+def png_image(fig: Figure) -> tuple[Any, Any]:
+    """The Pillow image of ``fig``'s drawn Agg canvas and matplotlib's PNG metadata for it.
+
+    RGB when every pixel is opaque (a figure's default face; the PNG holds the same colours as
+    matplotlib's RGBA file), RGBA else; shape (height, width) at the figure's dpi.
+    """
+    import matplotlib
+    import numpy as np
+    from PIL import Image, PngImagePlugin
+
+    rgba = np.asarray(fig.canvas.buffer_rgba())  # type: ignore[attr-defined]  # (h, w, 4) uint8
+    image = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
+    if rgba[..., 3].min() == 255:
+        image = image.convert("RGB")
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/")
+    return image, info
 
 
 @contextmanager
