@@ -91,9 +91,11 @@ def fit_setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget 
                                    tool=None if samples.tool is None else samples.tool[pts])
         plausibility.check_point_spread(meas.measured[pts], nominal, group[pts],
                                         arm.sizes_label)
-    start = options.start or _initial_frame(arm, Parameters.nominal(arm, options.step_deg),
-                                            q[main], meas.measured[main], group[main],
-                                            None if samples.tool is None else samples.tool[main])
+    every = bool(main.all())  # no copies of the campaign's columns (N x n_axes readouts)
+    start = options.start or _initial_frame(
+        arm, Parameters.nominal(arm, options.step_deg), q if every else q[main],
+        meas.measured if every else meas.measured[main], group if every else group[main],
+        None if samples.tool is None else samples.tool if every else samples.tool[main])
     axes = tuple(arm.measured_axes) if options.map_axes is None else tuple(options.map_axes)
     if coupled := [a for a in axes if 1 <= a <= arm.n_axes and arm.coupled[a - 1]]:
         raise ValueError(f"map_axes: A{coupled[0]} ({arm.axis_names[coupled[0] - 1]}) is a coupled "
@@ -170,8 +172,8 @@ def _nuisance(arm: Arm, start: Parameters, meas: Measurements, sigma_class: floa
     The measured points are completed with the bar sockets' start positions (the mean of their
     readouts' start-model points); the frames start from a Kabsch fit to the start model.
     """
-    measured = meas.measured.copy()
-    socket = np.isnan(measured[:, 0])
+    socket = np.isnan(meas.measured[:, 0])
+    measured = meas.measured.copy() if socket.any() else meas.measured  # completed: a copy
     frame_start = np.zeros((len(meas.frame_groups), 3, 4))
     if socket.any() or meas.frame_groups:
         pred = stylus_positions(arm, start, meas.q, frame="mt", samples=meas.samples)
