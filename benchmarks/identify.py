@@ -387,8 +387,9 @@ with its evaluations: the 160k draws lie within {draw_spread * 100:.0f} % of the
     write_section("identify-large", body)
 
 
-CLI_PEAK_LIMIT_MB = 1000
-"""Issue 41's target: the CLI's peak at 1.6M samples, MB (10^6 bytes: 954 MiB)."""
+CLI_PEAK_LIMIT_MB = 1024
+"""Issue 41's target: the CLI's peak at 1.6M samples, 1.0 GB in MB of 2^20 bytes (the tables'
+MB, as issue 28's 2 GB is :data:`PEAK_LIMIT_MB`)."""
 CLI_CPU_RATIO_LIMIT = 1.1
 """Issue 41's target: the CLI's CPU per sample at 1.6M within this factor of the 160k run's."""
 CLI_SMALL_DRAWS = (1, 2, 3, 4)
@@ -401,7 +402,7 @@ run = subprocess.run(sys.argv[1:], capture_output=True, text=True)
 wall = time.perf_counter() - t
 use = resource.getrusage(resource.RUSAGE_CHILDREN)
 print(json.dumps({"rc": run.returncode, "user": use.ru_utime, "sys": use.ru_stime, "wall": wall,
-                  "peak_mb": use.ru_maxrss * 1024 / 1e6, "out": run.stdout, "err": run.stderr}))
+                  "peak_mb": use.ru_maxrss / 1024, "out": run.stdout, "err": run.stderr}))
 """
 """Runs a command in a process of its own and prints its CPU, wall time and peak resident memory
 (``ru_maxrss`` of its only child: this wrapper's children are the command alone)."""
@@ -470,7 +471,7 @@ def _cli_section(small: list[dict], bigs: list[dict]) -> None:
 and 1000 times with fresh R-Test noise (the tiled campaigns above) written to disk, one process
 per run: its CPU time (user + system: reading, checking, the fit, writing the calibration folder
 with its URDF-alone loss over every pose), the system time's share, and its peak resident memory
-(`ru_maxrss` of that process alone, MB = 10^6 bytes). The 160k point over {len(small)} noise
+(`ru_maxrss` of that process alone; MB of 2^20 bytes, as above). The 160k point over {len(small)} noise
 draws (half before the 1.6M runs, half after them), the 1.6M point over {len(bigs)}. Issue 41's
 targets: peak <= {CLI_PEAK_LIMIT_MB:,} MB at 1.6M samples, CPU per sample within
 {CLI_CPU_RATIO_LIMIT}x of the 160k runs'.
