@@ -464,7 +464,7 @@ def _cli_section(small: list[dict], bigs: list[dict]) -> None:
                 f"{r['peak_mb']:,.0f} | {r['nfev']} | {r['rms_um']:.2f} |")
 
     table = "\n".join(row(r) for r in [*sorted(small, key=lambda r: r["seed"]), *bigs])
-    body = f"""## `aacmm-pin identify` at 1.6M samples (`python benchmarks/identify.py --large`)
+    body = f"""## `aacmm-pin identify` at 1.6M samples (`benchmarks/identify.py --large` or `--cli-large`)
 
 {machine()}. The command as a user runs it: `aacmm-pin identify CAMPAIGN --out DIR` (as
 `python -m aacmm_pin`, its bytecode written beforehand) on the paper-sized campaign repeated 100
