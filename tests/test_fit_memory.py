@@ -48,10 +48,10 @@ def _readouts(arm: ap.Arm, n: int, seed: int = 0) -> np.ndarray:
     return rng.uniform(-np.pi, np.pi, (n, arm.n_axes))
 
 
-def test_positions_in_blocks_are_those_of_one_call(arm: ap.Arm, paper_cal: ap.Calibration,
+def test_positions_in_blocks_are_those_of_one_call(arm: ap.Arm, small_cal: ap.Calibration,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     q = _readouts(arm, 3 * 4096 + 77)
-    params = paper_cal.parameters
+    params = small_cal.parameters
     whole = {frame: kinematics.stylus_positions(arm, params, q, frame) for frame in ("r", "mt")}
     monkeypatch.setattr(kinematics, "POSITIONS_CHUNK", 4096)  # the chain's own block
     for frame, ref in whole.items():
