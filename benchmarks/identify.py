@@ -5,7 +5,8 @@ the number of SPAT samples (1.6k, 16k, 160k): CPU time and peak memory of each.
 
 Run: ``python benchmarks/identify.py`` (about 7 minutes of CPU; writes its section of BENCHMARKS.md);
 ``python benchmarks/identify.py --large``: the 160k and 1.6M-sample points with their peak memory
-(on request: several minutes of CPU, 2-3 GB; its own section).
+(on request: several minutes of CPU, 2-3 GB; its own section), then ``aacmm-pin identify`` as a
+whole process on those campaigns written to disk (``--cli-large`` alone: its own section).
 The larger campaigns repeat the paper-sized campaign's postures with fresh R-Test noise; each runs
 in a process of its own (``python benchmarks/identify.py --case K [SEED]``, K copies, noise draw
 SEED, default 1), so that its peak resident memory is its own.
@@ -386,10 +387,115 @@ with its evaluations: the 160k draws lie within {draw_spread * 100:.0f} % of the
     write_section("identify-large", body)
 
 
+CLI_PEAK_LIMIT_MB = 1024
+"""Issue 41's target: the CLI's peak at 1.6M samples, 1.0 GB in MB of 2^20 bytes (the tables'
+MB, as issue 28's 2 GB is :data:`PEAK_LIMIT_MB`)."""
+CLI_CPU_RATIO_LIMIT = 1.1
+"""Issue 41's target: the CLI's CPU per sample at 1.6M within this factor of the 160k run's."""
+CLI_SMALL_DRAWS = (1, 2, 3, 4)
+"""The 160k CLI runs' noise draws (half before the 1.6M runs, half after them)."""
+CLI_BIG_DRAWS = (1,)
+"""The 1.6M CLI runs' noise draws (each about 3 minutes of CPU)."""
+_MEASURED = """import json, resource, subprocess, sys, time
+t = time.perf_counter()
+run = subprocess.run(sys.argv[1:], capture_output=True, text=True)
+wall = time.perf_counter() - t
+use = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(json.dumps({"rc": run.returncode, "user": use.ru_utime, "sys": use.ru_stime, "wall": wall,
+                  "peak_mb": use.ru_maxrss / 1024, "out": run.stdout, "err": run.stderr}))
+"""
+"""Runs a command in a process of its own and prints its CPU, wall time and peak resident memory
+(``ru_maxrss`` of its only child: this wrapper's children are the command alone)."""
+
+
+def cli_run(folder: Path, out: Path) -> dict:
+    """``aacmm-pin identify FOLDER --out OUT`` as a user runs it, in a fresh process: its CPU
+    (user + system), system share, wall time, peak RSS (MB) and what it printed."""
+    got = subprocess.run([sys.executable, "-c", _MEASURED, sys.executable, "-m", "aacmm_pin",
+                          "identify", str(folder), "--out", str(out)], check=True,
+                         capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    r = json.loads(got.stdout)
+    if r["rc"] != 0:
+        raise RuntimeError(f"identify failed ({r['rc']}): {r['err'][-2000:]}")
+    line = next(ln for ln in r["out"].splitlines() if "fit RMS" in ln)
+    r["cpu"] = r["user"] + r["sys"]
+    r["nfev"] = int(line.split(" evaluations")[0].rsplit("(", 1)[1])
+    r["rms_um"] = float(line.split("fit RMS ")[1].split(" ")[0])
+    r["printed"] = [ln for ln in r["out"].splitlines() if "s -> " not in ln]  # no timings
+    return r
+
+
+def cli_large() -> None:
+    """The CLI at 160k and 1.6M samples (``--cli-large``; part of ``--large``): the campaigns
+    written to disk as the growth table's tiled ones, ``aacmm-pin identify`` on each as a whole
+    process. Writes the section ``identify-cli-large`` of BENCHMARKS.md."""
+    arm = load_arm()
+    sim = simulate_campaign(arm, SimulationConfig(seed=0, samples_per_location=400))
+    compile_package()
+    with tempfile.TemporaryDirectory() as tmp:
+        def run(k: int, seed: int) -> dict:
+            folder = Path(tmp) / f"c{k}_{seed}"
+            if not folder.exists():
+                write_campaign(tiled(sim, k, np.random.default_rng(seed)), folder)
+            r = cli_run(folder, Path(tmp) / f"cal{k}_{seed}_{len(os.listdir(tmp))}")
+            r.update(n=1600 * k, seed=seed)
+            return r
+
+        half = len(CLI_SMALL_DRAWS) // 2
+        small = [run(LARGE[0], s) for s in CLI_SMALL_DRAWS[:half]]
+        bigs = [run(LARGE[1], s) for s in CLI_BIG_DRAWS]
+        small += [run(LARGE[0], s) for s in CLI_SMALL_DRAWS[half:]]
+    _cli_section(small, bigs)
+
+
+def _cli_section(small: list[dict], bigs: list[dict]) -> None:
+    """Write the ``identify-cli-large`` section from the runs (:func:`cli_large`)."""
+    per = np.array([r["cpu"] / r["n"] * 1e6 for r in small])
+    ref = float(np.median(per))
+    big_per = np.array([r["cpu"] / r["n"] * 1e6 for r in bigs])
+    each = pooled(float(np.median(big_per)) / ref, big_per / ref, ".2f",
+                  name="CLI 1.6M / 160k per sample")
+    peak = max(r["peak_mb"] for r in bigs)
+    holds_cpu = bool((big_per / ref).max() <= CLI_CPU_RATIO_LIMIT)
+
+    def row(r: dict) -> str:
+        return (f"| {r['n']:,} | {r['seed']} | {r['wall']:.1f} | {r['cpu']:.1f} | "
+                f"{r['sys'] / r['cpu'] * 100:.0f} | {r['cpu'] / r['n'] * 1e6:.1f} | "
+                f"{r['peak_mb']:,.0f} | {r['nfev']} | {r['rms_um']:.2f} |")
+
+    table = "\n".join(row(r) for r in [*sorted(small, key=lambda r: r["seed"]), *bigs])
+    body = f"""## `aacmm-pin identify` at 1.6M samples (`benchmarks/identify.py --large` or `--cli-large`)
+
+{machine()}. The command as a user runs it: `aacmm-pin identify CAMPAIGN --out DIR` (as
+`python -m aacmm_pin`, its bytecode written beforehand) on the paper-sized campaign repeated 100
+and 1000 times with fresh R-Test noise (the tiled campaigns above) written to disk, one process
+per run: its CPU time (user + system: reading, checking, the fit, writing the calibration folder
+with its URDF-alone loss over every pose), the system time's share, and its peak resident memory
+(`ru_maxrss` of that process alone; MB of 2^20 bytes, as above). The 160k point over {len(small)} noise
+draws (half before the 1.6M runs, half after them), the 1.6M point over {len(bigs)}. Issue 41's
+targets: peak <= {CLI_PEAK_LIMIT_MB:,} MB at 1.6M samples, CPU per sample within
+{CLI_CPU_RATIO_LIMIT}x of the 160k runs'.
+
+| samples | noise draw | wall (s) | CPU (s) | system (%) | CPU per sample (us) | peak (MB) \
+| evaluations | fit RMS (um) |
+|---|---|---|---|---|---|---|---|---|
+{table}
+
+160k (this run): CPU per sample median {ref:.1f} us (range {per.min():.1f} - {per.max():.1f}). \
+1.6M against it: CPU per sample {each} (range: each draw's against this run's 160k median, the \
+draws of this run and of the earlier runs named below); the target ({CLI_CPU_RATIO_LIMIT}x) \
+{'holds' if holds_cpu else 'does not hold'} for every draw of this run. Peak at 1.6M: {peak:,.0f} MB \
+({'within' if peak <= CLI_PEAK_LIMIT_MB else 'above'} the target)."""
+    write_section("identify-cli-large", body)
+
+
 if __name__ == "__main__":
     if len(sys.argv) in (3, 4) and sys.argv[1] == "--case":
         print(json.dumps(run_case(*map(int, sys.argv[2:]))))
     elif sys.argv[1:] == ["--large"]:
         large()
+        cli_large()
+    elif sys.argv[1:] == ["--cli-large"]:
+        cli_large()
     else:
         main()

@@ -12,7 +12,7 @@ SI inside (m); the report's key and the texts in um.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -96,22 +96,41 @@ def urdf_positions(arm: Arm, urdf: UrdfTree, q: np.ndarray) -> np.ndarray:
     Returns:
         Positions in the r-CS, shape (n_tools, N, 3), m.
     """
+    return _urdf_chain(arm, urdf)(q)
+
+
+def _urdf_chain(arm: Arm, urdf: UrdfTree) -> Callable[[np.ndarray], np.ndarray]:
+    """Return :func:`urdf_positions` of this URDF as a function of the readouts (model built once)."""
     tree = urdf.copy()
     for name in arm.off_chain:
         tree.make_fixed(name)
     model = build_model(tree)
     idx = [model.joints[model.getJointId(name)].idx_q for name in arm.axis_names]
-    angles = arm.joint_angles(np.atleast_2d(q))
-    config = np.zeros((len(angles), model.nq))
-    config[:, idx] = angles
     chain = BatchedChain(model)
-    return np.stack([chain.positions(config, np.full(len(angles), model.getFrameId(link)))
-                     for link in arm.tool_links])
+    frames = [model.getFrameId(link) for link in arm.tool_links]
+
+    def positions(q: np.ndarray) -> np.ndarray:
+        angles = arm.joint_angles(np.atleast_2d(q))
+        config = np.zeros((len(angles), model.nq))
+        config[:, idx] = angles
+        return np.stack([chain.positions(config, np.full(len(angles), fid)) for fid in frames])
+
+    return positions
+
+
+LOSS_BLOCK = 65536
+"""Readouts per block of :func:`urdf_alone_loss` without extensions (a multiple of the chain's
+own block: every readout's arithmetic that of one call): the configurations and corrected
+readouts (about 250 bytes per readout) exist for one block only, not for 1.6M readouts at once."""
 
 
 def urdf_alone_loss(arm: Arm, params: Parameters, urdf: UrdfTree, poses: Sequence[Samples]
                     ) -> UrdfLoss:
     """Return how far the URDF alone is from the whole calibration over the poses.
+
+    Every pose (readout row) counts. Without extensions the poses are taken
+    :data:`LOSS_BLOCK` at a time (the same distances, in the same order: the same numbers); with
+    extensions one part at a time (their terms may depend on the neighbouring samples).
 
     Args:
         arm: the arm the parameters calibrate (with its error frames).
@@ -124,14 +143,19 @@ def urdf_alone_loss(arm: Arm, params: Parameters, urdf: UrdfTree, poses: Sequenc
     Raises:
         AacmmError: if an extension needs a column the samples do not have.
     """
+    alone_of = _urdf_chain(arm, urdf)
     distances = []
     for part in poses:
-        if part.n == 0:
-            continue
-        alone = urdf_positions(arm, urdf, part.q)
-        for k in range(arm.n_tools):
-            full = predict(arm, params, part.q, part, tool=k)
-            distances.append(np.linalg.norm(alone[k] - full, axis=1))
+        block = part.n if params.extensions else LOSS_BLOCK
+        per_tool: list[list[np.ndarray]] = [[] for _ in range(arm.n_tools)]
+        for lo in range(0, part.n, max(block, 1)):
+            hi = min(part.n, lo + block)
+            q, samples = part.q[lo:hi], part if hi - lo == part.n else None
+            alone = alone_of(q)
+            for k in range(arm.n_tools):
+                full = predict(arm, params, q, samples, tool=k)
+                per_tool[k].append(np.linalg.norm(alone[k] - full, axis=1))
+        distances += [d for blocks in per_tool for d in blocks]  # by part, tool, then readout
     d = np.concatenate(distances) if distances else np.zeros(0)
     return UrdfLoss(float(np.sqrt(np.mean(d**2))) if d.size else 0.0,
                     float(d.max()) if d.size else 0.0, sum(p.n for p in poses), _missing(arm, params))

@@ -91,9 +91,12 @@ def fit_setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget 
                                    tool=None if samples.tool is None else samples.tool[pts])
         plausibility.check_point_spread(meas.measured[pts], nominal, group[pts],
                                         arm.sizes_label)
-    start = options.start or _initial_frame(arm, Parameters.nominal(arm, options.step_deg),
-                                            q[main], meas.measured[main], group[main],
-                                            None if samples.tool is None else samples.tool[main])
+    # every sample: the columns as they are (a copy only to make them C-ordered, as selecting
+    # rows makes them: the sums of the frame's fit in the same order), not N x n_axes copied
+    rows = _all_rows if main.all() else (lambda a: a[main])
+    start = options.start or _initial_frame(
+        arm, Parameters.nominal(arm, options.step_deg), rows(q), rows(meas.measured), rows(group),
+        None if samples.tool is None else rows(samples.tool))
     axes = tuple(arm.measured_axes) if options.map_axes is None else tuple(options.map_axes)
     if coupled := [a for a in axes if 1 <= a <= arm.n_axes and arm.coupled[a - 1]]:
         raise ValueError(f"map_axes: A{coupled[0]} ({arm.axis_names[coupled[0] - 1]}) is a coupled "
@@ -111,6 +114,11 @@ def fit_setup(campaign: Campaign, arm: Arm, options: FitOptions, budget: Budget 
                               max_nfev=options.solve_nfev, budget=budget)
     return FitSetup(meas, full_u, start, has_spat, sigma_class, stated, base_w, nuisance, measured,
                   nuisance_keys, settings, rob.sample_sources(campaign, options.use_bar), noise)
+
+
+def _all_rows(a: np.ndarray) -> np.ndarray:
+    """Return ``a`` C-ordered: itself if it is (as ``a[mask]`` would be, without the copy)."""
+    return np.ascontiguousarray(a)
 
 
 def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -170,8 +178,9 @@ def _nuisance(arm: Arm, start: Parameters, meas: Measurements, sigma_class: floa
     The measured points are completed with the bar sockets' start positions (the mean of their
     readouts' start-model points); the frames start from a Kabsch fit to the start model.
     """
-    measured = meas.measured.copy()
-    socket = np.isnan(measured[:, 0])
+    socket = np.isnan(meas.measured[:, 0])
+    # completed (sockets): a copy; else the measured points themselves, C-ordered as a copy is
+    measured = meas.measured.copy() if socket.any() else np.ascontiguousarray(meas.measured)
     frame_start = np.zeros((len(meas.frame_groups), 3, 4))
     if socket.any() or meas.frame_groups:
         pred = stylus_positions(arm, start, meas.q, frame="mt", samples=meas.samples)

@@ -355,12 +355,17 @@ class Unknowns:
 
 
 def _buffer(work: dict[str, np.ndarray] | None, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    """Return ``work[name]`` if it has this shape, else a new array (kept there, if ``work``)."""
+    """Return an array of this shape (C order) over ``work[name]``'s storage, if large enough.
+
+    Else a new array (its storage kept there, if ``work``): a campaign's last, shorter chunk
+    uses the front of the buffers, which the next pass's full chunks find as they were.
+    """
     if work is None:
         return np.empty(shape)
-    if name not in work or work[name].shape != shape:
-        work[name] = np.empty(shape)
-    return work[name]
+    size = int(np.prod(shape))
+    if name not in work or work[name].size < size:
+        work[name] = np.empty(size)
+    return work[name][:size].reshape(shape)
 
 
 CHUNK = 16384

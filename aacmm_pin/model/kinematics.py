@@ -328,6 +328,8 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
     ident = arm.identification
     q_read = _readouts_2d(readouts, arm)
     fids = np.asarray(ident.tool_frames)[tool_rows(arm, len(q_read), tool, _matching(samples, q_read))]
+    if adjust is None and len(q_read) > POSITIONS_CHUNK:  # the chain alone: chunk by chunk
+        return _chunked_positions(arm, params, q_read, frame, fids)
     change = _adjusted(adjust, q_read)
     q = identification_configuration(arm, params, q_read, frame, change.offsets)
     out = ident.chain.positions(q, fids)
@@ -337,6 +339,28 @@ def stylus_positions(arm: Arm, params: Parameters, readouts: np.ndarray, frame: 
         out = out + _twist_shift(ident.chain, arm, ident.model, q, fids, change.twists)
     if adjust is not None:
         out = _scaled(out, change.scale, params.translation if frame == "mt" else np.zeros(3))
+    return out
+
+
+POSITIONS_CHUNK = 65536
+"""Samples per block of :func:`stylus_positions` without extensions (a multiple of the chain's
+own block, :data:`~aacmm_pin.model._chain.CHUNK`, so that every sample's arithmetic is that of
+one call): the configurations (8 ``nq`` bytes per sample, 0.5 GB at 1.6M samples of the paper's
+arm) exist for one block only."""
+
+
+def _chunked_positions(arm: Arm, params: Parameters, q_read: np.ndarray, frame: str,
+                       fids: np.ndarray) -> np.ndarray:
+    """Return :func:`stylus_positions` without extensions, block by block, shape (N, 3), m.
+
+    :data:`POSITIONS_CHUNK` samples at a time; ``q_read`` (N, n_axes) rad, ``fids`` the tool
+    frame of every sample, shape (N,).
+    """
+    out = np.empty((len(q_read), 3))
+    for lo in range(0, len(q_read), POSITIONS_CHUNK):
+        hi = min(len(q_read), lo + POSITIONS_CHUNK)
+        config = identification_configuration(arm, params, q_read[lo:hi], frame)
+        out[lo:hi] = arm.identification.chain.positions(config, fids[lo:hi])
     return out
 
 

@@ -62,7 +62,9 @@ class Samples:
         """Per-sample columns by file name (``t_s``, ``temp_c``, ``temp_wrist_c``), shape (N,), SI."""
         self.files = tuple(files)
         """The files the samples come from (``spat.csv``, a readouts file), or empty."""
-        self.displacement = displacement
+        self._displacement = displacement
+        self._spat: SpatLog | None = None
+        """The SPAT log whose displacements :attr:`displacement` takes when first asked for."""
         self._gravity: np.ndarray | None = None
         self._lateral_gravity: np.ndarray | None = None
         self._direction: np.ndarray | None = None if direction is None else np.asarray(
@@ -81,13 +83,26 @@ class Samples:
 
     @classmethod
     def of_spat(cls, arm: Arm, spat: SpatLog) -> Samples:
-        """Return the SPAT samples, with each R-Test displacement less its location's mean."""
-        dev = spat.displacement.copy()
-        for m in np.unique(spat.location):
-            sel = spat.location == m
-            dev[sel] -= dev[sel].mean(axis=0)
-        return cls(arm, spat.q, displacement=dev, location=spat.location, columns=spat.columns,
-                   files=("spat.csv",))
+        """Return the SPAT samples, with each R-Test displacement less its location's mean.
+
+        The displacements are taken when first asked for (:attr:`displacement`): a fit without an
+        R-Test term holds no copy of them (38 MB at 1.6M samples).
+        """
+        out = cls(arm, spat.q, location=spat.location, columns=spat.columns, files=("spat.csv",))
+        out._spat = spat
+        return out
+
+    @property
+    def displacement(self) -> np.ndarray | None:
+        """R-Test displacement less its location's mean, shape (N, 3), m, or None."""
+        if self._displacement is None and self._spat is not None:
+            spat, self._spat = self._spat, None
+            dev = spat.displacement.copy()
+            for m in np.unique(spat.location):
+                sel = spat.location == m
+                dev[sel] -= dev[sel].mean(axis=0)
+            self._displacement = dev
+        return self._displacement
 
     @classmethod
     def concatenate(cls, parts: Sequence[Samples]) -> Samples:
