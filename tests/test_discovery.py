@@ -8,6 +8,7 @@ Simulated campaigns hide one effect; the loop is not told which. The noise is th
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -201,6 +202,10 @@ def test_cli_writes_report_figures_and_a_caldir_predict_and_validate_use(arm: ap
         assert key in step
     assert step["effect"] == "thermal" and report["missing"] == []
     assert report["stopped_because"]
+    # the family-wise false-alarm rate it ran at, split once over the search and the scan
+    rate = report["false_alarm"]
+    assert rate["rate"] == 0.01 and rate["candidates_searched"] >= report["candidates_scored"][0]
+    assert rate["search"] + rate["structure"] + rate["noise"] == pytest.approx(0.01)
     assert (out / "discovery_gap.png").stat().st_size > 10_000
     assert (out / "discovery_step1.png").stat().st_size > 10_000
     params = ap.read_parameters(out)
@@ -235,10 +240,13 @@ def test_cli_prints_each_result_before_any_figure(arm: ap.Arm, tmp_path, monkeyp
 
     monkeypatch.setattr(figures, "write_discovery", writer)
     assert main(["discover", str(tmp_path / "camp"), "--start", "proposed", "--max-steps", "1",
-                 "--out", str(tmp_path / "disc")]) == 0
+                 "--false-alarm", "0.02", "--out", str(tmp_path / "disc")]) == 0
     before = printed_before[0].splitlines()
     assert before and before[0].startswith("start proposed: held-out RMS "), before
     assert any(line.startswith("step 1: thermal: held-out RMS ") for line in before)
+    assert any(re.fullmatch(r"searched \d+ candidates at 2 % family-wise \(0\.2 % the candidates "
+                            r"over the steps, 1 % the residual's structure, 0\.8 % its noise\)",
+                            line) for line in before), before
     assert before[-1].startswith(("stopped: ", "residual: ", "unexplained: "))
     assert capsys.readouterr().out.startswith("wrote ")  # only the file list after the figures
 
@@ -275,6 +283,9 @@ def test_unknown_start_or_effect_is_a_message(arm: ap.Arm) -> None:
         discover(sim.campaign, arm, "full")
     with pytest.raises(ValueError, match="unknown"):
         discover(sim.campaign, arm, "dh", effects=["gravity"])
+    for rate in (0.0, 1.0, -0.01):
+        with pytest.raises(ap.AacmmError, match="false-alarm rate"):
+            discover(sim.campaign, arm, "dh", false_alarm=rate)
 
 
 class _Creep(ap.Effect):

@@ -13,8 +13,9 @@ The loop (:func:`discover`):
    * the length-bar error, when the campaign has a bar: the candidate's linearised change of the bar
      errors, normalised by their predicted covariance (:mod:`aacmm_pin.analyses.bar_linear`: what the SPATs
      leave unknown, e.g. the nests' scale or map nodes only the bar visits, weighs little);
-   * an F test of the fit improvement against the noise level (Bonferroni over the candidates) and
-     the BIC change, with the term's effective number of parameters;
+   * an F test of the fit improvement against the noise level (Bonferroni over the candidates at
+     the search's share of the false-alarm rate, :class:`~aacmm_pin.analyses.false_alarm.FalseAlarm`)
+     and the BIC change, with the term's effective number of parameters;
 3. the best term (largest held-out improvement: leave-one-location-out plus length bar, both in
    chi-square units) that is significant, improves the BIC and the held-out score is named;
    further axes of the same effect join it while they stay significant
@@ -23,7 +24,12 @@ The loop (:func:`discover`):
 5. scan the final model's residual (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`): against the
    campaign's stated noise (:class:`aacmm_pin.data.campaign.StatedNoise`) and for structure along every
    per-sample variable (time, temperature, angles, gravity torques, displacement, motion): what
-   no effect of the library explains (:attr:`Discovery.unexplained`).
+   no effect of the library explains (:attr:`Discovery.unexplained`), at the scan's shares of the
+   false-alarm rate.
+
+The family-wise false-alarm rate (default 1 %, ``false_alarm``) is spent once over the steps, the
+candidates and the scan (:mod:`aacmm_pin.analyses.false_alarm`): on a campaign where nothing is
+missing, at most that share of runs names anything or calls the residual unexplained.
 
 Held-out RMS after a step is measured on the refitted model, and so are the length-bar errors (when
 the campaign has a bar): their RMS (as :func:`aacmm_pin.validate`), their RMS over the bar readouts
@@ -41,6 +47,7 @@ import numpy as np
 from aacmm_pin._blas import single_threaded_blas
 from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
+from aacmm_pin.analyses.false_alarm import FALSE_ALARM, FalseAlarm
 from aacmm_pin.analyses.linear_scorer import LinearScorer
 from aacmm_pin.analyses.residual_scan import TIME, Scan, scan_residuals
 from aacmm_pin.analyses.term_elimination import Dropped, eliminate
@@ -57,8 +64,6 @@ from aacmm_pin.model.samples import Samples
 from aacmm_pin.progress import Progress
 
 STARTS = ("dh", "proposed")
-ALPHA = 1e-3
-"""Family-wise error rate of one step's F tests (Bonferroni over the candidates)."""
 StartReport = Callable[[float, float, "float | None", dict[str, float]], None]
 """``(held-out RMS m, fit RMS m, length-bar RMS m or None, size factors)`` of the start model,
 called once it is fitted."""
@@ -95,7 +100,7 @@ def _linear_bar(arm: Arm, cal: Calibration, campaign: Campaign) -> LinearBar | N
 
 def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
              effects: list[str] | None = None, use_rtest: bool = True, max_steps: int = 6,
-             alpha: float = ALPHA, max_nfev: int | None = None, progress: bool = False,
+             false_alarm: float = FALSE_ALARM, max_nfev: int | None = None, progress: bool = False,
              noise: StatedNoise | None = None, on_start: StartReport | None = None,
              on_step: StepReport | None = None) -> Discovery:
     """Find the effects the ``start`` model is missing on a campaign, add them and refit.
@@ -114,7 +119,10 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
             (:attr:`Discovery.widened`); ``["all"]``: every registered effect).
         use_rtest: whether the start model uses each sample's R-Test displacement.
         max_steps: most effects to add.
-        alpha: family-wise error rate of a step's significance tests (Bonferroni).
+        false_alarm: family-wise false-alarm rate of the whole discovery (the steps' searches
+            and the residual scan; :class:`~aacmm_pin.analyses.false_alarm.FalseAlarm`): on a
+            campaign where nothing is missing, the chance that anything is named or called
+            unexplained.
         max_nfev: most residual evaluations of all the discovery's fits together (the start, each
             step's refit, the refits after dropped terms; each fit stops at its tolerance);
             None: :data:`MAX_NFEV_PER_FIT` x (``max_steps`` + 1). A step's fit that spends it
@@ -134,10 +142,11 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         that no effect explains.
 
     Raises:
-        ValueError: for an unknown start or effect name.
+        ValueError: for an unknown start or effect name, or a false-alarm rate outside (0, 1).
         IdentificationError: if the campaign cannot be identified (see :func:`identify`).
         FitCapReached: if the start model's fit spends ``max_nfev``.
     """
+    rate = FalseAlarm(false_alarm)
     if start not in STARTS:
         raise ValueError(f"start: choose from {', '.join(STARTS)}, got {start!r}")
     known = library()
@@ -148,7 +157,7 @@ def discover(campaign: Campaign, arm: Arm | None = None, start: str = "dh", *,
         raise ValueError(f"effects: unknown {unknown}; the library has {', '.join(known)}")
     with single_threaded_blas():  # many small products: threads only spin
         budget = MAX_NFEV_PER_FIT * (max_steps + 1) if max_nfev is None else max_nfev
-        return _discover(campaign, arm, start, names, use_rtest, max_steps, alpha, budget,
+        return _discover(campaign, arm, start, names, use_rtest, max_steps, rate, budget,
                          progress, noise or campaign.noise or StatedNoise(),
                          (on_start or _quiet_start, on_step or _quiet_step), effects is None)
 
@@ -163,10 +172,10 @@ def _quiet_step(k: int, step: Step) -> None:
 
 
 def _discover(campaign: Campaign, arm: Arm | None, start: str, names: list[str], use_rtest: bool,
-              max_steps: int, alpha: float, max_nfev: int, progress: bool, noise: StatedNoise,
+              max_steps: int, rate: FalseAlarm, max_nfev: int, progress: bool, noise: StatedNoise,
               report: tuple[StartReport, StepReport], widen: bool = False) -> Discovery:
     tic = time.perf_counter()
-    search = _Search(campaign, arm or load_arm(), start, names, use_rtest, alpha, max_nfev, noise)
+    search = _Search(campaign, arm or load_arm(), start, names, use_rtest, rate, max_nfev, noise)
     search.begin(report[0])
     ticker = Progress("discover", "step", total=max_steps, enabled=progress)
     while True:
@@ -186,9 +195,10 @@ class _Search:
     """
 
     def __init__(self, campaign: Campaign, arm: Arm, start: str, names: list[str],
-                 use_rtest: bool, alpha: float, max_nfev: int, noise: StatedNoise):
+                 use_rtest: bool, rate: FalseAlarm, max_nfev: int, noise: StatedNoise):
         self.campaign, self.arm, self.start, self.names = campaign, arm, start, names
-        self.alpha, self.max_nfev, self.noise = alpha, max_nfev, noise
+        self.rate, self.alpha = rate, rate.search  # the search's share, spent once over the steps
+        self.max_nfev, self.noise = max_nfev, noise
         self.meas = measurements(campaign, arm, use_rtest, noise=noise)
         self.samples = self.meas.samples
         self.spec = ModelSpec((), tuple(arm.measured_axes) if start == "proposed" else (),
@@ -198,6 +208,7 @@ class _Search:
         self.left = max_nfev  # evaluations left to all the fits below together
         self.steps: list[Step] = []
         self.n_candidates: list[int] = []
+        self.searched: set[str] = set()  # keys of every candidate scored
         self.named_in: dict[str, int] = {}  # term key -> step that named it
         self.missing: list[dict[str, Any]] = []
         self.stopped, self.capped, self.failed = "", False, False
@@ -254,6 +265,7 @@ class _Search:
         out = [t for e in self.effects for t in e.offered(self.arm, self.samples)
                if not t.in_model(self.spec) and t.key not in self.named_in]
         self.n_candidates.append(len(out))
+        self.searched.update(t.key for t in out)
         return out
 
     def steps_up_to(self, max_steps: int, on_step: StepReport, ticker: Progress) -> None:
@@ -364,7 +376,7 @@ class _Search:
     def scan(self) -> Scan:
         """Return the residual scan of the model so far (:func:`_residual_scan`)."""
         return _residual_scan(self.arm, self.cal, self.lin, self.samples, self.campaign,
-                              self.meas, self.noise, self.names)
+                              self.meas, self.noise, self.names, self.rate)
 
     def result(self, runtime_s: float) -> Discovery:
         """Return the discovery: the steps, the final model and its scanned residual."""
@@ -387,20 +399,23 @@ class _Search:
             bar_covered_fraction=None if bar_now is None else float(np.mean(bar_now.covered)),
             noise=self.cal.sigma, n_candidates=self.n_candidates, runtime_s=runtime_s,
             size_factors=self.factors, scan=scan, stated_noise=self.noise, capped=self.capped,
-            failed=self.failed, widened=tuple(self.widened), left_out=tuple(self.left_out))
+            failed=self.failed, widened=tuple(self.widened), left_out=tuple(self.left_out),
+            false_alarm=self.rate, searched=len(self.searched))
 
 
 def _residual_scan(arm: Arm, cal: Calibration, lin: LinearScorer, samples: Samples,
-                   campaign: Campaign, meas: Measurements, noise: StatedNoise, names: list[str]
-                   ) -> Scan:
+                   campaign: Campaign, meas: Measurements, noise: StatedNoise, names: list[str],
+                   rate: FalseAlarm) -> Scan:
     """Return the residual of ``cal`` scanned against the stated noise (:func:`scan_residuals`).
 
-    Every variable of the effects ``names`` and of the default ones is tested.
+    Every variable of the effects ``names`` and of the default ones is tested, at the scan's
+    shares of the false-alarm ``rate``.
     """
     tools = np.concatenate(list(cal.parameters.tool_vectors(arm).values()))
     return scan_residuals(cal, samples, stated_noise(campaign, meas, noise),
                           np.einsum("nij,j->ni", lin.stylus.tool, tools),
-                          [library()[n] for n in dict.fromkeys(default_effects() + names)])
+                          [library()[n] for n in dict.fromkeys(default_effects() + names)],
+                          (rate.noise, rate.structure))
 
 
 def _capped(cal: Calibration) -> bool:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from aacmm_pin.analyses.false_alarm import FalseAlarm
 from aacmm_pin.analyses.residual_scan import Scan
 from aacmm_pin.analyses.term_elimination import Dropped
 from aacmm_pin.data.campaign import StatedNoise
@@ -218,6 +219,14 @@ class Discovery:
     left_out: tuple[LeftOut, ...] = ()
     """Effects asked for but not tried: the samples lack a column they declare
     (:attr:`aacmm_pin.effects.Effect.reads`; :func:`aacmm_pin.effects.contract.usable_effects`)."""
+    false_alarm: FalseAlarm = field(default_factory=FalseAlarm)
+    """The family-wise false-alarm rate the discovery ran at, and its split."""
+    searched: int = 0
+    """Candidates scored over all the steps (each counted once)."""
+
+    def false_alarm_text(self) -> str:
+        """Return ``searched 38 candidates at 1 % family-wise (...)``."""
+        return self.false_alarm.text(self.searched)
 
     def left_out_text(self, named: bool = True) -> str:
         """Return ``left out: fixture_creep (no column strain_um), ...``, or "" when none is.
@@ -266,6 +275,7 @@ class Discovery:
                       "noise_um": self.noise * 1e6},
             "unexplained": self.unexplained,
             "stated_noise_um": None if self.stated_noise is None else self.stated_noise.to_um(),
-            "candidates_scored": self.n_candidates, "runtime_s": self.runtime_s,
+            "candidates_scored": self.n_candidates,
+            "false_alarm": self.false_alarm.to_dict(self.searched), "runtime_s": self.runtime_s,
             "library": {name: e.description for name, e in library().items()},
         }

@@ -21,7 +21,9 @@ in two ways (:func:`scan_residuals`):
   ones are ranked by p-value (time is reported once, see :func:`_within_better`).
 
 The residual is *unexplained* when its chi-square exceeds the stated noise's (level
-:data:`ALPHA_NOISE`) or a variable carries structure (family-wise level :data:`ALPHA_STRUCTURE`).
+:data:`ALPHA_NOISE`) or a variable carries structure (family-wise level :data:`ALPHA_STRUCTURE`);
+discovery passes its own shares of its false-alarm rate
+(:class:`aacmm_pin.analyses.false_alarm.FalseAlarm`).
 """
 
 from __future__ import annotations
@@ -103,6 +105,10 @@ class Scan:
     suspects: tuple[str, ...] = ()
     """Keys of library terms not in the model whose variable the residual follows (set by
     :func:`aacmm_pin.discover`): they use it, yet were not named."""
+    alpha_noise: float = ALPHA_NOISE
+    """Level of the chi-square test against the stated noise."""
+    alpha_structure: float = ALPHA_STRUCTURE
+    """Family-wise level of the structure tests (Holm over the variables)."""
 
     @property
     def noise_ratio(self) -> float:
@@ -112,12 +118,12 @@ class Scan:
     @property
     def structure(self) -> list[Structure]:
         """The variables that carry structure (Holm), best first."""
-        return [v for v in self.variables if v.p_value < ALPHA_STRUCTURE]
+        return [v for v in self.variables if v.p_value < self.alpha_structure]
 
     @property
     def noise_consistent(self) -> bool:
         """Whether the residual is consistent with the stated noise (chi-square test)."""
-        return self.p_value >= ALPHA_NOISE
+        return self.p_value >= self.alpha_noise
 
     @property
     def unexplained(self) -> bool:
@@ -251,14 +257,14 @@ def _indicators(index: np.ndarray) -> np.ndarray:
 
 
 def _within_better(designs: dict[str, np.ndarray], white: np.ndarray, loc_design: np.ndarray,
-                   ssr: float, dof: float) -> bool:
+                   ssr: float, dof: float, alpha: float = ALPHA_STRUCTURE) -> bool:
     """Whether time within each location explains significantly more than time over the campaign.
 
     With the locations measured one after the other and each nest's offset free, a creep at one
     rate in every location *is* a drift over the campaign (the offsets take the steps), so a fit of
     time over the campaign follows either; one within each location is said only if its extra fit
-    is significant (extra-sum-of-squares F test at :data:`ALPHA_STRUCTURE`): a creep of its own
-    shape or direction per location.
+    is significant (extra-sum-of-squares F test at ``alpha``, the structure tests' level): a creep
+    of its own shape or direction per location.
     """
     small = np.hstack([loc_design, designs[OVERALL]])
     ss_small, rank_small = _projected_ss(white, small)
@@ -269,7 +275,7 @@ def _within_better(designs: dict[str, np.ndarray], white: np.ndarray, loc_design
         return False
     rest = max(ssr - (ss_big - ss_loc), 1e-300)
     return bool(f_sf(((ss_big - ss_small) / k) / (rest / dof_rest), k, dof_rest)
-                < ALPHA_STRUCTURE)
+                < alpha)
 
 
 def _merge_time(ranked: list[Structure], within_better: bool) -> list[Structure]:
@@ -334,8 +340,8 @@ def _holm(found: list[tuple[Structure, float]]) -> list[Structure]:
 
 
 def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray,
-                   stylus: np.ndarray | None = None, effects: Iterable[Effect] | None = None
-                   ) -> Scan:
+                   stylus: np.ndarray | None = None, effects: Iterable[Effect] | None = None,
+                   levels: tuple[float, float] = (ALPHA_NOISE, ALPHA_STRUCTURE)) -> Scan:
     """Judge a calibration's residual against the stated noise and test it for structure.
 
     Args:
@@ -348,6 +354,9 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
             frame, shape (N, 3), m, or None: its inclination and azimuth are variables too.
         effects: the effects whose variables are tested (default: those tried by default,
             :attr:`aacmm_pin.effects.Effect.by_default`; discovery adds those it was asked to try).
+        levels: the levels of the test against the stated noise and of the structure tests
+            (family-wise, Holm): discovery's shares of its false-alarm rate
+            (:class:`aacmm_pin.analyses.false_alarm.FalseAlarm`).
 
     Returns:
         The scan (see the module doc); :attr:`Scan.unexplained` says whether something is missing.
@@ -394,9 +403,10 @@ def scan_residuals(cal: Calibration, samples: Samples, noise: float | np.ndarray
     ranked = _holm(found)
     if WITHIN in designs and OVERALL in designs:
         ranked = _merge_time(ranked, _within_better(designs, white, loc_design, total - ss_loc,
-                                                    dof))
+                                                    dof, levels[1]))
     return Scan(fit_rms=float(np.sqrt(np.mean(residual ** 2))), noise=noise_rms, chi2=ssr_stated,
                 dof=dof, p_value=float(chi2_sf(ssr_stated, dof)), variables=ranked,
                 residual=centred, location=location,
                 location_ratio={int(m): float(np.sqrt(np.mean(white[location == m] ** 2)))
-                              for m in np.unique(location)})
+                              for m in np.unique(location)},
+                alpha_noise=levels[0], alpha_structure=levels[1])

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from aacmm_pin.analyses.false_alarm import FALSE_ALARM
 from aacmm_pin.cli._options import (
     add_command,
     campaign_inputs,
@@ -62,6 +63,7 @@ def _discover_into(args: argparse.Namespace) -> int:
         result = discover(campaign, arm, args.start, effects=effects,
                           use_rtest=not args.no_rtest, max_steps=args.max_steps,
                           max_nfev=args.max_nfev, progress=True, noise=noise,
+                          false_alarm=args.false_alarm,
                           on_start=functools.partial(
                               _print_discovery_start_sizes, args.start, arm,
                               noise_summary(campaign, noise if given else None)),
@@ -72,6 +74,7 @@ def _discover_into(args: argparse.Namespace) -> int:
     if not result.steps:
         print("nothing is missing")
     print(f"stopped: {result.stopped_because}")
+    print(result.false_alarm_text())
     if left_out := result.left_out_text(named=effects is not None):  # their columns missing
         print(left_out)
     if result.widened:
@@ -131,6 +134,14 @@ def _print_discovery_step(k: int, step: Step) -> None:
     sys.stdout.flush()
 
 
+def _rate(text: str) -> float:
+    """Return a false-alarm rate in (0, 1) (an argparse type)."""
+    value = positive()(text)
+    if value >= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a rate below 1 (e.g. 0.01), got {text!r}")
+    return float(value)
+
+
 def add_discover_parser(subparsers: Any, arm: argparse.ArgumentParser) -> None:
     """Add ``discover`` (``arm``: the shared ``--arm`` parent)."""
     p = add_command(subparsers, "discover", "find what a model is missing: name the effect, add "
@@ -152,6 +163,11 @@ def add_discover_parser(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                         "tried only when named: lateral_compliance)")
     p.add_argument("--max-steps", type=positive(int, zero=True), default=6,
                    help="most effects to add")
+    p.add_argument("--false-alarm", type=_rate, default=FALSE_ALARM,
+                   help="family-wise false-alarm rate of the whole discovery, spent once over "
+                        "the steps' candidates and the residual scan: on a campaign where "
+                        f"nothing is missing, the chance that anything is named or called "
+                        f"unexplained (default {FALSE_ALARM:g})")
     for kind, what, default in (("rtest", "R-Test gauge reading", "2"),
                                 ("location", "R-Test nest (zero) position", "3"),
                                 ("point", "tool point of an instrument", "20")):
