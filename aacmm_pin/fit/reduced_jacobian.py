@@ -207,45 +207,7 @@ class ReducedJacobian(DataRows):
             g, g2 = g / np.sqrt(g2), 1.0
         b_mat = np.eye(g.size) - np.outer(g, g) / (1.0 + np.sqrt(1.0 - g2))  # (I - g g^T)^(1/2)
 
-        def reflector() -> np.ndarray:
-            """Return H's vector ``w = f / |f| - e1``, shape (n_rows,).
-
-            Made when used: the operator holds no (n_rows,) vector of its own (38 MB at 1.6M
-            samples) beside the residual the solver holds.
-            """
-            w = f / size if size > 0.0 else np.zeros_like(f)
-            w[0] -= 1.0
-            return w
-
-        w0 = reflector()
-        ww = float(w0 @ w0)
-        del w0
-        n_z, n_rows = g.size, f.size
-
-        def reflect(u: np.ndarray, own: bool = False) -> np.ndarray:
-            """H u: ``u - (2 w.u / w.w) w`` in one new vector of n_rows (u itself if ``own``)."""
-            if ww <= 1e-300:
-                return u if own else u.copy()
-            w = reflector()
-            c = 2.0 * float(w @ u) / ww
-            np.multiply(w, -c, out=w)  # u + (-c w): the same numbers as u - c w
-            w += u
-            return w
-
-        def matvec(v: np.ndarray) -> np.ndarray:
-            t = r @ np.ravel(v)
-            top = np.zeros(n_rows)
-            top[0] = g @ t
-            top[1:n_z + 1] = b_mat @ t
-            return reflect(top, own=True)
-
-        def rmatvec(u: np.ndarray) -> np.ndarray:
-            h = reflect(np.ravel(u))
-            out: np.ndarray = r.T @ (g * h[0] + b_mat @ h[1:n_z + 1])
-            return out
-
-        op = LinearOperator(shape=(n_rows, n_z), dtype=float, matvec=matvec, rmatvec=rmatvec)
-        return op, [jac]
+        return _compressed_operator(f, size, r, g, b_mat), [jac]
 
     def factor(self, z: np.ndarray) -> Factor:
         """Return the reduced QR factors of the dense Jacobian at z."""
@@ -327,3 +289,54 @@ class ReducedJacobian(DataRows):
             if np.linalg.norm(step) < 1e-12 * max(1.0, float(np.linalg.norm(z))):
                 return z, True
         return z, False
+
+
+def _compressed_operator(f: np.ndarray, size: float, r: np.ndarray, g: np.ndarray,
+                         b_mat: np.ndarray) -> LinearOperator:
+    """Return :meth:`ReducedJacobian.compressed`'s ``K = H [g^T; B; 0] R``, shape (n_rows, n_z).
+
+    Args:
+        f: the residual, shape (n_rows,), m.
+        size: ``|f|``, m.
+        r: R, shape (n_z, n_z).
+        g: the residual's coefficients on the columns' orthonormal basis over ``|f|``, (n_z,).
+        b_mat: ``B = (I - g g^T)^(1/2)``, shape (n_z, n_z).
+    """
+    def reflector() -> np.ndarray:
+        """Return H's vector ``w = f / |f| - e1``, shape (n_rows,).
+
+        Made when used: the operator holds no (n_rows,) vector of its own (38 MB at 1.6M
+        samples) beside the residual the solver holds.
+        """
+        w = f / size if size > 0.0 else np.zeros_like(f)
+        w[0] -= 1.0
+        return w
+
+    w0 = reflector()
+    ww = float(w0 @ w0)
+    del w0
+    n_z, n_rows = g.size, f.size
+
+    def reflect(u: np.ndarray, own: bool = False) -> np.ndarray:
+        """H u: ``u - (2 w.u / w.w) w`` in one new vector of n_rows (u itself if ``own``)."""
+        if ww <= 1e-300:
+            return u if own else u.copy()
+        w = reflector()
+        c = 2.0 * float(w @ u) / ww
+        np.multiply(w, -c, out=w)  # u + (-c w): the same numbers as u - c w
+        w += u
+        return w
+
+    def matvec(v: np.ndarray) -> np.ndarray:
+        t = r @ np.ravel(v)
+        top = np.zeros(n_rows)
+        top[0] = g @ t
+        top[1:n_z + 1] = b_mat @ t
+        return reflect(top, own=True)
+
+    def rmatvec(u: np.ndarray) -> np.ndarray:
+        h = reflect(np.ravel(u))
+        out: np.ndarray = r.T @ (g * h[0] + b_mat @ h[1:n_z + 1])
+        return out
+
+    return LinearOperator(shape=(n_rows, n_z), dtype=float, matvec=matvec, rmatvec=rmatvec)
