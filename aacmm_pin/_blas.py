@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import threading
 from collections.abc import Iterator
 
@@ -15,10 +16,31 @@ def started_single_threaded() -> None:
 
     Called by the command line, which sets the BLAS thread variables before numpy is loaded
     (``aacmm_pin.cli.one_blas_thread_at_start``): :func:`single_threaded_blas` then has nothing
-    to limit and skips ``threadpoolctl`` (importing it and finding the libraries: ~20 ms of each
+    to limit where numpy's and SciPy's BLAS read that variable (their wheels' OpenBLAS) and skips
+    ``threadpoolctl`` (importing it and finding the libraries: ~20 ms of each
     ``identify``).
     """
     _STARTED_SINGLE_THREADED[0] = True
+
+
+@functools.cache
+def _threads_from_environment() -> bool:
+    """Whether numpy's and SciPy's BLAS take their threads from ``OPENBLAS_NUM_THREADS``.
+
+    True for the OpenBLAS of their wheels (scipy-openblas, built with its own threads); an
+    OpenMP build of OpenBLAS, MKL or BLIS may follow other variables, so there the limit of
+    :func:`single_threaded_blas` is set as for any process (``threadpoolctl``).
+    """
+    import numpy
+    import scipy
+
+    for package in (numpy, scipy):
+        blas = getattr(package, "__config__", None)
+        info = getattr(blas, "CONFIG", {}).get("Build Dependencies", {}).get("blas", {})
+        if not (str(info.get("name", "")).startswith("scipy-openblas")
+                and "USE_OPENMP=1" not in str(info.get("openblas configuration", ""))):
+            return False
+    return True
 
 
 @contextlib.contextmanager
@@ -30,7 +52,8 @@ def single_threaded_blas() -> Iterator[None]:
     process-wide: it is set only from a main thread (serial, or a worker process), never from the
     threads of a thread pool, which would undo each other's limits.
     """
-    if _STARTED_SINGLE_THREADED[0] or threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or (
+            _STARTED_SINGLE_THREADED[0] and _threads_from_environment()):
         yield
         return
     from threadpoolctl import threadpool_limits

@@ -19,6 +19,7 @@ import copy
 import hashlib
 import math
 import re
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
@@ -68,6 +69,7 @@ class Joint:
 
 _READ: OrderedDict[tuple[str, bytes, tuple[int | None, ...]], tuple[Joint, ...]] = OrderedDict()
 """Joints read, by path, the tree's text and its joints' lines (:meth:`UrdfTree.joints`)."""
+_READ_LOCK = threading.Lock()
 _READ_KEPT = 32
 """Most trees whose joints are remembered (the least recently read are forgotten)."""
 
@@ -149,13 +151,16 @@ class UrdfTree:
         """
         key = (str(self.path), hashlib.blake2b(etree.tostring(self.root)).digest(),
                tuple(e.sourceline for e in self.root.iterfind("joint")))
-        known = _READ.get(key)
+        with _READ_LOCK:  # threads of a pool may read trees at once
+            known = _READ.get(key)
+            if known is not None:
+                _READ.move_to_end(key)
         if known is None:
-            known = _READ[key] = tuple(self._read_joints())
-            while len(_READ) > _READ_KEPT:
-                _READ.popitem(last=False)
-        else:
-            _READ.move_to_end(key)
+            known = tuple(self._read_joints())
+            with _READ_LOCK:
+                _READ[key] = known
+                while len(_READ) > _READ_KEPT:
+                    _READ.popitem(last=False)
         return list(known)
 
     def _read_joints(self) -> list[Joint]:
