@@ -68,6 +68,37 @@ def test_every_command_has_a_handler():
         assert callable(parser.get_default("handler")), path
 
 
+def test_the_command_index_lists_every_command_in_order():
+    """``cli.COMMANDS`` (what a command line's first word builds alone) is the full parser's list."""
+    subs = [a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    assert list(subs[0].choices) == list(cli.COMMANDS)
+
+
+@pytest.mark.parametrize("command", list(cli.COMMANDS))
+def test_a_command_built_alone_parses_and_helps_as_in_the_full_parser(command):
+    """``build_parser(command)`` gives the command the same usage, help, actions and defaults.
+
+    Only the first word of a command line selects (``aacmm-pin identify ...``); a word that is no
+    command builds them all, so argparse names every choice in its error.
+    """
+    def described(action: argparse.Action) -> tuple:
+        kind = getattr(action.type, "__qualname__", action.type)  # a closure: one per build
+        return action.dest, action.default, kind, action.choices, action.option_strings
+
+    def parsers(parser: argparse.ArgumentParser) -> dict[tuple[str, ...], argparse.ArgumentParser]:
+        return {path: leaf for path, leaf in leaves(parser) if path[0] == command}
+
+    full, alone = parsers(cli.build_parser()), parsers(cli.build_parser(command))
+    assert list(full) == list(alone) and full
+    for path, parser in full.items():
+        assert alone[path].format_help() == parser.format_help(), path
+        assert [described(a) for a in alone[path]._actions] == \
+            [described(a) for a in parser._actions], path
+        handlers = alone[path].get_default("handler"), parser.get_default("handler")
+        assert handlers[0].__qualname__ == handlers[1].__qualname__  # closures: one per build
+    assert dict(leaves(cli.build_parser("identfy"))).keys() == COMMANDS
+
+
 @pytest.mark.parametrize("path", sorted(COMMANDS), ids=" ".join)
 def test_help_shows_every_default(path, capsys):
     """``--help`` of each subcommand exits 0, documents every argument and shows its defaults."""

@@ -15,7 +15,7 @@ import pytest
 
 import aacmm_pin as ap
 from aacmm_pin.analyses.discovery import discover
-from aacmm_pin.cli.calibration import _print_discovery_step
+from aacmm_pin.cli.discovery import _print_discovery_step
 
 HIDDEN = ("compliance[A2]", "crosstalk[A4<-A3]")
 EFFECTS = ("dh", "encoder", "rtest", "compliance", "crosstalk")

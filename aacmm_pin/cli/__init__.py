@@ -1,22 +1,26 @@
 """The ``aacmm-pin`` command: :func:`main`, and one module of subcommands per group.
 
-* :mod:`~aacmm_pin.cli.calibration`: ``simulate``, ``predict``, ``identify``, ``discover``,
+* :mod:`~aacmm_pin.cli.calibration`: ``axes``, ``simulate``, ``predict``, ``identify``,
   ``validate``, ``uncertainty``, ``plan``, ``demo``;
+* :mod:`~aacmm_pin.cli.discovery`: ``discover``;
 * :mod:`~aacmm_pin.cli.viewer`: ``view``;
 * :mod:`~aacmm_pin.cli.acquisition`: ``acquire``, ``fake-devices``;
 * :mod:`~aacmm_pin.cli.iso10360`: ``iso10360 spat|sphere|ldia|euni``;
 * :mod:`~aacmm_pin.cli.importing`: ``import-points``.
 
-Each module's ``add_parsers(subparsers)`` adds its commands; every leaf parser sets ``handler``,
-a thin function of the parsed arguments that calls the public API, prints and returns the exit
-status. Building the parser imports neither Pinocchio, yourdfpy, scipy nor matplotlib: the
-handlers import what they need, so ``aacmm-pin --help`` and ``--version`` answer at once.
+Each module's ``PARSERS`` maps its commands to the functions that add their parsers
+(:func:`build_parser` builds only the command a command line names: :data:`COMMANDS`); every leaf
+parser sets ``handler``, a thin function of the parsed arguments that calls the public API, prints
+and returns the exit status. Building the parser imports neither Pinocchio, yourdfpy, scipy nor
+matplotlib: the handlers import what they need, so ``aacmm-pin --help`` and ``--version`` answer
+at once.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import os
 import signal
 import sys
@@ -25,7 +29,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from aacmm_pin._blas import started_single_threaded
-from aacmm_pin.cli import acquisition, calibration, importing, iso10360, viewer
+from aacmm_pin.cli._collector import imports_uncollected
 from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, load_effect_files
 from aacmm_pin.errors import AacmmError, CampaignWarning, StaleOutputWarning
 from aacmm_pin.interrupts import Terminated, sigint_handler, sigterm_as_interrupt
@@ -59,8 +63,23 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the argument parser of ``aacmm-pin``."""
+COMMANDS = {"axes": "calibration", "simulate": "calibration", "predict": "calibration",
+            "identify": "calibration", "discover": "discovery", "validate": "calibration",
+            "uncertainty": "calibration", "plan": "calibration", "demo": "calibration",
+            "view": "viewer", "acquire": "acquisition", "fake-devices": "acquisition",
+    "iso10360": "iso10360", "import-points": "importing"}
+"""Each command's module in :mod:`aacmm_pin.cli` (its ``PARSERS`` builds the command's parser), in
+the order of ``aacmm-pin --help``."""
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Return the argument parser of ``aacmm-pin``.
+
+    Args:
+        command: build this command's parser alone (the command a command line starts with: the
+            others' parsers and modules cost ~20 ms to build and import, a sixth of a small
+            ``identify`` beyond its floor); default, or a name that is no command: all of them.
+    """
     parser = argparse.ArgumentParser(
         prog="aacmm-pin",
         description="Calibrate articulated arm CMMs (Ibaraki & Saito, CIRP Annals 2023) on "
@@ -69,11 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action=_VersionAction,
                         help="print the program's version (aacmm-pin X.Y.Z) and exit")
     sub = parser.add_subparsers(dest="command", required=True)
-    calibration.add_parsers(sub)
-    viewer.add_parsers(sub)
-    acquisition.add_parsers(sub)
-    iso10360.add_parsers(sub)
-    importing.add_parsers(sub)
+    for name, module in COMMANDS.items():
+        if command not in COMMANDS or name == command:
+            importlib.import_module(f"aacmm_pin.cli.{module}").PARSERS[name](sub)
     return parser
 
 
@@ -147,8 +164,9 @@ def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     Raises:
         SystemExit: 2 after the usage and the error, as ``ArgumentParser.error``.
     """
-    parser = build_parser()
-    args, stray = parser.parse_known_args(argv)
+    given = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(given[0] if given else None)
+    args, stray = parser.parse_known_args(given)
     if stray:
         command: argparse.ArgumentParser = getattr(args, "command_parser", parser)
         command.error(f"unrecognized arguments: {' '.join(stray)}")
@@ -156,7 +174,15 @@ def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``aacmm-pin``; return the exit status (errors are printed, not raised)."""
+    """Run ``aacmm-pin``; return the exit status (errors are printed, not raised).
+
+    Imports run without the garbage collector (:func:`~aacmm_pin.cli._collector.imports_uncollected`).
+    """
+    with imports_uncollected():
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     try:
         args = parse_arguments(argv)
     except KeyboardInterrupt:  # Ctrl-C while the parser loads (a slow disk)

@@ -11,7 +11,7 @@ import math
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -153,6 +153,12 @@ def add_parsers(subparsers: Any) -> None:
         subparsers: what ``ArgumentParser.add_subparsers()`` returned; each parser sets
             ``handler``, a function of the parsed arguments returning the exit status.
     """
+    _add_acquire_parser(subparsers)
+    _add_fake_devices_parser(subparsers)
+
+
+def _add_acquire_parser(subparsers: Any) -> None:
+    """Add the subcommand ``acquire`` to ``subparsers``."""
     p = add_command(
         subparsers, "acquire", "record a SPAT from the arm and R-Test gauges on serial ports",
         description="Record one R-Test location's SPAT into CAMPAIGN/spat.csv (appended, one "
@@ -205,7 +211,6 @@ def add_parsers(subparsers: Any) -> None:
                         "file is refused without --force")
     p.add_argument("--quiet", action="store_true", help="no status line or report")
     p.set_defaults(handler=_acquire)
-    _add_fake_devices_parser(subparsers)
 
 
 def _add_fake_devices_parser(subparsers: Any) -> None:
@@ -237,3 +242,8 @@ def _add_fake_devices_parser(subparsers: Any) -> None:
     p.add_argument("--silence-s", type=float, default=0.3, help="length of an injected silence, s")
     p.add_argument("--seconds", type=float, default=60.0, help="run this long, s")
     p.set_defaults(handler=_fake_devices)
+
+
+PARSERS: dict[str, Callable[[Any], None]] = {"acquire": _add_acquire_parser,
+                                             "fake-devices": _add_fake_devices_parser}
+"""Each command's parser builder (:func:`aacmm_pin.cli.build_parser` builds only the command given)."""

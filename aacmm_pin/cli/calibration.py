@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,8 +40,6 @@ from aacmm_pin.cli._options import (
     write_json,
 )
 from aacmm_pin.cli.calibration_summary import print_calibration, print_sizes
-from aacmm_pin.cli.discovery import _print_discovery_step as _print_discovery_step  # tests' path
-from aacmm_pin.cli.discovery import add_discover_parser
 from aacmm_pin.data.output_claim import claim_output, input_paths
 from aacmm_pin.units import DEFAULT_SIMULATOR_EFFECTS as DEFAULT_EFFECTS
 from aacmm_pin.units import SIMULATOR_EFFECTS
@@ -368,20 +367,18 @@ def _write_completed(arm: Arm, out: Path, force: bool) -> None:
 
 
 def add_parsers(subparsers: Any) -> None:
-    """Add axes, simulate, predict, identify, discover, validate, uncertainty, plan and demo.
+    """Add axes, simulate, predict, identify, validate, uncertainty, plan and demo.
 
     Args:
         subparsers: what ``ArgumentParser.add_subparsers()`` returned; each parser sets
             ``handler``, a function of the parsed arguments returning the exit status.
     """
-    arm = arm_option()
-    _add_model_parsers(subparsers, arm)
-    _add_fit_parsers(subparsers, arm)
-    _add_analysis_parsers(subparsers, arm)
+    for build in PARSERS.values():
+        build(subparsers)
 
 
-def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
-    """Add axes, simulate and predict (``arm``: the shared ``--arm`` parent)."""
+def _add_axes_parser(subparsers: Any) -> None:
+    """Add ``axes`` to ``subparsers``."""
     p = add_command(subparsers, "axes", "list an arm's axes in readout-column order (depth-first "
                     "over its tree), their limits, its tools and its error frames",
                     parents=[force_option(FORCE_FILE)])
@@ -393,9 +390,12 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                         "frames it adds in memory (a URDF without them), their values zero")
     p.set_defaults(handler=_axes)
 
+
+def _add_simulate_parser(subparsers: Any) -> None:
+    """Add ``simulate`` to ``subparsers``."""
     p = add_command(subparsers, "simulate",
                     "write a simulated SPAT + length-bar campaign and its truth",
-                    parents=[seed_option("random seed (same seed, same files)"), arm,
+                    parents=[seed_option("random seed (same seed, same files)"), arm_option(),
                              force_option()])
     p.add_argument("out", type=Path, help="campaign folder to write")
     p.add_argument("--effects", default=",".join(DEFAULT_EFFECTS),
@@ -413,6 +413,9 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                         "A4=6e-6)")
     p.set_defaults(handler=_simulate)
 
+
+def _add_predict_parser(subparsers: Any) -> None:
+    """Add ``predict`` to ``subparsers``."""
     p = add_command(subparsers, "predict", "stylus centres (r-CS, mm) for encoder readouts",
                     parents=[out_option(Path("points.csv"), "output CSV"),
                              arm_option(None, "override the URDF named in the parameters"),
@@ -431,8 +434,8 @@ def _add_model_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
 
 
 
-def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
-    """Add identify and discover (``arm``: the shared ``--arm`` parent)."""
+def _add_identify_parser(subparsers: Any) -> None:
+    """Add ``identify`` to ``subparsers``."""
     p = add_command(subparsers, "identify", "identify DH errors (and encoder maps) from SPATs, "
                                             "absolute points (points.csv) or both",
                     parents=[model_option(("auto", "dh", "proposed"),
@@ -443,7 +446,7 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                                           "auto"),
                              no_rtest_option("conventional SPAT: each location's mean "
                                              "displacement for every sample (SPAT only)"),
-                             arm, out_option(Path("calibration"), "calibration folder"),
+                             arm_option(), out_option(Path("calibration"), "calibration folder"),
                              max_nfev_option(), force_option(), effects_file_option()])
     p.add_argument("campaign", type=input_path,
                    help="campaign folder (spat.csv and locations.csv, and/or points.csv; "
@@ -474,11 +477,9 @@ def _add_fit_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                         "bar placement set")
     p.set_defaults(handler=_identify)
 
-    add_discover_parser(subparsers, arm)
 
-
-def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None:
-    """Add validate, uncertainty, plan and demo (``arm``: the shared ``--arm`` parent)."""
+def _add_validate_parser(subparsers: Any) -> None:
+    """Add ``validate`` to ``subparsers``."""
     p = add_command(subparsers, "validate", "length-bar errors (paper Fig. 9) or point errors of "
                                             "a calibration on a test campaign",
                     parents=[json_option("the errors"), effects_file_option(),
@@ -499,9 +500,12 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
                    help="campaign folder with lengthbar.csv and bar.csv, and/or points.csv")
     p.set_defaults(handler=_validate)
 
+
+def _add_uncertainty_parser(subparsers: Any) -> None:
+    """Add ``uncertainty`` to ``subparsers``."""
     p = add_command(subparsers, "uncertainty", "Monte Carlo uncertainty of every identified value",
                     parents=[model_option(),
-                             no_rtest_option("conventional SPAT (location means)"), arm,
+                             no_rtest_option("conventional SPAT (location means)"), arm_option(),
                              seed_option("seed of the first trial (trial i uses seed + i)"),
                              out_option(Path("uncertainty"), "output folder"), max_nfev_option(),
                              force_option()])
@@ -517,10 +521,13 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
                         "campaign.json's, else 3)")
     p.set_defaults(handler=_uncertainty)
 
+
+def _add_plan_parser(subparsers: Any) -> None:
+    """Add ``plan`` to ``subparsers``."""
     p = add_command(subparsers, "plan", "where to measure next: rank candidate SPATs",
                     parents=[model_option(("proposed",), "the model whose uncertainty is planned "
                                                          "for (DH errors and encoder maps)"),
-                             arm, seed_option("seed of the candidate postures' IK starts"),
+                             arm_option(), seed_option("seed of the candidate postures' IK starts"),
                              json_option("the plan"), max_nfev_option(),
                              force_option(FORCE_FILE)])
     p.add_argument("campaign", type=input_path, help="campaign folder")
@@ -533,8 +540,18 @@ def _add_analysis_parsers(subparsers: Any, arm: argparse.ArgumentParser) -> None
     p.add_argument("--top", type=positive(int), default=10, help="candidates to print")
     p.set_defaults(handler=_plan)
 
+
+def _add_demo_parser(subparsers: Any) -> None:
+    """Add ``demo`` to ``subparsers``."""
     p = add_command(subparsers, "demo", "the main job: simulate, identify the paper's 3 models, "
                                         "validate, figures",
                     parents=[out_option(Path("aacmm-pin-demo"), "output folder"),
                              seed_option("seed of the simulated campaign"), force_option()])
     p.set_defaults(handler=_demo)
+
+
+PARSERS: dict[str, Callable[[Any], None]] = {
+    "axes": _add_axes_parser, "simulate": _add_simulate_parser, "predict": _add_predict_parser,
+    "identify": _add_identify_parser, "validate": _add_validate_parser,
+    "uncertainty": _add_uncertainty_parser, "plan": _add_plan_parser, "demo": _add_demo_parser}
+"""Each command's parser builder, in the order of ``aacmm-pin --help``."""

@@ -11,12 +11,14 @@ import argparse
 import dataclasses
 import functools
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from aacmm_pin.analyses.false_alarm import FALSE_ALARM
 from aacmm_pin.cli._options import (
     add_command,
+    arm_option,
     campaign_inputs,
     effects_file_option,
     force_option,
@@ -176,3 +178,8 @@ def add_discover_parser(subparsers: Any, arm: argparse.ArgumentParser) -> None:
                             f"residual is judged against (default: campaign.json's noise_um, "
                             f"else its instrument's, else {default})")
     p.set_defaults(handler=_discover)
+
+
+PARSERS: dict[str, Callable[[Any], None]] = {
+    "discover": lambda subparsers: add_discover_parser(subparsers, arm_option())}
+"""The command's parser builder (:func:`aacmm_pin.cli.build_parser` builds only the command given)."""

@@ -9,6 +9,7 @@ header (``--format jacobi2025``, the shipped laser-tracker data); the folder it 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -176,3 +177,7 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--one-frame", action="store_true",
                    help="the files share one instrument frame (one set-up) instead of one each")
     p.set_defaults(handler=_import_points)
+
+
+PARSERS: dict[str, Callable[[Any], None]] = {"import-points": add_parsers}
+"""The command's parser builder (:func:`aacmm_pin.cli.build_parser` builds only the command given)."""

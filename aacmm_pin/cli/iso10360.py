@@ -6,6 +6,7 @@ The formulas and their sources are in :mod:`aacmm_pin.analyses.iso10360`, import
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -182,3 +183,7 @@ def add_parsers(subparsers: Any) -> None:
     q = add_command(sub, "euni", "E_UNI from the length bar", parents=common)
     q.add_argument("campaign", type=input_path, help="campaign folder with lengthbar.csv and bar.csv")
     q.set_defaults(handler=_claiming(_euni))
+
+
+PARSERS: dict[str, Callable[[Any], None]] = {"iso10360": add_parsers}
+"""The command's parser builder (:func:`aacmm_pin.cli.build_parser` builds only the command given)."""

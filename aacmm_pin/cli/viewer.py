@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -67,3 +68,7 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--serve-for", type=float, default=None, metavar="SECONDS",
                    help="stop the live server after this long (default: at Ctrl+C)")
     p.set_defaults(handler=_view)
+
+
+PARSERS: dict[str, Callable[[Any], None]] = {"view": add_parsers}
+"""The command's parser builder (:func:`aacmm_pin.cli.build_parser` builds only the command given)."""

@@ -266,8 +266,11 @@ def check_names(path: Path | str, names: Sequence[str], optional: Sequence[str],
         optional: the file's optional columns (``group``, ``tool``, ``t_s`` ...).
         problems: where a misspelt name is added.
     """
+    used = {c.name for c in BUILT_IN} | {POSE_COLUMN}
+    if all(name in used or name in optional or name in _REGISTERED for name in names):
+        return None  # every column is the package's: no need to load the installed plugins
     effects = read_by_effects()
-    used = {c.name for c in BUILT_IN} | {POSE_COLUMN} | set(effects or ())
+    used |= set(effects or ())
     known = list(dict.fromkeys([*optional, *used, *_REGISTERED]))
     carried = []
     for name in names:
