@@ -26,7 +26,7 @@ import signal
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from aacmm_pin._blas import started_single_threaded
 from aacmm_pin.cli._collector import imports_uncollected
@@ -34,7 +34,7 @@ from aacmm_pin.cli._options import Handler, HelpFormatter, check_input_paths, lo
 from aacmm_pin.errors import AacmmError, CampaignWarning, StaleOutputWarning
 from aacmm_pin.interrupts import Terminated, sigint_handler, sigterm_as_interrupt
 
-__all__ = ["Handler", "build_parser", "main", "os_error_message", "version"]
+__all__ = ["Handler", "build_parser", "main", "os_error_message", "run", "version"]
 
 
 def version() -> str:
@@ -176,10 +176,21 @@ def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``aacmm-pin``; return the exit status (errors are printed, not raised).
 
-    Imports run without the garbage collector (:func:`~aacmm_pin.cli._collector.imports_uncollected`).
+    Imports run without the garbage collector, their objects returned to it at the end
+    (:func:`~aacmm_pin.cli._collector.imports_uncollected`).
     """
     with imports_uncollected():
         return _main(argv)
+
+
+def run() -> NoReturn:
+    """The ``aacmm-pin`` program: :func:`main` on the command line, then exit with its status.
+
+    The imports' objects stay frozen to the exit (its last collection skips them).
+    """
+    with imports_uncollected(keep_frozen=True):
+        status = _main(None)
+    sys.exit(status)
 
 
 def _main(argv: Sequence[str] | None) -> int:
