@@ -1,10 +1,11 @@
 """Tests of aacmm_pin.outputs.figure_files and in_view_ticks: the figures' one set-up, drawn cheaply.
 
-Issue 28: a discovery's figures were 30 % of ``discover``'s CPU; they are written unhinted, at
-zlib level 3, with ticks built only where they are drawn, and with the objects the process holds
-frozen while they are written. The figures carry the same information (same pixels where only the
-ticks out of view are left out). Issue 41: written from the Agg canvas as RGB (the pixels
-matplotlib writes), the step figures sharing one figure's panels (the pixels of new panels).
+Issue 28: a discovery's figures were 30 % of ``discover``'s CPU; they are written unhinted, with
+ticks built only where they are drawn, and with the objects the process holds frozen while they
+are written. The figures carry the same information (same pixels where only the ticks out of view
+are left out). Issue 41: written from the Agg canvas as RGB (the pixels matplotlib writes) by
+png_files (unfiltered rows: the same pixels, half Pillow's CPU), the step figures sharing one
+figure's panels (the pixels of new panels).
 """
 
 from __future__ import annotations
@@ -69,20 +70,22 @@ def test_in_view_ticks_leave_the_pixels_unchanged(tmp_path):
 
 
 def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeypatch):
-    """write_png draws with unhinted text, asks Pillow for PNG_LEVEL, and writes the pixels
-    matplotlib's own writer writes (RGB: the figure is opaque), at the dpi asked for, with
-    matplotlib's metadata; matplotlib's settings and the figure's dpi are left as they were."""
+    """write_png draws with unhinted text and writes, through png_files, the pixels matplotlib's
+    own writer writes (RGB: the figure is opaque), at the dpi asked for, with matplotlib's
+    metadata; matplotlib's settings and the figure's dpi are left as they were."""
     import matplotlib
     from matplotlib.image import imread
     from PIL import Image
 
-    saved: list[dict[str, Any]] = []
-    save = Image.Image.save
+    from aacmm_pin.outputs import png_files
+
+    written: list[tuple[int, float]] = []
+    write = png_files.write_png_file
     hinting: list[str] = []
 
-    def keep(image: Any, *args: Any, **kwargs: Any) -> None:
-        saved.append(dict(kwargs, mode=image.mode))
-        save(image, *args, **kwargs)
+    def keep(pixels: np.ndarray, path: Any, dpi: float, software: str = "") -> Any:
+        written.append((pixels.shape[2], dpi))
+        return write(pixels, path, dpi, software)
 
     before = matplotlib.rcParams["text.hinting"]
     fig = _step_figure(_step(), 1)
@@ -94,7 +97,7 @@ def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeyp
 
     own = fig.get_dpi()
     for dpi in (DPI, 120):
-        monkeypatch.setattr(Image.Image, "save", keep)
+        monkeypatch.setattr(png_files, "write_png_file", keep)
         monkeypatch.setattr(fig.canvas, "draw", drawn)
         write_png(fig, tmp_path / f"ours{dpi}.png", dpi=dpi)
         monkeypatch.undo()
@@ -106,10 +109,12 @@ def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeyp
         assert np.array_equal(ours, theirs[..., :3])
         width, height = fig.get_size_inches()
         assert ours.shape[:2] == (round(height * dpi), round(width * dpi))
-        with Image.open(tmp_path / f"ours{dpi}.png") as image:
+        with Image.open(tmp_path / f"ours{dpi}.png") as image, \
+                Image.open(tmp_path / f"theirs{dpi}.png") as theirs_image:
             assert image.info["dpi"] == pytest.approx((dpi, dpi), abs=0.05)  # in px per m
-            assert image.info["Software"].startswith("Matplotlib version")
-    assert [(s["mode"], s["compress_level"]) for s in saved] == [("RGB", figure_files.PNG_LEVEL)] * 2
+            assert image.info["dpi"] == theirs_image.info["dpi"]
+            assert image.info["Software"] == theirs_image.info["Software"]
+    assert written == [(3, DPI), (3, 120)]
     assert hinting == [figure_files.TEXT_HINTING] * 2 and figure_files.TEXT_HINTING == "none"
     assert matplotlib.rcParams["text.hinting"] == before
 

@@ -5,9 +5,9 @@ Every PNG figure of the package (:mod:`aacmm_pin.outputs.plots`,
 ``FigureCanvasAgg`` (:func:`new_figure`, :func:`fixed_figure`, :class:`PanelFigure`: panels
 shared by figures written one after another): pyplot is never imported, so no
 GUI backend is looked for and no figure registry keeps figures alive. :func:`write_png` draws a
-figure on its canvas with its text unhinted (:data:`TEXT_HINTING`) and writes its pixels through
-Pillow at zlib level :data:`PNG_LEVEL` (RGB when opaque); :func:`figure_batch` keeps the garbage collector
-out of the way while a command writes its figures. matplotlib (the ``figures`` extra) is imported
+figure on its canvas with its text unhinted (:data:`TEXT_HINTING`) and writes its pixels
+(:mod:`~aacmm_pin.outputs.png_files`: RGB when opaque); :func:`figure_batch` keeps the garbage
+collector out of the way while a command writes its figures. matplotlib (the ``figures`` extra) is imported
 inside the functions only; without it they raise :class:`~aacmm_pin.errors.MissingExtraError`.
 """
 
@@ -32,12 +32,8 @@ TEXT_HINTING = "none"
 outlines as drawn, not snapped to the pixel grid (hinting changes a glyph's edge by less than a
 pixel at 150 dpi); matplotlib renders text glyph by glyph, and unhinted text takes about a quarter
 less of a discovery figure's drawing."""
-PNG_LEVEL = 3
-"""zlib level of the PNG files (Pillow's ``compress_level``; matplotlib leaves Pillow's 6). The
-file holds the same pixels; on a discovery step figure level 3 takes two thirds of level 6's CPU
-(60 against 89 ms) for a file 6 % larger (334 against 314 kB). Written as RGB (an opaque
-figure), a UR5 discovery's step, gap and unexplained figures take 93 against 116 ms at level 3
-(their RGBA files), 572 against 643 kB; levels 1 and 2 are no faster."""
+SOFTWARE = "Matplotlib version{}, https://matplotlib.org/"
+"""The ``Software`` text of the PNG files (matplotlib's own), with matplotlib's version."""
 FIGURES = "writing figures"
 """What needs matplotlib, in the message of a missing ``figures`` extra."""
 
@@ -181,10 +177,11 @@ def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: flo
     """Draw ``fig`` at ``dpi`` (dots per inch; :data:`DPI`), text unhinted, and write it as PNG.
 
     The figure is drawn on its Agg canvas (text hinting :data:`TEXT_HINTING`) and its pixels
-    written by Pillow at zlib level :data:`PNG_LEVEL`, with matplotlib's own metadata (software,
-    resolution), parent folders created; an opaque figure (every pixel's alpha 255: a figure's
-    default white face) as RGB, the same pixels as matplotlib's RGBA file with a quarter less to
-    compress (:func:`png_image`).
+    written by :func:`~aacmm_pin.outputs.png_files.write_png_file` (unfiltered rows at zlib
+    level :data:`~aacmm_pin.outputs.png_files.LEVEL`: half Pillow's CPU), with matplotlib's own
+    metadata (software, resolution), parent folders created; an opaque figure (every pixel's
+    alpha 255: a figure's default white face) as RGB, the same pixels as matplotlib's RGBA file
+    with a quarter less to compress (:func:`png_pixels`).
     Ticks are built only where they are drawn, at most ``nbins`` intervals per axis
     (:func:`~aacmm_pin.outputs.in_view_ticks.ticks_in_view`). The figure's own dpi is restored
     after. Returns ``path`` as a Path.
@@ -193,6 +190,7 @@ def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: flo
     import matplotlib
 
     from aacmm_pin.outputs.in_view_ticks import ticks_in_view
+    from aacmm_pin.outputs.png_files import write_png_file
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -202,30 +200,22 @@ def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: flo
     try:
         with matplotlib.rc_context({"text.hinting": TEXT_HINTING}):
             fig.canvas.draw()
-        image, info = png_image(fig)
-        image.save(path, format="png", compress_level=PNG_LEVEL, pnginfo=info, dpi=(dpi, dpi))
+        write_png_file(png_pixels(fig), path, dpi, SOFTWARE.format(matplotlib.__version__))
     finally:
         fig.set_dpi(own)
     return path
 
 
-def png_image(fig: Figure) -> tuple[Any, Any]:
-    """The Pillow image of ``fig``'s drawn Agg canvas and matplotlib's PNG metadata for it.
+def png_pixels(fig: Figure) -> np.ndarray:
+    """The pixels of ``fig``'s drawn Agg canvas, shape (height, width, 3 or 4), uint8.
 
-    RGB when every pixel is opaque (a figure's default face; the PNG holds the same colours as
-    matplotlib's RGBA file), RGBA else; shape (height, width) at the figure's dpi.
+    RGB (a view of the canvas's RGBA buffer) when every pixel is opaque (a figure's default face;
+    the same colours as matplotlib's RGBA file), RGBA else; at the figure's dpi.
     """
-    import matplotlib
     import numpy as np
-    from PIL import Image, PngImagePlugin
 
     rgba = np.asarray(fig.canvas.buffer_rgba())  # type: ignore[attr-defined]  # (h, w, 4) uint8
-    image = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
-    if rgba[..., 3].min() == 255:
-        image = image.convert("RGB")
-    info = PngImagePlugin.PngInfo()
-    info.add_text("Software", f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/")
-    return image, info
+    return rgba[..., :3] if rgba[..., 3].min() == 255 else rgba
 
 
 @contextmanager
