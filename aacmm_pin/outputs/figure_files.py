@@ -101,7 +101,8 @@ class PanelFigure:
     figure, 5 panels: 81 and 77 ms, against 220 ms for a second drawing); :meth:`panels` hands
     the panels of the
     previous figure back, moved to the new layout and emptied of what was drawn on them (lines,
-    texts, patches, collections, title, labels, the figure's legends), their ticks kept, and
+    texts, patches, collections, title, labels, the figure's legends and texts: a figure on
+    them titles itself with ``fig.text``, not ``suptitle``), their ticks kept, and
     builds only the panels the previous figure lacked; panels beyond those asked for are hidden.
     A panel handed back draws the same pixels as a new one (``tests/test_figure_files.py``).
     The panels' axes must be left linear with their own limits (no shared or twin axes, no
@@ -126,8 +127,8 @@ class PanelFigure:
             self.fig = new_figure(width_in, height_in, layout=None)
         else:
             self.fig.set_size_inches(width_in, height_in)
-            for legend in list(self.fig.legends):
-                legend.remove()
+            for artist in [*self.fig.legends, *self.fig.texts]:
+                artist.remove()
         for k, ax in enumerate(self.axes):
             ax.set_visible(k < n)
             if k < n:
@@ -135,6 +136,59 @@ class PanelFigure:
                 _empty(ax)
         self.axes += [self.fig.add_axes(box) for box in boxes[len(self.axes):]]
         return self.fig, self.axes[:n]
+
+
+LEGEND_LINE = 1.3
+"""Spacing of a :func:`text_legend`'s lines, in font sizes."""
+
+
+def text_legend(target: Any, entries: list[tuple[str, str, Any]], x: float, y: float,
+                height_in: float, fontsize: float = 7.0, backed: bool = False) -> None:
+    """Write a legend as lines of text, ending at ``x``, the first line's top at ``y``.
+
+    matplotlib's legend box packs its entries' texts and handles anew at every draw: 10-25 ms a
+    legend (a "best" place searched among the data: the most), against a few ms for a line of
+    text. Each entry ``(sample, label, colour)`` is one line: ``label`` in black, right-aligned,
+    then ``sample``, a few glyphs standing for the series' line and marker in its colour
+    (:data:`SAMPLES`), centred in a column :data:`SAMPLE_EM` font sizes wide at the right end
+    (matplotlib's ``markerfirst=False``).
+
+    Args:
+        target: a Figure (``x``, ``y`` in figure fractions) or an Axes (in axes fractions).
+        entries: the lines, top first.
+        x: right end of the lines, fraction of ``target``'s width.
+        y: top of the first line, fraction of ``target``'s height.
+        height_in: ``target``'s height, in (the lines' spacing in its fractions).
+        fontsize: pt.
+        backed: each text on a white box of 80 % opacity (a legend over data), else bare.
+    """
+    from matplotlib.transforms import offset_copy
+
+    transform = target.transAxes if hasattr(target, "transAxes") else target.transSubfigure
+    step = LEGEND_LINE * fontsize / 72.0 / height_in
+    box = {"boxstyle": "square,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.8} if backed else None
+    fig = target.get_figure()
+    # the samples' column and the labels' right end, in points left of x
+    at_sample = offset_copy(transform, fig, x=-0.5 * SAMPLE_EM * fontsize, units="points")
+    at_label = offset_copy(transform, fig, x=-(SAMPLE_EM + 0.4) * fontsize, units="points")
+    for k, (sample, label, colour) in enumerate(entries):
+        baseline = y - k * step - fontsize / 72.0 / height_in
+        target.text(x, baseline, sample, color=colour, fontsize=fontsize, ha="center",
+                    va="baseline", transform=at_sample, bbox=box)
+        target.text(x, baseline, label, color="black", fontsize=fontsize, ha="right",
+                    va="baseline", transform=at_label, bbox=box)
+
+
+SAMPLE_EM = 2.2
+"""Width of a :func:`text_legend`'s column of samples, in font sizes (its widest sample, "─■─",
+2.15)."""
+
+
+SAMPLES = {"-o": "─●─", "-s": "─■─", "-^": "─▲─", "--^": "╌△╌", "-D": "─◆─", ":": "┈┈┈",
+           "span": "■"}
+"""A :func:`text_legend`'s samples of matplotlib's line styles and markers (DejaVu Sans glyphs):
+a solid line with a circle, square, triangle, an open triangle on a dashed line, a diamond; a
+dotted line; a shaded band (a square of its colour)."""
 
 
 def panel_boxes(width_in: float, height_in: float, n: int, ncols: int,
