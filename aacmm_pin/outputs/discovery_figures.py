@@ -197,29 +197,30 @@ def _gap_figure(result: Discovery) -> Figure:
     labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
                                             for s in result.steps]
     x = np.arange(len(labels))
-    entries = [("-o", f"held-out RMS ({held_out_text(result.calibration.inputs)})",
-                MODEL_COLOURS[2], result.heldout_rms), ("-s", "fit RMS", MODEL_COLOURS[3], result.fit_rms),
-               ("-^", "length-bar RMS", MODEL_COLOURS[4], result.bar_rms),
-               ("--^", "length-bar RMS inside the SPAT coverage", MODEL_COLOURS[4],
-                result.bar_covered_rms)]
-    entries = [entry for entry in entries if all(v is not None for v in entry[3])]
-    for style, _, colour, values in entries:
+    series: list[tuple[str, str, str, list[Any]]] = [  # style, label, colour, values (m)
+        ("-o", f"held-out RMS ({held_out_text(result.calibration.inputs)})", MODEL_COLOURS[2],
+         list(result.heldout_rms)), ("-s", "fit RMS", MODEL_COLOURS[3], list(result.fit_rms)),
+        ("-^", "length-bar RMS", MODEL_COLOURS[4], list(result.bar_rms)),
+        ("--^", "length-bar RMS inside the SPAT coverage", MODEL_COLOURS[4],
+         list(result.bar_covered_rms))]
+    drawn = [one for one in series if all(v is not None for v in one[3])]  # no bars: none of theirs
+    for style, _, colour, values in drawn:
         ax.plot(x, np.array(values, dtype=float) * 1e6, style, color=colour,
                 mfc="none" if style == "--^" else colour)
+    entries = [(style, label, colour) for style, label, colour, _ in drawn]
     ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8)
-    entries.append((":", "noise (sigma)", "k", []))
+    entries.append((":", "noise (sigma)", "k"))
     if all(v is not None for v in result.bar_normalised):
         right = ax.twinx()
         right.plot(x, np.array(result.bar_normalised, dtype=float), "-D", ms=4, color=MODEL_COLOURS[1])
         right.set_ylabel("normalised length-bar error")
         right.set_ylim(0.0, None)
-        entries.append(("-D", "length-bar error / its predicted uncertainty (right)",
-                        MODEL_COLOURS[1], []))
+        entries.append(("-D", "length-bar error / its predicted uncertainty (right)", MODEL_COLOURS[1]))
     ax.set_xticks(x, labels, rotation=15, fontsize=8)
     ax.set_ylabel("um")
     ax.set_ylim(0.0, None)
     ax.set_title(title, fontsize=7, y=1.0)
-    text_legend(ax, [(SAMPLES[style], label, colour) for style, label, colour, _ in entries],
+    text_legend(ax, [(SAMPLES[style], label, colour) for style, label, colour in entries],
                 0.985, 0.975, ax.get_position().height * fig.get_figheight(), backed=True)
     return fig
 
