@@ -154,6 +154,48 @@ def test_step_figures_on_shared_panels_draw_the_pixels_of_new_ones(tmp_path):
     assert sum(ax.get_visible() for ax in shared.axes) == 6
 
 
+def _scan(scale: float) -> Any:
+    """A residual scan of 300 samples whose top variable is time, residuals ``scale`` m."""
+    rng = np.random.default_rng(3)
+    top = SimpleNamespace(values=np.arange(300.0), label="time (s)", variable="time")
+    return SimpleNamespace(structure=[top], variables=[top], noise=0.3 * scale,
+                           residual=rng.normal(0.0, scale, (300, 3)) * [1.0, 3.0, 0.5],
+                           hint=lambda: "the residual follows time")
+
+
+def test_unexplained_figures_on_shared_panels_draw_the_pixels_of_their_own(tmp_path):
+    """Issue 41: the unexplained figure is drawn on the step figures' panels (their set-up built
+    once): its PNG is the one a figure of its own writes, pixel for pixel, whose one y range and
+    hidden inner y tick labels are sharey's; a step figure drawn on the panels after it (tick
+    labels and offset text back on the inner panels) is a new figure's too."""
+    from matplotlib.image import imread
+
+    from aacmm_pin.outputs.discovery_figures import _unexplained_figure, unexplained_figure
+
+    six = _step()
+    six.views = [dict(six.views[k % 2], term=f"t{k}") for k in range(6)]
+    shared = PanelFigure()
+    for k, (kind, item) in enumerate([("scan", _scan(1e-6)), ("step", six), ("scan", _scan(1e-9)),
+                                      ("step", _step())]):
+        if kind == "scan":
+            unexplained_figure(item, tmp_path / f"shared{k}.png", shared=shared)
+            unexplained_figure(item, tmp_path / f"own{k}.png")
+        else:
+            step_figure(item, k, tmp_path / f"shared{k}.png", shared)
+            step_figure(item, k, tmp_path / f"own{k}.png")
+        assert np.array_equal(imread(tmp_path / f"shared{k}.png"), imread(tmp_path / f"own{k}.png")), k
+    fig = _unexplained_figure(_scan(1e-6), ("spat",))
+    fig.canvas.draw()
+    first, *inner = fig.axes
+    assert all(ax.get_ylim() == first.get_ylim() for ax in inner)  # one scale
+    residual = _scan(1e-6).residual * 1e6  # um; y's spread 6x z's: every panel's on one scale
+    low, high = first.get_ylim()
+    assert low < residual.min() and high > residual.max()
+    assert high - low < 1.2 * (residual.max() - residual.min())  # matplotlib's margins
+    assert any(t.get_visible() and t.get_text() for t in first.get_yticklabels())
+    assert not any(t.get_visible() and t.get_text() for ax in inner for t in ax.get_yticklabels())
+
+
 def test_panel_boxes_match_fixed_figures_grid():
     """PanelFigure's layout is fixed_figure's: the same panel positions for the same margins."""
     fig, grid = fixed_figure(12.6, 6.6, 2, 3, margins=(1.0, 0.15, 0.55, 0.6), gaps=(1.1, 0.8))

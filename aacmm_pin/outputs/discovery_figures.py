@@ -26,6 +26,7 @@ from aacmm_pin.outputs.figure_files import (
     PanelFigure,
     figure_batch,
     fixed_figure,
+    same_y,
     text_legend,
     write_png,
 )
@@ -225,28 +226,32 @@ def _gap_figure(result: Discovery) -> Figure:
     return fig
 
 
-def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = ("spat",)) -> None:
+def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = ("spat",),
+                       shared: PanelFigure | None = None) -> None:
     """Write the final residual (less each location's mean) against the variable it follows most.
 
     One panel per coordinate: the residual of every sample and its binned means, with the stated
     noise as a band; the variable is the scan's top structure (else its best-ranked variable).
     ``inputs``: the calibration's data kinds (its ``inputs``), which name what the mean is over
-    (:func:`group_text`: an R-Test location, an instrument group of points).
+    (:func:`group_text`: an R-Test location, an instrument group of points). ``shared``: the
+    step figures' :class:`~aacmm_pin.outputs.figure_files.PanelFigure` (its panels reused);
+    None: a figure of its own.
     """
-    write_png(_unexplained_figure(scan, inputs), path, TICKS, DPI)
+    write_png(_unexplained_figure(scan, inputs, shared), path, TICKS, DPI)
 
 
-def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
-    """Build the figure of :func:`unexplained_figure`."""
+def _unexplained_figure(scan: Scan, inputs: tuple[str, ...], shared: PanelFigure | None = None
+                        ) -> Figure:
+    """Build the figure of :func:`unexplained_figure`: three panels in a row, one y range."""
     top = (scan.structure or scan.variables)[0]
     hint = "\n".join(textwrap.wrap(scan.hint(), 130))
-    # the suptitle's lines at 8 pt (0.14 in each) above the panels' titles
-    fig, grid = fixed_figure(11.0, 3.4, 1, 3, margins=(0.75, 0.15, 0.55,
-                                                        0.4 + 0.14 * (hint.count("\n") + 1)),
-                              gaps=(0.3, 0.0), sharey=True)
+    # the title's lines at 8 pt (0.14 in each) above the panels' titles
+    fig, axes = (shared or PanelFigure()).panels(
+        11.0, 3.4, 3, 3, margins=(0.75, 0.15, 0.55, 0.4 + 0.14 * (hint.count("\n") + 1)),
+        gaps=(0.3, 0.0))
     x = np.asarray(top.values, dtype=float)
     noise = scan.noise * 1e6
-    for c, ax in enumerate(grid[0]):
+    for c, ax in enumerate(axes):
         y = scan.residual[:, c] * 1e6
         ax.plot(x, y, ".", ms=2, alpha=0.35, color=MODEL_COLOURS[0])
         bx, by = _binned(x, y)
@@ -255,12 +260,12 @@ def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set_xlabel(top.label or top.variable)
         ax.set_title(f"{'xyz'[c]} residual", fontsize=9, y=1.0)
-        if c == 0:
-            ax.set_ylabel(f"residual less {group_text(inputs)} (um)")
-            text_legend(ax, [(SAMPLES["-o"], "bin means", MODEL_COLOURS[3]),
-                             (SAMPLES["span"], "stated noise (+- sigma)", "0.85")],
-                        0.985, 0.975, ax.get_position().height * fig.get_figheight(), backed=True)
-    fig.suptitle(hint, fontsize=8)
+    same_y(axes)  # as sharey: one scale, its numbers on the first panel
+    axes[0].set_ylabel(f"residual less {group_text(inputs)} (um)")
+    text_legend(axes[0], [(SAMPLES["-o"], "bin means", MODEL_COLOURS[3]),
+                          (SAMPLES["span"], "stated noise (+- sigma)", "0.85")],
+                0.985, 0.975, axes[0].get_position().height * fig.get_figheight(), backed=True)
+    fig.text(0.5, 0.98, hint, fontsize=8, ha="center", va="top")  # a suptitle's place
     return fig
 
 
@@ -294,9 +299,9 @@ def _write_figures(result: Discovery, folder: Path) -> None:
     """Write the PNG files of :func:`write_discovery` into ``folder``."""
     with figure_batch():
         gap_figure(result, folder / "discovery_gap.png")
-        shared = PanelFigure()  # the step figures' panels, built once
+        shared = PanelFigure()  # the step and unexplained figures' panels, built once
         for k, step in enumerate(result.steps, start=1):
             step_figure(step, k, folder / f"discovery_step{k}.png", shared)
         if result.scan is not None and result.scan.unexplained and result.scan.variables:
             unexplained_figure(result.scan, folder / "discovery_unexplained.png",
-                               result.calibration.inputs)
+                               result.calibration.inputs, shared)
