@@ -91,3 +91,38 @@ def test_the_package_figures_draw_whole_lines_and_only_they():
     assert isinstance(fig.canvas.get_renderer(), text_canvas.StringRenderer)
     assert backend_agg.FigureCanvasAgg.get_renderer is not text_canvas.StringCanvas.get_renderer
     assert backend_agg.RendererAgg.draw_text is not text_canvas.StringRenderer.draw_text
+
+
+def test_lines_are_laid_out_once_and_drawn_the_same_from_the_store(monkeypatch):
+    """A figure's lines are laid out and rendered once each (for their size and their drawing;
+    its repeated tick labels once): the store holds fewer lines than the figure draws, a second
+    drawing (every line from the store) has the same pixels, and so does one after the store is
+    emptied and one from a store cleared when full."""
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    from aacmm_pin.outputs.discovery_figures import _step_figure
+    from tests.test_figure_files import _step
+
+    drawn: list[str] = []
+    draw_text = text_canvas.StringRenderer.draw_text
+
+    def counted(self: Any, gc: Any, x: float, y: float, s: str, *args: Any, **kwargs: Any) -> None:
+        drawn.append(s)
+        draw_text(self, gc, x, y, s, *args, **kwargs)
+
+    text_canvas.LINES.clear()
+    monkeypatch.setattr(text_canvas.StringRenderer, "draw_text", counted)
+    fig = _step_figure(_step(), 1)
+    fig.canvas.draw()
+    first = np.array(fig.canvas.buffer_rgba())
+    assert len(drawn) > len(set(drawn)) and len(text_canvas.LINES) < len(drawn)
+    assert set(drawn) <= {key[0] for key in text_canvas.LINES}
+    fig.canvas.draw()
+    assert np.array_equal(np.asarray(fig.canvas.buffer_rgba()), first)
+    monkeypatch.setattr(text_canvas, "MOST_LINES", 3)  # cleared again and again while drawing
+    text_canvas.LINES.clear()
+    fig.canvas.draw()
+    assert np.array_equal(np.asarray(fig.canvas.buffer_rgba()), first)
+    assert len(text_canvas.LINES) <= 3
+    assert RendererAgg.get_text_width_height_descent is not \
+        text_canvas.StringRenderer.get_text_width_height_descent
