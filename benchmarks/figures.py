@@ -159,15 +159,20 @@ def main(before: Path | None = None) -> None:
 CPU = user + system; the figures' CPU is measured in the same process around the figure functions
 `write_discovery` calls and the entry and exit of their `figure_batch` (importing matplotlib
 included: only the figures need it). The figures are drawn after the results are
-printed, with fixed margins (no constrained layout) and one legend per step figure, by
-`outputs.figure_files`: text unhinted (`text.hinting` "none"), drawn on the figure's Agg canvas and
-written by Pillow at zlib level 3 as RGB (an opaque figure: the same pixels as matplotlib's RGBA
-file), no tick built outside the view (`outputs.in_view_ticks`: the same pixels), and the objects
-the process holds, then matplotlib's, frozen (`gc.freeze`) while the figures are written. The
-discovery figures (`outputs.discovery_figures`) draw at most 4 intervals between ticks per axis
-(2 to 5 labelled ticks, `TICKS`), at 120 dpi (`DPI`; the package's other figures 150), and
-the step figures share one figure's panels (`figure_files.PanelFigure`: built once, moved and
-emptied for each step, the same pixels as new panels). Median (range) of {REPEAT} runs per
+printed, with fixed margins (no constrained layout), by `outputs.figure_files`: text unhinted
+(`text.hinting` "none") and each line of it laid out and rendered by FreeType in one call, once
+(`outputs.text_canvas.StringCanvas`, the figures' Agg canvas: matplotlib 3.10's Agg text, where
+3.11 draws glyph by glyph from Python; the glyphs within a pixel of 3.11's), written by
+`outputs.png_files` (zlib level 3, rows unfiltered: Pillow chose a filter per row; RGB: an opaque
+figure, the same pixels as matplotlib's RGBA file), no tick built outside the view
+(`outputs.in_view_ticks`: the same pixels), and the objects the process holds, then matplotlib's,
+frozen (`gc.freeze`) while the figures are written. The discovery figures
+(`outputs.discovery_figures`) draw at most 4 intervals between ticks per axis (2 to 5 labelled
+ticks, `TICKS`), at 120 dpi (`DPI`; the package's other figures 150), their legends as lines of
+text (`figure_files.text_legend`: a legend box packs its entries anew at each draw), and the step
+and unexplained figures share one figure's panels (`figure_files.PanelFigure`: built once, moved
+and emptied for each figure, the same pixels as new panels; `figure_files.same_y`: sharey's one
+range). Median (range) of {REPEAT} runs per
 campaign (the figures' share: its range over the runs of this benchmark's run and of the earlier
 ones named below); issue 41's target: figures <= 25 % of the command's CPU on the sample campaign
 and the UR5 grid.{rows_before} The load average (1, 5 and 15 min) when this table was written: {load}:

@@ -13,10 +13,10 @@ from aacmm_pin.outputs.discovery_figures import _gap_figure, _step_figure, _unex
 
 
 def _texts(fig: Any) -> str:
-    """Every label, legend entry and axis title of a figure, one string."""
-    out = []
+    """Every label, legend entry (a legend box's or a text legend's) and title of a figure."""
+    out = [t.get_text() for t in fig.texts]
     for ax in fig.axes:
-        out += [ax.get_ylabel(), ax.get_xlabel(), ax.get_title()]
+        out += [ax.get_ylabel(), ax.get_xlabel(), ax.get_title(), *(t.get_text() for t in ax.texts)]
         legend = ax.get_legend()
         if legend is not None:
             out += [t.get_text() for t in legend.get_texts()]

@@ -1,10 +1,11 @@
 """Tests of aacmm_pin.outputs.figure_files and in_view_ticks: the figures' one set-up, drawn cheaply.
 
-Issue 28: a discovery's figures were 30 % of ``discover``'s CPU; they are written unhinted, at
-zlib level 3, with ticks built only where they are drawn, and with the objects the process holds
-frozen while they are written. The figures carry the same information (same pixels where only the
-ticks out of view are left out). Issue 41: written from the Agg canvas as RGB (the pixels
-matplotlib writes), the step figures sharing one figure's panels (the pixels of new panels).
+Issue 28: a discovery's figures were 30 % of ``discover``'s CPU; they are written unhinted, with
+ticks built only where they are drawn, and with the objects the process holds frozen while they
+are written. The figures carry the same information (same pixels where only the ticks out of view
+are left out). Issue 41: written from the Agg canvas as RGB (the pixels matplotlib writes) by
+png_files (unfiltered rows: the same pixels, half Pillow's CPU), the step figures sharing one
+figure's panels (the pixels of new panels).
 """
 
 from __future__ import annotations
@@ -69,20 +70,22 @@ def test_in_view_ticks_leave_the_pixels_unchanged(tmp_path):
 
 
 def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeypatch):
-    """write_png draws with unhinted text, asks Pillow for PNG_LEVEL, and writes the pixels
-    matplotlib's own writer writes (RGB: the figure is opaque), at the dpi asked for, with
-    matplotlib's metadata; matplotlib's settings and the figure's dpi are left as they were."""
+    """write_png draws with unhinted text and writes, through png_files, the pixels matplotlib's
+    own writer writes (RGB: the figure is opaque), at the dpi asked for, with matplotlib's
+    metadata; matplotlib's settings and the figure's dpi are left as they were."""
     import matplotlib
     from matplotlib.image import imread
     from PIL import Image
 
-    saved: list[dict[str, Any]] = []
-    save = Image.Image.save
+    from aacmm_pin.outputs import png_files
+
+    written: list[tuple[int, float]] = []
+    write = png_files.write_png_file
     hinting: list[str] = []
 
-    def keep(image: Any, *args: Any, **kwargs: Any) -> None:
-        saved.append(dict(kwargs, mode=image.mode))
-        save(image, *args, **kwargs)
+    def keep(pixels: np.ndarray, path: Any, dpi: float, software: str = "") -> Any:
+        written.append((pixels.shape[2], dpi))
+        return write(pixels, path, dpi, software)
 
     before = matplotlib.rcParams["text.hinting"]
     fig = _step_figure(_step(), 1)
@@ -94,7 +97,7 @@ def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeyp
 
     own = fig.get_dpi()
     for dpi in (DPI, 120):
-        monkeypatch.setattr(Image.Image, "save", keep)
+        monkeypatch.setattr(png_files, "write_png_file", keep)
         monkeypatch.setattr(fig.canvas, "draw", drawn)
         write_png(fig, tmp_path / f"ours{dpi}.png", dpi=dpi)
         monkeypatch.undo()
@@ -106,10 +109,12 @@ def test_figures_are_written_unhinted_as_matplotlib_draws_them(tmp_path, monkeyp
         assert np.array_equal(ours, theirs[..., :3])
         width, height = fig.get_size_inches()
         assert ours.shape[:2] == (round(height * dpi), round(width * dpi))
-        with Image.open(tmp_path / f"ours{dpi}.png") as image:
+        with Image.open(tmp_path / f"ours{dpi}.png") as image, \
+                Image.open(tmp_path / f"theirs{dpi}.png") as theirs_image:
             assert image.info["dpi"] == pytest.approx((dpi, dpi), abs=0.05)  # in px per m
-            assert image.info["Software"].startswith("Matplotlib version")
-    assert [(s["mode"], s["compress_level"]) for s in saved] == [("RGB", figure_files.PNG_LEVEL)] * 2
+            assert image.info["dpi"] == theirs_image.info["dpi"]
+            assert image.info["Software"] == theirs_image.info["Software"]
+    assert written == [(3, DPI), (3, 120)]
     assert hinting == [figure_files.TEXT_HINTING] * 2 and figure_files.TEXT_HINTING == "none"
     assert matplotlib.rcParams["text.hinting"] == before
 
@@ -147,6 +152,48 @@ def test_step_figures_on_shared_panels_draw_the_pixels_of_new_ones(tmp_path):
         assert np.array_equal(imread(tmp_path / f"shared{k}.png"), imread(tmp_path / f"own{k}.png")), k
     assert len(shared.axes) == 6  # built once: as many panels as the largest step's
     assert sum(ax.get_visible() for ax in shared.axes) == 6
+
+
+def _scan(scale: float) -> Any:
+    """A residual scan of 300 samples whose top variable is time, residuals ``scale`` m."""
+    rng = np.random.default_rng(3)
+    top = SimpleNamespace(values=np.arange(300.0), label="time (s)", variable="time")
+    return SimpleNamespace(structure=[top], variables=[top], noise=0.3 * scale,
+                           residual=rng.normal(0.0, scale, (300, 3)) * [1.0, 3.0, 0.5],
+                           hint=lambda: "the residual follows time")
+
+
+def test_unexplained_figures_on_shared_panels_draw_the_pixels_of_their_own(tmp_path):
+    """Issue 41: the unexplained figure is drawn on the step figures' panels (their set-up built
+    once): its PNG is the one a figure of its own writes, pixel for pixel, whose one y range and
+    hidden inner y tick labels are sharey's; a step figure drawn on the panels after it (tick
+    labels and offset text back on the inner panels) is a new figure's too."""
+    from matplotlib.image import imread
+
+    from aacmm_pin.outputs.discovery_figures import _unexplained_figure, unexplained_figure
+
+    six = _step()
+    six.views = [dict(six.views[k % 2], term=f"t{k}") for k in range(6)]
+    shared = PanelFigure()
+    for k, (kind, item) in enumerate([("scan", _scan(1e-6)), ("step", six), ("scan", _scan(1e-9)),
+                                      ("step", _step())]):
+        if kind == "scan":
+            unexplained_figure(item, tmp_path / f"shared{k}.png", shared=shared)
+            unexplained_figure(item, tmp_path / f"own{k}.png")
+        else:
+            step_figure(item, k, tmp_path / f"shared{k}.png", shared)
+            step_figure(item, k, tmp_path / f"own{k}.png")
+        assert np.array_equal(imread(tmp_path / f"shared{k}.png"), imread(tmp_path / f"own{k}.png")), k
+    fig = _unexplained_figure(_scan(1e-6), ("spat",))
+    fig.canvas.draw()
+    first, *inner = fig.axes
+    assert all(ax.get_ylim() == first.get_ylim() for ax in inner)  # one scale
+    residual = _scan(1e-6).residual * 1e6  # um; y's spread 6x z's: every panel's on one scale
+    low, high = first.get_ylim()
+    assert low < residual.min() and high > residual.max()
+    assert high - low < 1.2 * (residual.max() - residual.min())  # matplotlib's margins
+    assert any(t.get_visible() and t.get_text() for t in first.get_yticklabels())
+    assert not any(t.get_visible() and t.get_text() for ax in inner for t in ax.get_yticklabels())
 
 
 def test_panel_boxes_match_fixed_figures_grid():

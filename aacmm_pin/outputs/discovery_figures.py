@@ -21,7 +21,15 @@ from aacmm_pin.data.output_folder import output_folder
 from aacmm_pin.extras import require
 from aacmm_pin.model.arm import Arm
 from aacmm_pin.outputs.export import write_calibration_files
-from aacmm_pin.outputs.figure_files import PanelFigure, figure_batch, fixed_figure, write_png
+from aacmm_pin.outputs.figure_files import (
+    SAMPLES,
+    PanelFigure,
+    figure_batch,
+    fixed_figure,
+    same_y,
+    text_legend,
+    write_png,
+)
 from aacmm_pin.outputs.plots import MODEL_COLOURS
 
 if TYPE_CHECKING:
@@ -126,15 +134,15 @@ def _step_figure(step: Step, k: int, shared: PanelFigure | None = None) -> Figur
     fig, axes = (shared or PanelFigure()).panels(
         max(4.2 * ncols, 8.4), 0.6 + 3.0 * nrows, len(views), ncols,
         margins=(1.0, 0.15, 0.55, 0.6), gaps=(1.1, 0.8))
+    series = (("before", MODEL_COLOURS[0]), ("after", MODEL_COLOURS[3]))
     for ax, view in zip(axes, views):  # every named term, one panel each
         x = np.asarray(view["x"], dtype=float)
         drawn = []
-        for key, colour, label in (("before", MODEL_COLOURS[0], "before"),
-                                   ("after", MODEL_COLOURS[3], "after")):
+        for key, colour in series:
             y = np.asarray(view[key], dtype=float)
             ax.plot(x, y, ".", ms=2, alpha=0.35, color=colour)
             bx, by = _binned(x, y)
-            ax.plot(bx, by, "-o", ms=3, color=colour, label=f"{label} (bin means)")
+            ax.plot(bx, by, "-o", ms=3, color=colour)
             drawn.append((y, colour))
         ax.axhline(0.0, color="k", lw=0.6)
         _robust_ylim(ax, [y for y, _ in drawn])
@@ -143,12 +151,15 @@ def _step_figure(step: Step, k: int, shared: PanelFigure | None = None) -> Figur
         ax.set_xlabel(view["variable"])
         ax.set_ylabel(view["residual"])
         ax.set_title(view["term"], fontsize=9, y=1.0)  # at the top (no search for room)
-    # one legend for every panel, in the top margin (a legend per panel searched its data for room)
-    handles = axes[0].get_legend_handles_labels() if axes else ([], [])
-    fig.legend(*handles, loc="upper right", fontsize=7, ncols=2, frameon=False)
-    fig.suptitle(f"step {k}: {step.effect} {step.axes or ''} - held-out RMS "
-                 f"{step.heldout_rms_before * 1e6:.2f} -> {step.heldout_rms_after * 1e6:.2f} um",
-                 fontsize=10, x=0.1 / fig.get_figwidth(), ha="left")
+    # one legend for every panel, in the top margin's right end: lines of text (a legend box
+    # costs more than a panel's points); the title at its left, as a suptitle's (a figure text:
+    # the panels' next figure removes it)
+    width, height = fig.get_size_inches()
+    text_legend(fig, [(SAMPLES["-o"], f"{key} (bin means)", colour) for key, colour in series],
+                1.0 - 0.15 / width, 1.0 - 0.05 / height, height)
+    fig.text(0.1 / width, 0.98, f"step {k}: {step.effect} {step.axes or ''} - held-out RMS "
+             f"{step.heldout_rms_before * 1e6:.2f} -> {step.heldout_rms_after * 1e6:.2f} um",
+             fontsize=10, ha="left", va="top")
     return fig
 
 
@@ -187,68 +198,74 @@ def _gap_figure(result: Discovery) -> Figure:
     labels = [f"start ({result.start})"] + [f"+{s.effect} {','.join(map(str, s.axes))}".strip()
                                             for s in result.steps]
     x = np.arange(len(labels))
-    ax.plot(x, np.array(result.heldout_rms) * 1e6, "-o", color=MODEL_COLOURS[2],
-            label=f"held-out RMS ({held_out_text(result.calibration.inputs)})")
-    ax.plot(x, np.array(result.fit_rms) * 1e6, "-s", color=MODEL_COLOURS[3], label="fit RMS")
-    handles: list[Any] = []
-    if all(v is not None for v in result.bar_rms):
-        ax.plot(x, np.array(result.bar_rms, dtype=float) * 1e6, "-^", color=MODEL_COLOURS[4],
-                label="length-bar RMS")
-    if all(v is not None for v in result.bar_covered_rms):
-        ax.plot(x, np.array(result.bar_covered_rms, dtype=float) * 1e6, "--^", mfc="none",
-                color=MODEL_COLOURS[4], label="length-bar RMS inside the SPAT coverage")
-    ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8, label="noise (sigma)")
+    series: list[tuple[str, str, str, list[Any]]] = [  # style, label, colour, values (m)
+        ("-o", f"held-out RMS ({held_out_text(result.calibration.inputs)})", MODEL_COLOURS[2],
+         list(result.heldout_rms)), ("-s", "fit RMS", MODEL_COLOURS[3], list(result.fit_rms)),
+        ("-^", "length-bar RMS", MODEL_COLOURS[4], list(result.bar_rms)),
+        ("--^", "length-bar RMS inside the SPAT coverage", MODEL_COLOURS[4],
+         list(result.bar_covered_rms))]
+    drawn = [one for one in series if all(v is not None for v in one[3])]  # no bars: none of theirs
+    for style, _, colour, values in drawn:
+        ax.plot(x, np.array(values, dtype=float) * 1e6, style, color=colour,
+                mfc="none" if style == "--^" else colour)
+    entries = [(style, label, colour) for style, label, colour, _ in drawn]
+    ax.axhline(result.noise * 1e6, color="k", ls=":", lw=0.8)
+    entries.append((":", "noise (sigma)", "k"))
     if all(v is not None for v in result.bar_normalised):
         right = ax.twinx()
-        handles = right.plot(x, np.array(result.bar_normalised, dtype=float), "-D", ms=4,
-                             color=MODEL_COLOURS[1], label="length-bar error / its predicted "
-                             "uncertainty (right)")
+        right.plot(x, np.array(result.bar_normalised, dtype=float), "-D", ms=4, color=MODEL_COLOURS[1])
         right.set_ylabel("normalised length-bar error")
         right.set_ylim(0.0, None)
+        entries.append(("-D", "length-bar error / its predicted uncertainty (right)", MODEL_COLOURS[1]))
     ax.set_xticks(x, labels, rotation=15, fontsize=8)
     ax.set_ylabel("um")
     ax.set_ylim(0.0, None)
     ax.set_title(title, fontsize=7, y=1.0)
-    lines, labels_ = ax.get_legend_handles_labels()
-    ax.legend([*lines, *handles], labels_ + [h.get_label() for h in handles], fontsize=7,
-              loc="upper right")
+    text_legend(ax, [(SAMPLES[style], label, colour) for style, label, colour in entries],
+                0.985, 0.975, ax.get_position().height * fig.get_figheight(), backed=True)
     return fig
 
 
-def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = ("spat",)) -> None:
+def unexplained_figure(scan: Scan, path: str | Path, inputs: tuple[str, ...] = ("spat",),
+                       shared: PanelFigure | None = None) -> None:
     """Write the final residual (less each location's mean) against the variable it follows most.
 
     One panel per coordinate: the residual of every sample and its binned means, with the stated
     noise as a band; the variable is the scan's top structure (else its best-ranked variable).
     ``inputs``: the calibration's data kinds (its ``inputs``), which name what the mean is over
-    (:func:`group_text`: an R-Test location, an instrument group of points).
+    (:func:`group_text`: an R-Test location, an instrument group of points). ``shared``: the
+    step figures' :class:`~aacmm_pin.outputs.figure_files.PanelFigure` (its panels reused);
+    None: a figure of its own.
     """
-    write_png(_unexplained_figure(scan, inputs), path, TICKS, DPI)
+    write_png(_unexplained_figure(scan, inputs, shared), path, TICKS, DPI)
 
 
-def _unexplained_figure(scan: Scan, inputs: tuple[str, ...]) -> Figure:
-    """Build the figure of :func:`unexplained_figure`."""
+def _unexplained_figure(scan: Scan, inputs: tuple[str, ...], shared: PanelFigure | None = None
+                        ) -> Figure:
+    """Build the figure of :func:`unexplained_figure`: three panels in a row, one y range."""
     top = (scan.structure or scan.variables)[0]
     hint = "\n".join(textwrap.wrap(scan.hint(), 130))
-    # the suptitle's lines at 8 pt (0.14 in each) above the panels' titles
-    fig, grid = fixed_figure(11.0, 3.4, 1, 3, margins=(0.75, 0.15, 0.55,
-                                                        0.4 + 0.14 * (hint.count("\n") + 1)),
-                              gaps=(0.3, 0.0), sharey=True)
+    # the title's lines at 8 pt (0.14 in each) above the panels' titles
+    fig, axes = (shared or PanelFigure()).panels(
+        11.0, 3.4, 3, 3, margins=(0.75, 0.15, 0.55, 0.4 + 0.14 * (hint.count("\n") + 1)),
+        gaps=(0.3, 0.0))
     x = np.asarray(top.values, dtype=float)
     noise = scan.noise * 1e6
-    for c, ax in enumerate(grid[0]):
+    for c, ax in enumerate(axes):
         y = scan.residual[:, c] * 1e6
         ax.plot(x, y, ".", ms=2, alpha=0.35, color=MODEL_COLOURS[0])
         bx, by = _binned(x, y)
-        ax.plot(bx, by, "-o", ms=3, color=MODEL_COLOURS[3], label="bin means")
-        ax.axhspan(-noise, noise, color="0.85", zorder=0, label="stated noise (+- sigma)")
+        ax.plot(bx, by, "-o", ms=3, color=MODEL_COLOURS[3])
+        ax.axhspan(-noise, noise, color="0.85", zorder=0)
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set_xlabel(top.label or top.variable)
         ax.set_title(f"{'xyz'[c]} residual", fontsize=9, y=1.0)
-        if c == 0:
-            ax.set_ylabel(f"residual less {group_text(inputs)} (um)")
-            ax.legend(fontsize=7)
-    fig.suptitle(hint, fontsize=8)
+    same_y(axes)  # as sharey: one scale, its numbers on the first panel
+    axes[0].set_ylabel(f"residual less {group_text(inputs)} (um)")
+    text_legend(axes[0], [(SAMPLES["-o"], "bin means", MODEL_COLOURS[3]),
+                          (SAMPLES["span"], "stated noise (+- sigma)", "0.85")],
+                0.985, 0.975, axes[0].get_position().height * fig.get_figheight(), backed=True)
+    fig.text(0.5, 0.98, hint, fontsize=8, ha="center", va="top")  # a suptitle's place
     return fig
 
 
@@ -282,9 +299,9 @@ def _write_figures(result: Discovery, folder: Path) -> None:
     """Write the PNG files of :func:`write_discovery` into ``folder``."""
     with figure_batch():
         gap_figure(result, folder / "discovery_gap.png")
-        shared = PanelFigure()  # the step figures' panels, built once
+        shared = PanelFigure()  # the step and unexplained figures' panels, built once
         for k, step in enumerate(result.steps, start=1):
             step_figure(step, k, folder / f"discovery_step{k}.png", shared)
         if result.scan is not None and result.scan.unexplained and result.scan.variables:
             unexplained_figure(result.scan, folder / "discovery_unexplained.png",
-                               result.calibration.inputs)
+                               result.calibration.inputs, shared)

@@ -5,9 +5,9 @@ Every PNG figure of the package (:mod:`aacmm_pin.outputs.plots`,
 ``FigureCanvasAgg`` (:func:`new_figure`, :func:`fixed_figure`, :class:`PanelFigure`: panels
 shared by figures written one after another): pyplot is never imported, so no
 GUI backend is looked for and no figure registry keeps figures alive. :func:`write_png` draws a
-figure on its canvas with its text unhinted (:data:`TEXT_HINTING`) and writes its pixels through
-Pillow at zlib level :data:`PNG_LEVEL` (RGB when opaque); :func:`figure_batch` keeps the garbage collector
-out of the way while a command writes its figures. matplotlib (the ``figures`` extra) is imported
+figure on its canvas with its text unhinted (:data:`TEXT_HINTING`) and writes its pixels
+(:mod:`~aacmm_pin.outputs.png_files`: RGB when opaque); :func:`figure_batch` keeps the garbage
+collector out of the way while a command writes its figures. matplotlib (the ``figures`` extra) is imported
 inside the functions only; without it they raise :class:`~aacmm_pin.errors.MissingExtraError`.
 """
 
@@ -19,10 +19,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+import numpy as np
+
 from aacmm_pin.extras import require
 
 if TYPE_CHECKING:
-    import numpy as np
     from matplotlib.figure import Figure
 
 DPI = 150
@@ -32,12 +33,8 @@ TEXT_HINTING = "none"
 outlines as drawn, not snapped to the pixel grid (hinting changes a glyph's edge by less than a
 pixel at 150 dpi); matplotlib renders text glyph by glyph, and unhinted text takes about a quarter
 less of a discovery figure's drawing."""
-PNG_LEVEL = 3
-"""zlib level of the PNG files (Pillow's ``compress_level``; matplotlib leaves Pillow's 6). The
-file holds the same pixels; on a discovery step figure level 3 takes two thirds of level 6's CPU
-(60 against 89 ms) for a file 6 % larger (334 against 314 kB). Written as RGB (an opaque
-figure), a UR5 discovery's step, gap and unexplained figures take 93 against 116 ms at level 3
-(their RGBA files), 572 against 643 kB; levels 1 and 2 are no faster."""
+SOFTWARE = "Matplotlib version{}, https://matplotlib.org/"
+"""The ``Software`` text of the PNG files (matplotlib's own), with matplotlib's version."""
 FIGURES = "writing figures"
 """What needs matplotlib, in the message of a missing ``figures`` extra."""
 
@@ -45,6 +42,9 @@ FIGURES = "writing figures"
 def new_figure(width_in: float, height_in: float,
                layout: Literal["constrained"] | None = "constrained") -> Figure:
     """Return an empty Figure on its own Agg canvas (no pyplot), constrained layout by default.
+
+    The canvas is a :class:`~aacmm_pin.outputs.text_canvas.StringCanvas` (each line of text drawn
+    as one bitmap: a quarter less CPU for a discovery's figures).
 
     Args:
         width_in: figure width, in.
@@ -56,11 +56,12 @@ def new_figure(width_in: float, height_in: float,
         MissingExtraError: if matplotlib (the ``figures`` extra) is not installed.
     """
     require("figures", FIGURES)
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    from aacmm_pin.outputs.text_canvas import StringCanvas
+
     fig = Figure(figsize=(width_in, height_in), layout=layout)
-    FigureCanvasAgg(fig)
+    StringCanvas(fig)
     return fig
 
 
@@ -105,7 +106,8 @@ class PanelFigure:
     figure, 5 panels: 81 and 77 ms, against 220 ms for a second drawing); :meth:`panels` hands
     the panels of the
     previous figure back, moved to the new layout and emptied of what was drawn on them (lines,
-    texts, patches, collections, title, labels, the figure's legends), their ticks kept, and
+    texts, patches, collections, title, labels, the figure's legends and texts: a figure on
+    them titles itself with ``fig.text``, not ``suptitle``), their ticks kept, and
     builds only the panels the previous figure lacked; panels beyond those asked for are hidden.
     A panel handed back draws the same pixels as a new one (``tests/test_figure_files.py``).
     The panels' axes must be left linear with their own limits (no shared or twin axes, no
@@ -130,8 +132,8 @@ class PanelFigure:
             self.fig = new_figure(width_in, height_in, layout=None)
         else:
             self.fig.set_size_inches(width_in, height_in)
-            for legend in list(self.fig.legends):
-                legend.remove()
+            for artist in [*self.fig.legends, *self.fig.texts]:
+                artist.remove()
         for k, ax in enumerate(self.axes):
             ax.set_visible(k < n)
             if k < n:
@@ -139,6 +141,59 @@ class PanelFigure:
                 _empty(ax)
         self.axes += [self.fig.add_axes(box) for box in boxes[len(self.axes):]]
         return self.fig, self.axes[:n]
+
+
+LEGEND_LINE = 1.3
+"""Spacing of a :func:`text_legend`'s lines, in font sizes."""
+
+
+def text_legend(target: Any, entries: list[tuple[str, str, Any]], x: float, y: float,
+                height_in: float, fontsize: float = 7.0, backed: bool = False) -> None:
+    """Write a legend as lines of text, ending at ``x``, the first line's top at ``y``.
+
+    matplotlib's legend box packs its entries' texts and handles anew at every draw: 10-25 ms a
+    legend (a "best" place searched among the data: the most), against a few ms for a line of
+    text. Each entry ``(sample, label, colour)`` is one line: ``label`` in black, right-aligned,
+    then ``sample``, a few glyphs standing for the series' line and marker in its colour
+    (:data:`SAMPLES`), centred in a column :data:`SAMPLE_EM` font sizes wide at the right end
+    (matplotlib's ``markerfirst=False``).
+
+    Args:
+        target: a Figure (``x``, ``y`` in figure fractions) or an Axes (in axes fractions).
+        entries: the lines, top first.
+        x: right end of the lines, fraction of ``target``'s width.
+        y: top of the first line, fraction of ``target``'s height.
+        height_in: ``target``'s height, in (the lines' spacing in its fractions).
+        fontsize: pt.
+        backed: each text on a white box of 80 % opacity (a legend over data), else bare.
+    """
+    from matplotlib.transforms import offset_copy
+
+    transform = target.transAxes if hasattr(target, "transAxes") else target.transSubfigure
+    step = LEGEND_LINE * fontsize / 72.0 / height_in
+    box = {"boxstyle": "square,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.8} if backed else None
+    fig = target.get_figure()
+    # the samples' column and the labels' right end, in points left of x
+    at_sample = offset_copy(transform, fig, x=-0.5 * SAMPLE_EM * fontsize, units="points")
+    at_label = offset_copy(transform, fig, x=-(SAMPLE_EM + 0.4) * fontsize, units="points")
+    for k, (sample, label, colour) in enumerate(entries):
+        baseline = y - k * step - fontsize / 72.0 / height_in
+        target.text(x, baseline, sample, color=colour, fontsize=fontsize, ha="center",
+                    va="baseline", transform=at_sample, bbox=box)
+        target.text(x, baseline, label, color="black", fontsize=fontsize, ha="right",
+                    va="baseline", transform=at_label, bbox=box)
+
+
+SAMPLE_EM = 2.2
+"""Width of a :func:`text_legend`'s column of samples, in font sizes (its widest sample, "─■─",
+2.15)."""
+
+
+SAMPLES = {"-o": "─●─", "-s": "─■─", "-^": "─▲─", "--^": "╌△╌", "-D": "─◆─", ":": "┈┈┈",
+           "span": "■"}
+"""A :func:`text_legend`'s samples of matplotlib's line styles and markers (DejaVu Sans glyphs):
+a solid line with a circle, square, triangle, an open triangle on a dashed line, a diamond; a
+dotted line; a shaded band (a square of its colour)."""
 
 
 def panel_boxes(width_in: float, height_in: float, n: int, ncols: int,
@@ -173,18 +228,42 @@ def _empty(ax: Any) -> None:
     ax.set_title("")
     ax.set_xlabel("")
     ax.set_ylabel("")
+    if not ax.yaxis.offsetText.get_visible():  # an inner panel of same_y's
+        ax.yaxis.set_tick_params(which="both", labelleft=True)
+        ax.yaxis.offsetText.set_visible(True)
     ax.relim()
     ax.set_autoscale_on(True)
+
+
+def same_y(axes: list[Any]) -> None:
+    """Give a row of panels one y range, its tick labels on the first panel only: ``sharey``'s.
+
+    The range is the one matplotlib's shared autoscaling gives (the panels' data together, widened
+    by the first panel's y margin); the panels after the first lose their y tick labels and
+    offset text (``label_outer``). Unlike ``sharey`` the panels stay independent, so that a
+    :class:`PanelFigure` can hand them back: call after everything is drawn on them.
+    """
+    data = [v for ax in axes for v in ax.dataLim.intervaly if np.isfinite(v)]
+    if not data:
+        return
+    low, high = axes[0].yaxis.get_major_locator().nonsingular(min(data), max(data))
+    pad = axes[0].margins()[1] * (high - low)
+    for k, ax in enumerate(axes):
+        ax.set_ylim(low - pad, high + pad)
+        if k:
+            ax.yaxis.offsetText.set_visible(False)
+            ax.yaxis.set_tick_params(which="both", labelleft=False)
 
 
 def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: float = DPI) -> Path:
     """Draw ``fig`` at ``dpi`` (dots per inch; :data:`DPI`), text unhinted, and write it as PNG.
 
     The figure is drawn on its Agg canvas (text hinting :data:`TEXT_HINTING`) and its pixels
-    written by Pillow at zlib level :data:`PNG_LEVEL`, with matplotlib's own metadata (software,
-    resolution), parent folders created; an opaque figure (every pixel's alpha 255: a figure's
-    default white face) as RGB, the same pixels as matplotlib's RGBA file with a quarter less to
-    compress (:func:`png_image`).
+    written by :func:`~aacmm_pin.outputs.png_files.write_png_file` (unfiltered rows at zlib
+    level :data:`~aacmm_pin.outputs.png_files.LEVEL`: half Pillow's CPU), with matplotlib's own
+    metadata (software, resolution), parent folders created; an opaque figure (every pixel's
+    alpha 255: a figure's default white face) as RGB, the same pixels as matplotlib's RGBA file
+    with a quarter less to compress (:func:`png_pixels`).
     Ticks are built only where they are drawn, at most ``nbins`` intervals per axis
     (:func:`~aacmm_pin.outputs.in_view_ticks.ticks_in_view`). The figure's own dpi is restored
     after. Returns ``path`` as a Path.
@@ -193,6 +272,7 @@ def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: flo
     import matplotlib
 
     from aacmm_pin.outputs.in_view_ticks import ticks_in_view
+    from aacmm_pin.outputs.png_files import write_png_file
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -202,30 +282,22 @@ def write_png(fig: Figure, path: str | Path, nbins: int | str = "auto", dpi: flo
     try:
         with matplotlib.rc_context({"text.hinting": TEXT_HINTING}):
             fig.canvas.draw()
-        image, info = png_image(fig)
-        image.save(path, format="png", compress_level=PNG_LEVEL, pnginfo=info, dpi=(dpi, dpi))
+        write_png_file(png_pixels(fig), path, dpi, SOFTWARE.format(matplotlib.__version__))
     finally:
         fig.set_dpi(own)
     return path
 
 
-def png_image(fig: Figure) -> tuple[Any, Any]:
-    """The Pillow image of ``fig``'s drawn Agg canvas and matplotlib's PNG metadata for it.
+def png_pixels(fig: Figure) -> np.ndarray:
+    """The pixels of ``fig``'s drawn Agg canvas, shape (height, width, 3 or 4), uint8.
 
-    RGB when every pixel is opaque (a figure's default face; the PNG holds the same colours as
-    matplotlib's RGBA file), RGBA else; shape (height, width) at the figure's dpi.
+    RGB (a view of the canvas's RGBA buffer) when every pixel is opaque (a figure's default face;
+    the same colours as matplotlib's RGBA file), RGBA else; at the figure's dpi.
     """
-    import matplotlib
     import numpy as np
-    from PIL import Image, PngImagePlugin
 
     rgba = np.asarray(fig.canvas.buffer_rgba())  # type: ignore[attr-defined]  # (h, w, 4) uint8
-    image = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
-    if rgba[..., 3].min() == 255:
-        image = image.convert("RGB")
-    info = PngImagePlugin.PngInfo()
-    info.add_text("Software", f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/")
-    return image, info
+    return rgba[..., :3] if rgba[..., 3].min() == 255 else rgba
 
 
 @contextmanager
@@ -246,8 +318,9 @@ def figure_batch() -> Iterator[None]:
         return
     gc.freeze()
     try:
-        import matplotlib.backends.backend_agg  # noqa: F401  # what new_figure imports
-        import matplotlib.figure  # noqa: F401
+        import matplotlib.figure  # noqa: F401  # what new_figure imports
+
+        import aacmm_pin.outputs.text_canvas  # noqa: F401  # matplotlib's Agg backend
 
         gc.freeze()
         yield
