@@ -81,6 +81,25 @@ def test_math_text_and_a_matplotlib_without_whole_lines_are_drawn_by_matplotlib(
                           _ink(FigureCanvasAgg, plain, 90.0, 10.0))
 
 
+@pytest.mark.parametrize("broken, error", [("_line", AttributeError), ("_draw_line", TypeError)])
+def test_a_matplotlib_whose_private_calls_changed_draws_every_text_itself(monkeypatch, broken,
+                                                                         error):
+    """If the private calls raise (a matplotlib whose internals changed: FreeType's line calls
+    gone, the renderer's image call taking other arguments), the text is drawn by matplotlib's own
+    code, then and from then on: the pixels of matplotlib's canvas, no error."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    def changed(*args: Any, **kwargs: Any) -> None:
+        raise error("a changed private call")
+
+    monkeypatch.setattr(text_canvas, "WHOLE_LINES", True)
+    monkeypatch.setattr(text_canvas.StringRenderer, broken, changed)
+    text = "A1 angle residual (arcsec)"
+    drawn = _ink(text_canvas.StringCanvas, text, 0.0, 10.0)
+    assert text_canvas.WHOLE_LINES is False
+    assert np.array_equal(drawn, _ink(FigureCanvasAgg, text, 0.0, 10.0))
+
+
 def test_the_package_figures_draw_whole_lines_and_only_they():
     """new_figure's figures have the canvas; matplotlib's own canvas is left as it is."""
     from matplotlib.backends import backend_agg

@@ -15,8 +15,9 @@ figures take 0.77x the CPU without it (import excluded; median of 7 interleaved 
 (:func:`~aacmm_pin.outputs.figure_files.new_figure`); other figures and matplotlib itself are
 left as they are. Where matplotlib lacks what it uses (a version without
 ``FT2Font.draw_glyphs_to_bitmap``, or whose Agg renderer's text image call differs),
-the text is drawn by matplotlib's own ``draw_text``. Imported with matplotlib (the ``figures``
-extra), by :mod:`~aacmm_pin.outputs.figure_files` only.
+the text is drawn by matplotlib's own ``draw_text``, as it is from the first text whose private
+calls raise ``AttributeError`` or ``TypeError`` on (a matplotlib whose internals changed).
+Imported with matplotlib (the ``figures`` extra), by :mod:`~aacmm_pin.outputs.figure_files` only.
 """
 
 from __future__ import annotations
@@ -91,11 +92,15 @@ class StringRenderer(RendererAgg):
     def get_text_width_height_descent(self, s: str, prop: Any, ismath: bool | str
                                       ) -> tuple[float, float, float]:
         """Width, height and descent of ``s`` unrotated, pixels; math and TeX as matplotlib's."""
-        if ismath or not WHOLE_LINES:
-            return super().get_text_width_height_descent(  # type: ignore[no-untyped-call, no-any-return]
-                s, prop, ismath)
-        line = self._line(s, prop, bool(rcParams["text.antialiased"]))
-        return line.width, line.height, line.descent
+        if not ismath and WHOLE_LINES:
+            try:
+                line = self._line(s, prop, bool(rcParams["text.antialiased"]))
+            except (AttributeError, TypeError):  # a matplotlib whose private calls changed
+                _whole_lines_failed()
+            else:
+                return line.width, line.height, line.descent
+        return super().get_text_width_height_descent(  # type: ignore[no-untyped-call, no-any-return]
+            s, prop, ismath)
 
     def draw_text(self, gc: Any, x: float, y: float, s: str, prop: Any, angle: float,
                   ismath: bool | str = False, mtext: Any = None) -> None:
@@ -103,9 +108,16 @@ class StringRenderer(RendererAgg):
 
         ``x``, ``y``: pixels from the canvas's top left. Math text as matplotlib draws it.
         """
-        if ismath or not WHOLE_LINES:
-            super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)  # type: ignore[no-untyped-call]
-            return
+        if not ismath and WHOLE_LINES:
+            try:
+                self._draw_line(gc, x, y, s, prop, angle, mtext)
+                return
+            except (AttributeError, TypeError):  # a matplotlib whose private calls changed
+                _whole_lines_failed()
+        super().draw_text(gc, x, y, s, prop, angle, ismath, mtext)  # type: ignore[no-untyped-call]
+
+    def _draw_line(self, gc: Any, x: float, y: float, s: str, prop: Any, angle: float,
+                   mtext: Any) -> None:
         line = self._line(s, prop, bool(gc.get_antialiased()), mtext)
         if line.image.size == 0:
             return
@@ -113,6 +125,12 @@ class StringRenderer(RendererAgg):
         left = round(x + line.offset[0] + line.descent * sin(radians(angle)))
         bottom = round(y + line.offset[1] + line.descent * cos(radians(angle)))
         self._renderer.draw_text_image(line.image, left, bottom + 1, angle, gc)
+
+
+def _whole_lines_failed() -> None:
+    """Draw every later text with matplotlib's own calls (this matplotlib's private ones differ)."""
+    global WHOLE_LINES
+    WHOLE_LINES = False
 
 
 class StringCanvas(FigureCanvasAgg):
