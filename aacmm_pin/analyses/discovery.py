@@ -17,9 +17,11 @@ The loop (:func:`discover`):
      the search's share of the false-alarm rate, :class:`~aacmm_pin.analyses.false_alarm.FalseAlarm`)
      and the BIC change, with the term's effective number of parameters;
 3. the best term (largest held-out improvement: leave-one-location-out plus length bar, both in
-   chi-square units) that is significant, improves the BIC and the held-out score is named;
-   further axes of the same effect join it while they stay significant
-   given the ones already in (forward selection); the model is refitted with them (nonlinear);
+   chi-square units) that is significant and improves the BIC is named, unless the held-out
+   groups or the length bar contradict it (:data:`CONFIRM`: confirmations, not gates); further
+   axes of the same effect join it while they stay significant given the ones already in
+   (forward selection; a map replaces a harmonic of its axis only where it also predicts the
+   held-out data better); the model is refitted with them (nonlinear);
 4. stop when no candidate is significant: "nothing is missing";
 5. scan the final model's residual (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`): against the
    campaign's stated noise (:class:`aacmm_pin.data.campaign.StatedNoise`) and for structure along every
