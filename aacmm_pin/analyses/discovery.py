@@ -17,9 +17,11 @@ The loop (:func:`discover`):
      the search's share of the false-alarm rate, :class:`~aacmm_pin.analyses.false_alarm.FalseAlarm`)
      and the BIC change, with the term's effective number of parameters;
 3. the best term (largest held-out improvement: leave-one-location-out plus length bar, both in
-   chi-square units) that is significant, improves the BIC and the held-out score is named;
-   further axes of the same effect join it while they stay significant
-   given the ones already in (forward selection); the model is refitted with them (nonlinear);
+   chi-square units) that is significant and improves the BIC is named, unless the held-out
+   groups or the length bar contradict it (:data:`CONFIRM`: confirmations, not gates); further
+   axes of the same effect join it while they stay significant given the ones already in
+   (forward selection; a map replaces a harmonic of its axis only where it also predicts the
+   held-out data better); the model is refitted with them (nonlinear);
 4. stop when no candidate is significant: "nothing is missing";
 5. scan the final model's residual (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`): against the
    campaign's stated noise (:class:`aacmm_pin.data.campaign.StatedNoise`) and for structure along every
@@ -463,7 +465,9 @@ def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: 
 
     Forward selection on the linearised model over every candidate of the effect (one masked by a
     larger error at the start may be significant once that is explained); an encoder map may
-    replace a harmonic term of the same axis (the map holds every harmonic its nodes resolve).
+    replace a harmonic term of the same axis (the map holds every harmonic its nodes resolve)
+    where it also predicts the held-out data better (locations plus bar: a choice of form, not a
+    detection).
     """
     chosen = [best]
     pool = [t for t in candidates if t.effect == best.term.effect and t != best.term]
@@ -471,8 +475,10 @@ def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: 
         cols = np.hstack([lin.columns(c.term) for c in chosen])
         taken = {c.term.axes: c.term for c in chosen}
         pool = [t for t in pool if t.axes not in taken or t.replaces(taken[t.axes])]
+        # a form replacing a chosen term of its axis (a map for a harmonic) is a choice between
+        # two forms of an effect already found: the one that predicts left-out data better
         rescored = [s for s in _scored(lin, pool, threshold, (cols, lin.evaluate(cols)))
-                    if s.significant]
+                    if s.significant and (s.term.axes not in taken or s.total_gain > 0)]
         if not rescored:
             return chosen
         nxt = max(rescored, key=lambda s: s.total_gain)
@@ -492,8 +498,18 @@ MIN_K_EFF = 0.1
 (near) zero on these samples, e.g. an axis that does not move the measured point."""
 
 
+CONFIRM = 0.01
+"""A candidate the held-out groups or the length bar contradict at this one-sided level is not
+named (:attr:`Score.heldout_against`, :attr:`Score.bar_against`): where it is real, each check
+rejects it about this often, so the two cost at most 2 % of the search's power."""
+
+
 def _mark(score: Score, threshold: float) -> Score:
-    """Return the score marked significant: F test, BIC and held-out (locations plus bar) pass."""
-    ok = (score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
-          and score.k_eff >= MIN_K_EFF)
+    """Return the score marked significant: the F test (``threshold``) and the BIC pass.
+
+    The held-out groups and the length bar confirm: they remove a candidate only where they
+    contradict it (:data:`CONFIRM`), not where they are merely less sure than the F test.
+    """
+    ok = (score.p_value < threshold and score.bic_gain > 0 and score.k_eff >= MIN_K_EFF
+          and min(score.heldout_against, score.bar_against) >= CONFIRM)
     return dataclasses.replace(score, significant=bool(ok))

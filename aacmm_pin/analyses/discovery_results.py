@@ -43,6 +43,12 @@ class Score:
     """Normalised length-bar SSR decrease (chi-square units, linearised); 0 without a bar."""
     bar_normalised: float | None = None
     """Normalised length-bar error with the term (linearised), or None without a bar."""
+    heldout_against: float = 1.0
+    """One-sided p-value of the held-out groups' gains against the candidate (small: they agree
+    it predicts left-out data worse; :func:`~aacmm_pin.analyses.linear_scorer.heldout_against`)."""
+    bar_against: float = 1.0
+    """One-sided p-value of the length bar against the change the candidate makes (small: the bar
+    contradicts it; :func:`~aacmm_pin.analyses.linear_scorer.bar_against`); 1 without a bar."""
     significant: bool = False
     """Whether it passes all tests of a step (set by the loop)."""
 
@@ -58,7 +64,9 @@ class Score:
                 "bar_gain": self.bar_gain, "bar_normalised": self.bar_normalised,
                 "heldout_rms_um": self.heldout_rms * 1e6,
                 "fit_rms_um": self.fit_rms * 1e6, "p_value": self.p_value,
-                "bic_gain": self.bic_gain, "k_eff": self.k_eff, "significant": self.significant}
+                "bic_gain": self.bic_gain, "k_eff": self.k_eff,
+                "heldout_against": self.heldout_against, "bar_against": self.bar_against,
+                "significant": self.significant}
 
 
 @dataclass
