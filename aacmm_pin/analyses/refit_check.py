@@ -1,12 +1,12 @@
 r"""Held-out error by refits: each fold's poses predicted by the model fitted without them.
 
-Discovery scores a candidate on the fit of all samples, linearised there
-(:mod:`aacmm_pin.analyses.linear_scorer`). Where the model's residual is far beyond the stated noise
-the linearised score can be optimistic: on the Barrett WAM's laser-tracker grid (215 poses,
-residual 1.30 mm per coordinate against the tracker's 20 um, 65x) it fell 1.39 -> 0.98 mm over six
-steps while the same models, refitted on 4/5 of the poses and tested on the fifth, rose from 2.12
-to 2.16 mm (docs/real-robots.md). :func:`refit_error` is that test; :func:`refit_rule` says where
-discovery applies it (:data:`REFIT_RATIO`).
+Discovery scores a candidate on the fit of all samples, linearised there, with the arm's sizes as
+priors (:mod:`aacmm_pin.analyses.linear_scorer`). Where the model's residual is far beyond the
+stated noise (the Barrett WAM's laser-tracker grid: 1.30 mm per coordinate against the tracker's
+20 um, priors widened 12x) that score is an approximation the data cannot vouch for;
+:func:`refit_error` is the test that needs none (on the WAM it confirms each of the six steps,
+2.12 -> 1.52 mm, docs/real-robots.md) and :func:`refit_rule` says where discovery applies it
+(:data:`REFIT_RATIO`).
 """
 
 from __future__ import annotations
@@ -44,8 +44,30 @@ OUT_FACTOR = 1e6
 """A held-out point's stated noise in a fold's fit, times its own (:func:`refit_error`)."""
 
 
+def weighted_out(campaign: Campaign, rows: np.ndarray, noise: StatedNoise | None = None
+                 ) -> Campaign:
+    """Return the campaign with the points ``rows`` held out of a fit, kept in sequence.
+
+    Their stated noise is :data:`OUT_FACTOR` times their own (a ``sigma_um`` column, else
+    ``noise``'s or the campaign's point noise): weight 1e-12, nothing of them is fitted, and every
+    pose keeps the direction each axis moved in to reach it.
+
+    Raises:
+        AacmmError: if the campaign has no points.
+    """
+    points = campaign.points
+    if points is None:
+        raise AacmmError("refit_error: the campaign has no points (points.csv)")
+    sigma = points.sigma.copy() if points.sigma is not None else np.full(
+        len(points.q), (noise or campaign.noise or StatedNoise()).point)
+    sigma[rows] *= OUT_FACTOR
+    return dataclasses.replace(campaign, points=dataclasses.replace(
+        points, columns={**points.columns, "sigma_um": sigma}))
+
+
 def refit_error(campaign: Campaign, arm: Arm, model: ModelSpec = ModelSpec(), *,
-                folds: int = REFIT_FOLDS, noise: StatedNoise | None = None) -> float:
+                folds: int = REFIT_FOLDS, noise: StatedNoise | None = None,
+                fold_rows: list[np.ndarray] | None = None) -> float:
     """Return the mean position error (m) of a model on the points of poses it was not fitted to.
 
     The model (DH errors, tool and instrument frame, plus ``model``'s encoder maps and extension
@@ -54,8 +76,8 @@ def refit_error(campaign: Campaign, arm: Arm, model: ModelSpec = ModelSpec(), *,
     in one fold), and predicts the fold it left out (:func:`validate_points`). The mean is over
     every point of the campaign, each predicted once.
 
-    A fold's points stay in its fit's rows with a stated noise :data:`OUT_FACTOR` times their own
-    (weight 1e-12: nothing of them is fitted), so that every pose keeps the direction each axis
+    A fold's points stay in its fit's rows, weighted out (:func:`weighted_out`), so that every
+    pose keeps the direction each axis
     moved in to reach it (:attr:`aacmm_pin.model.samples.Samples.direction`, from the sequence of
     readouts, which the arm went through whole): without them the backlash of the WAM's A1 was
     fitted to directions the arm never moved in, and its refit error rose 2.12 -> 2.42 mm where
@@ -67,6 +89,7 @@ def refit_error(campaign: Campaign, arm: Arm, model: ModelSpec = ModelSpec(), *,
         model: the model beyond DH (default: DH).
         folds: number of folds (>= 2).
         noise: the stated noise of every fit (default: the campaign's).
+        fold_rows: the rows of each fold instead (e.g. contiguous blocks of the sequence).
 
     Raises:
         AacmmError: if the campaign has no points, or a fold's fit is refused.
@@ -74,16 +97,13 @@ def refit_error(campaign: Campaign, arm: Arm, model: ModelSpec = ModelSpec(), *,
     points = campaign.points
     if points is None:
         raise AacmmError("refit_error: the campaign has no points (points.csv)")
-    stated = points.sigma if points.sigma is not None else np.full(
-        len(points.q), (noise or campaign.noise or StatedNoise()).point)
+    if fold_rows is None:
+        fold_rows = pose_folds(pose_ids(points.q, points.columns.get(POSE_COLUMN)), folds)
     errors = []
-    for test in pose_folds(pose_ids(points.q, points.columns.get(POSE_COLUMN)), folds):
+    for test in fold_rows:
         if not len(test):
             continue
-        sigma = stated.copy()
-        sigma[test] *= OUT_FACTOR  # held out, in sequence
-        part = dataclasses.replace(points, columns={**points.columns, "sigma_um": sigma})
-        cal = identify(dataclasses.replace(campaign, points=part), arm,
+        cal = identify(weighted_out(campaign, test, noise), arm,
                        model="proposed" if model.map_axes else "dh", use_rtest=model.use_rtest,
                        map_axes=model.map_axes or None, extensions=model.terms, noise=noise)
         held = validate_points(arm, cal.parameters, campaign)  # the whole sequence's directions
