@@ -22,6 +22,10 @@ The loop (:func:`discover`):
    axes of the same effect join it while they stay significant given the ones already in
    (forward selection; a map replaces a harmonic of its axis only where it also predicts the
    held-out data better); the model is refitted with them (nonlinear);
+   where the fit's residual is far beyond the stated noise on a campaign of points
+   (:func:`aacmm_pin.analyses.refit_check.refit_rule`), the step is taken only if its k-fold
+   refit error falls (each fold's poses predicted by the model fitted without them), else the
+   next significant candidate is tried;
 4. stop when no candidate is significant: "nothing is missing";
 5. scan the final model's residual (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`): against the
    campaign's stated noise (:class:`aacmm_pin.data.campaign.StatedNoise`) and for structure along every
@@ -51,6 +55,7 @@ from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
 from aacmm_pin.analyses.false_alarm import FALSE_ALARM, FalseAlarm
 from aacmm_pin.analyses.linear_scorer import LinearScorer
+from aacmm_pin.analyses.refit_check import REFIT_FOLDS, refit_error, refit_rule
 from aacmm_pin.analyses.residual_scan import TIME, Scan, scan_residuals
 from aacmm_pin.analyses.term_elimination import Dropped, eliminate
 from aacmm_pin.data.campaign import Campaign, StatedNoise
@@ -215,6 +220,9 @@ class _Search:
         self.missing: list[dict[str, Any]] = []
         self.stopped, self.capped, self.failed = "", False, False
         self.widened: list[str] = []
+        self.refit_why = ""  # why steps are checked by refits (refit_rule), "" where they are not
+        self.refits: list[float] = []  # k-fold refit error of the start and each step's model, m
+        self.refused: dict[str, dict[str, Any]] = {}  # candidate -> its step's refit errors (um)
 
     def fit(self, model: ModelSpec | None = None) -> Calibration:
         """Return the fit of ``model`` (default: the start model) within the budget left.
@@ -259,13 +267,17 @@ class _Search:
         self.lin = LinearScorer(self.cal, self.samples, self.bar_now)
         self.held, self.fits = [self.lin.heldout_rms], [self.cal.fit_rms]
         self.bars, self.factors = [self.bar_now], [self.lin.size_factors]
+        self.refit_why = refit_rule(self.campaign, self.cal, self.noise)
+        if self.refit_why:
+            self.refits = [refit_error(self.campaign, self.arm, self.spec, noise=self.noise)]
         on_start(self.lin.heldout_rms, self.cal.fit_rms,
                  None if self.bar_now is None else self.bar_now.rms, self.lin.size_factors)
 
     def candidates(self) -> list[Term]:
         """Return the terms to try: offered, not in the model, not named before (nor dropped)."""
         out = [t for e in self.effects for t in e.offered(self.arm, self.samples)
-               if not t.in_model(self.spec) and t.key not in self.named_in]
+               if not t.in_model(self.spec) and t.key not in self.named_in
+               and t.key not in self.refused]
         self.n_candidates.append(len(out))
         self.searched.update(t.key for t in out)
         return out
@@ -291,6 +303,9 @@ class _Search:
     def _step(self, terms_now: list[Term], on_step: StepReport) -> bool:
         """Score the candidates, name the best with its effect's further axes and refit.
 
+        Where steps are checked by refits (:attr:`refit_why`), a step whose refit error does not
+        fall is refused and the next significant candidate tried.
+
         Returns whether a step was taken (else :attr:`stopped` says why).
         """
         lin, threshold = self.lin, self.alpha / len(terms_now)
@@ -304,9 +319,27 @@ class _Search:
                             f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
                             f"{best.bic_gain:.1f}")
             return False
-        chosen = _forward(lin, good[0], terms_now, threshold)
+        for best in good:
+            if best.term.key not in self.refused:  # else refused with an earlier one's group
+                pool = [t for t in terms_now if t.key not in self.refused]
+                taken = self._try(best, (good, scores), pool, threshold, on_step)
+                if taken is not None:
+                    return taken
+        self.stopped = (f"{len(good)} candidates are significant by the linearised score, but "
+                        f"none lowers the {REFIT_FOLDS}-fold refit error "
+                        f"({self.refits[-1] * 1e3:.4f} mm; refused: see refits)")
+        return False
+
+    def _try(self, best: Score, scored: tuple[list[Score], list[Score]], pool: list[Term],
+             threshold: float, on_step: StepReport) -> bool | None:
+        """Name ``best`` with its effect's further axes in ``pool``, refit and record the step.
+
+        ``scored``: the significant candidates and all, best first. Returns True (taken), False
+        (a fit ended the loop) or None (refused by refits: the model stays as it was).
+        """
+        chosen = _forward(self.lin, best, pool, threshold)
         new_terms = [s.term for s in chosen]
-        spec_before = self.spec
+        spec_before, named_before = self.spec, dict(self.named_in)
         for t in new_terms:
             self.spec = t.added_to(self.spec)
             self.named_in[t.key] = len(self.steps) + 1
@@ -315,15 +348,25 @@ class _Search:
         try:
             new_cal, self.spec, dropped = eliminate(self.fit(), self.spec, self.fit, self.alpha,
                                                     self.named_in)
+            refit = self._refit(self.spec)
         except (_CapReached, _FitFailed, AacmmError) as exc:  # AacmmError: a fit that raised
             self._ended(exc, new_terms)
             self.spec = spec_before  # the model of the steps that stand
             return False
         new_terms = [t for t in new_terms if t.in_model(self.spec)]
+        if refit is not None and refit >= self.refits[-1]:  # the linearised gain does not hold
+            self.spec, self.named_in = spec_before, named_before
+            self.refused[best.term.key] = {"terms": [t.key for t in new_terms],
+                                           "refit_error_before_um": self.refits[-1] * 1e6,
+                                           "refit_error_um": refit * 1e6}
+            return None
         new_bar = _linear_bar(self.arm, new_cal, self.campaign)
         new_lin = LinearScorer(new_cal, self.samples, new_bar)
-        step = _step(new_terms, good[0], scores, (self.cal, lin, self.bar_now),
+        step = _step(new_terms, best, scored[1], (self.cal, self.lin, self.bar_now),
                      (new_cal, new_lin, new_bar), self.samples, (chosen, dropped))
+        if refit is not None:
+            step.refit_error_before, step.refit_error_after = self.refits[-1], refit
+            self.refits.append(refit)
         self.steps.append(step)
         on_step(len(self.steps), step)
         self.cal, self.lin, self.bar_now = new_cal, new_lin, new_bar
@@ -332,6 +375,12 @@ class _Search:
         self.fits.append(new_cal.fit_rms)
         self.bars.append(new_bar)
         return True
+
+    def _refit(self, model: ModelSpec) -> float | None:
+        """Return the model's k-fold refit error (m) where steps are checked by refits, else None."""
+        if not self.refit_why:
+            return None
+        return refit_error(self.campaign, self.arm, model, noise=self.noise)
 
     def _ended(self, exc: Exception, new_terms: list[Term]) -> None:
         """Record why a step's fit ended the loop: the budget spent, or the fit failed.
@@ -402,7 +451,8 @@ class _Search:
             noise=self.cal.sigma, n_candidates=self.n_candidates, runtime_s=runtime_s,
             size_factors=self.factors, scan=scan, stated_noise=self.noise, capped=self.capped,
             failed=self.failed, widened=tuple(self.widened), left_out=tuple(self.left_out),
-            false_alarm=self.rate, searched=len(self.searched))
+            false_alarm=self.rate, searched=len(self.searched), refit_rule=self.refit_why,
+            refit_errors=self.refits, refused=self.refused)
 
 
 def _residual_scan(arm: Arm, cal: Calibration, lin: LinearScorer, samples: Samples,

@@ -99,6 +99,10 @@ class Step:
     dropped: list[Dropped] = field(default_factory=list)
     """Terms of the model (this step's or an earlier one's) not significant given the others after
     this step's refit, dropped (:mod:`aacmm_pin.analyses.term_elimination`)."""
+    refit_error_before: float | None = None
+    """k-fold refit error (mean position error, m) of the model before the step, where discovery
+    checks steps by refits (:mod:`aacmm_pin.analyses.refit_check`), else None."""
+    refit_error_after: float | None = None
 
     def selection_summary(self) -> str:
         """Return the terms tried and dropped with their p-values in one line (empty if none dropped)."""
@@ -165,6 +169,9 @@ class Step:
         }
         if forms:
             out["form"] = forms
+        if self.refit_error_after is not None:
+            out["refit_error_before_um"] = _um(self.refit_error_before)
+            out["refit_error_after_um"] = _um(self.refit_error_after)
         if self.bar_rms_before is not None:
             out["bar_rms_before_um"] = self.bar_rms_before * 1e6
             out["bar_rms_after_um"] = _um(self.bar_rms_after)  # None: the bar cannot say
@@ -231,6 +238,22 @@ class Discovery:
     """The family-wise false-alarm rate the discovery ran at, and its split."""
     searched: int = 0
     """Candidates scored over all the steps (each counted once)."""
+    refit_rule: str = ""
+    """Why each step was checked by k-fold refits (:func:`aacmm_pin.analyses.refit_check.refit_rule`),
+    "" where the linearised scores alone decided."""
+    refit_errors: list[float] = field(default_factory=list)
+    """k-fold refit error (mean position error, m) of the start model and after every step, where
+    steps were checked by refits."""
+    refused: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Significant candidates whose step's refit error did not fall: key -> the step's terms and
+    refit errors before and with it (um)."""
+
+    def refits_to_dict(self) -> dict[str, Any] | None:
+        """Return ``discovery.json``'s ``"refits"`` (um), None where steps were not refitted."""
+        if not self.refit_rule:
+            return None
+        return {"rule": self.refit_rule, "error_um": [v * 1e6 for v in self.refit_errors],
+                "refused": self.refused}
 
     def false_alarm_text(self) -> str:
         """Return ``searched 38 candidates at 1 % family-wise (...)``."""
@@ -281,7 +304,7 @@ class Discovery:
             "final": {"extensions": sorted(cal.parameters.extensions),
                       "map_axes": list(cal.unknowns.map_axes),
                       "noise_um": self.noise * 1e6},
-            "unexplained": self.unexplained,
+            "unexplained": self.unexplained, "refits": self.refits_to_dict(),
             "stated_noise_um": None if self.stated_noise is None else self.stated_noise.to_um(),
             "candidates_scored": self.n_candidates,
             "false_alarm": self.false_alarm.to_dict(self.searched), "runtime_s": self.runtime_s,
