@@ -32,13 +32,11 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 import aacmm_pin as ap
+from aacmm_pin.analyses.refit_check import refit_error
 from aacmm_pin.analyses.validation import validate_points
 from aacmm_pin.cli import main
 from aacmm_pin.data.point_import import import_points
-from aacmm_pin.data.poses import POSE_COLUMN, pose_folds, pose_ids
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "real-data" / "jacobi2025-laser-tracker"
@@ -131,20 +129,10 @@ def kfold_error(campaign: ap.Campaign, arm: ap.Arm, maps: tuple[int, ...] = (),
     """Mean position error (mm) of a model on grid poses it was not fitted to.
 
     The model (``maps``: encoder-map axes, none for DH; ``terms``: extension terms) is fitted
-    ``FOLDS`` times, each on all poses but one fold, and predicts the fold it left out; the points
-    of one pose (a ``pose`` column, else identical readouts in consecutive rows) stay in one fold.
+    ``FOLDS`` times, each on all poses but one fold, and predicts the fold it left out
+    (:func:`aacmm_pin.analyses.refit_check.refit_error`, discovery's refit check).
     """
-    points = campaign.points
-    assert points is not None
-    errors = []
-    for test in pose_folds(pose_ids(points.q, points.columns.get(POSE_COLUMN)), FOLDS):
-        part = points.take(np.setdiff1d(np.arange(len(points.q)), test))  # every pose whole
-        cal = ap.identify(dataclasses.replace(campaign, points=part), arm,
-                          model="proposed" if maps else "dh", map_axes=maps or None,
-                          extensions=terms)
-        pred = ap.stylus_positions(arm, cal.parameters, points.q[test], frame="mt")
-        errors.append(np.linalg.norm(pred - points.point[test], axis=1))
-    return float(np.mean(np.concatenate(errors)) * 1e3)
+    return refit_error(campaign, arm, ap.effects.ModelSpec(terms, maps), folds=FOLDS) * 1e3
 
 
 def wam(data: Path, out: Path) -> list[Row]:

@@ -17,9 +17,15 @@ The loop (:func:`discover`):
      the search's share of the false-alarm rate, :class:`~aacmm_pin.analyses.false_alarm.FalseAlarm`)
      and the BIC change, with the term's effective number of parameters;
 3. the best term (largest held-out improvement: leave-one-location-out plus length bar, both in
-   chi-square units) that is significant, improves the BIC and the held-out score is named;
-   further axes of the same effect join it while they stay significant
-   given the ones already in (forward selection); the model is refitted with them (nonlinear);
+   chi-square units) that is significant and improves the BIC is named, unless the held-out
+   groups or the length bar contradict it (:data:`CONFIRM`: confirmations, not gates); further
+   axes of the same effect join it while they stay significant given the ones already in
+   (forward selection; a map replaces a harmonic of its axis only where it also predicts the
+   held-out data better); the model is refitted with them (nonlinear);
+   where the fit's residual is far beyond the stated noise on a campaign of points
+   (:func:`aacmm_pin.analyses.refit_check.refit_rule`), the step is taken only if its k-fold
+   refit error falls (each fold's poses predicted by the model fitted without them), else the
+   next significant candidate is tried;
 4. stop when no candidate is significant: "nothing is missing";
 5. scan the final model's residual (:func:`aacmm_pin.analyses.residual_scan.scan_residuals`): against the
    campaign's stated noise (:class:`aacmm_pin.data.campaign.StatedNoise`) and for structure along every
@@ -49,6 +55,7 @@ from aacmm_pin.analyses.bar_linear import LinearBar
 from aacmm_pin.analyses.discovery_results import Discovery, Score, Step
 from aacmm_pin.analyses.false_alarm import FALSE_ALARM, FalseAlarm
 from aacmm_pin.analyses.linear_scorer import LinearScorer
+from aacmm_pin.analyses.refit_check import REFIT_FOLDS, refit_error, refit_rule
 from aacmm_pin.analyses.residual_scan import TIME, Scan, scan_residuals
 from aacmm_pin.analyses.term_elimination import Dropped, eliminate
 from aacmm_pin.data.campaign import Campaign, StatedNoise
@@ -213,6 +220,9 @@ class _Search:
         self.missing: list[dict[str, Any]] = []
         self.stopped, self.capped, self.failed = "", False, False
         self.widened: list[str] = []
+        self.refit_why = ""  # why steps are checked by refits (refit_rule), "" where they are not
+        self.refits: list[float] = []  # k-fold refit error of the start and each step's model, m
+        self.refused: dict[str, dict[str, Any]] = {}  # candidate -> its step's refit errors (um)
 
     def fit(self, model: ModelSpec | None = None) -> Calibration:
         """Return the fit of ``model`` (default: the start model) within the budget left.
@@ -257,13 +267,17 @@ class _Search:
         self.lin = LinearScorer(self.cal, self.samples, self.bar_now)
         self.held, self.fits = [self.lin.heldout_rms], [self.cal.fit_rms]
         self.bars, self.factors = [self.bar_now], [self.lin.size_factors]
+        self.refit_why = refit_rule(self.campaign, self.cal, self.noise)
+        if self.refit_why:
+            self.refits = [refit_error(self.campaign, self.arm, self.spec, noise=self.noise)]
         on_start(self.lin.heldout_rms, self.cal.fit_rms,
                  None if self.bar_now is None else self.bar_now.rms, self.lin.size_factors)
 
     def candidates(self) -> list[Term]:
         """Return the terms to try: offered, not in the model, not named before (nor dropped)."""
         out = [t for e in self.effects for t in e.offered(self.arm, self.samples)
-               if not t.in_model(self.spec) and t.key not in self.named_in]
+               if not t.in_model(self.spec) and t.key not in self.named_in
+               and t.key not in self.refused]
         self.n_candidates.append(len(out))
         self.searched.update(t.key for t in out)
         return out
@@ -289,6 +303,9 @@ class _Search:
     def _step(self, terms_now: list[Term], on_step: StepReport) -> bool:
         """Score the candidates, name the best with its effect's further axes and refit.
 
+        Where steps are checked by refits (:attr:`refit_why`), a step whose refit error does not
+        fall is refused and the next significant candidate tried.
+
         Returns whether a step was taken (else :attr:`stopped` says why).
         """
         lin, threshold = self.lin, self.alpha / len(terms_now)
@@ -302,9 +319,27 @@ class _Search:
                             f"p = {best.p_value:.2g} (needed < {threshold:.2g}), BIC gain "
                             f"{best.bic_gain:.1f}")
             return False
-        chosen = _forward(lin, good[0], terms_now, threshold)
+        for best in good:
+            if best.term.key not in self.refused:  # else refused with an earlier one's group
+                pool = [t for t in terms_now if t.key not in self.refused]
+                taken = self._try(best, (good, scores), pool, threshold, on_step)
+                if taken is not None:
+                    return taken
+        self.stopped = (f"{len(good)} candidates are significant by the linearised score, but "
+                        f"none lowers the {REFIT_FOLDS}-fold refit error "
+                        f"({self.refits[-1] * 1e3:.4f} mm; refused: see refits)")
+        return False
+
+    def _try(self, best: Score, scored: tuple[list[Score], list[Score]], pool: list[Term],
+             threshold: float, on_step: StepReport) -> bool | None:
+        """Name ``best`` with its effect's further axes in ``pool``, refit and record the step.
+
+        ``scored``: the significant candidates and all, best first. Returns True (taken), False
+        (a fit ended the loop) or None (refused by refits: the model stays as it was).
+        """
+        chosen = _forward(self.lin, best, pool, threshold)
         new_terms = [s.term for s in chosen]
-        spec_before = self.spec
+        spec_before, named_before = self.spec, dict(self.named_in)
         for t in new_terms:
             self.spec = t.added_to(self.spec)
             self.named_in[t.key] = len(self.steps) + 1
@@ -313,15 +348,25 @@ class _Search:
         try:
             new_cal, self.spec, dropped = eliminate(self.fit(), self.spec, self.fit, self.alpha,
                                                     self.named_in)
+            refit = self._refit(self.spec)
         except (_CapReached, _FitFailed, AacmmError) as exc:  # AacmmError: a fit that raised
             self._ended(exc, new_terms)
             self.spec = spec_before  # the model of the steps that stand
             return False
         new_terms = [t for t in new_terms if t.in_model(self.spec)]
+        if refit is not None and refit >= self.refits[-1]:  # the linearised gain does not hold
+            self.spec, self.named_in = spec_before, named_before
+            self.refused[best.term.key] = {"terms": [t.key for t in new_terms],
+                                           "refit_error_before_um": self.refits[-1] * 1e6,
+                                           "refit_error_um": refit * 1e6}
+            return None
         new_bar = _linear_bar(self.arm, new_cal, self.campaign)
         new_lin = LinearScorer(new_cal, self.samples, new_bar)
-        step = _step(new_terms, good[0], scores, (self.cal, lin, self.bar_now),
+        step = _step(new_terms, best, scored[1], (self.cal, self.lin, self.bar_now),
                      (new_cal, new_lin, new_bar), self.samples, (chosen, dropped))
+        if refit is not None:
+            step.refit_error_before, step.refit_error_after = self.refits[-1], refit
+            self.refits.append(refit)
         self.steps.append(step)
         on_step(len(self.steps), step)
         self.cal, self.lin, self.bar_now = new_cal, new_lin, new_bar
@@ -330,6 +375,12 @@ class _Search:
         self.fits.append(new_cal.fit_rms)
         self.bars.append(new_bar)
         return True
+
+    def _refit(self, model: ModelSpec) -> float | None:
+        """Return the model's k-fold refit error (m) where steps are checked by refits, else None."""
+        if not self.refit_why:
+            return None
+        return refit_error(self.campaign, self.arm, model, noise=self.noise)
 
     def _ended(self, exc: Exception, new_terms: list[Term]) -> None:
         """Record why a step's fit ended the loop: the budget spent, or the fit failed.
@@ -400,7 +451,8 @@ class _Search:
             noise=self.cal.sigma, n_candidates=self.n_candidates, runtime_s=runtime_s,
             size_factors=self.factors, scan=scan, stated_noise=self.noise, capped=self.capped,
             failed=self.failed, widened=tuple(self.widened), left_out=tuple(self.left_out),
-            false_alarm=self.rate, searched=len(self.searched))
+            false_alarm=self.rate, searched=len(self.searched), refit_rule=self.refit_why,
+            refit_errors=self.refits, refused=self.refused)
 
 
 def _residual_scan(arm: Arm, cal: Calibration, lin: LinearScorer, samples: Samples,
@@ -463,7 +515,9 @@ def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: 
 
     Forward selection on the linearised model over every candidate of the effect (one masked by a
     larger error at the start may be significant once that is explained); an encoder map may
-    replace a harmonic term of the same axis (the map holds every harmonic its nodes resolve).
+    replace a harmonic term of the same axis (the map holds every harmonic its nodes resolve)
+    where it also predicts the held-out data better (locations plus bar: a choice of form, not a
+    detection).
     """
     chosen = [best]
     pool = [t for t in candidates if t.effect == best.term.effect and t != best.term]
@@ -471,8 +525,10 @@ def _forward(lin: LinearScorer, best: Score, candidates: list[Term], threshold: 
         cols = np.hstack([lin.columns(c.term) for c in chosen])
         taken = {c.term.axes: c.term for c in chosen}
         pool = [t for t in pool if t.axes not in taken or t.replaces(taken[t.axes])]
+        # a form replacing a chosen term of its axis (a map for a harmonic) is a choice between
+        # two forms of an effect already found: the one that predicts left-out data better
         rescored = [s for s in _scored(lin, pool, threshold, (cols, lin.evaluate(cols)))
-                    if s.significant]
+                    if s.significant and (s.term.axes not in taken or s.total_gain > 0)]
         if not rescored:
             return chosen
         nxt = max(rescored, key=lambda s: s.total_gain)
@@ -492,8 +548,18 @@ MIN_K_EFF = 0.1
 (near) zero on these samples, e.g. an axis that does not move the measured point."""
 
 
+CONFIRM = 0.01
+"""A candidate the held-out groups or the length bar contradict at this one-sided level is not
+named (:attr:`Score.heldout_against`, :attr:`Score.bar_against`): where it is real, each check
+rejects it about this often, so the two cost at most 2 % of the search's power."""
+
+
 def _mark(score: Score, threshold: float) -> Score:
-    """Return the score marked significant: F test, BIC and held-out (locations plus bar) pass."""
-    ok = (score.p_value < threshold and score.bic_gain > 0 and score.total_gain > 0
-          and score.k_eff >= MIN_K_EFF)
+    """Return the score marked significant: the F test (``threshold``) and the BIC pass.
+
+    The held-out groups and the length bar confirm: they remove a candidate only where they
+    contradict it (:data:`CONFIRM`), not where they are merely less sure than the F test.
+    """
+    ok = (score.p_value < threshold and score.bic_gain > 0 and score.k_eff >= MIN_K_EFF
+          and min(score.heldout_against, score.bar_against) >= CONFIRM)
     return dataclasses.replace(score, significant=bool(ok))

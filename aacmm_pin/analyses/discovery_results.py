@@ -43,6 +43,12 @@ class Score:
     """Normalised length-bar SSR decrease (chi-square units, linearised); 0 without a bar."""
     bar_normalised: float | None = None
     """Normalised length-bar error with the term (linearised), or None without a bar."""
+    heldout_against: float = 1.0
+    """One-sided p-value of the held-out groups' gains against the candidate (small: they agree
+    it predicts left-out data worse; :func:`~aacmm_pin.analyses.linear_scorer.heldout_against`)."""
+    bar_against: float = 1.0
+    """One-sided p-value of the length bar against the change the candidate makes (small: the bar
+    contradicts it; :func:`~aacmm_pin.analyses.linear_scorer.bar_against`); 1 without a bar."""
     significant: bool = False
     """Whether it passes all tests of a step (set by the loop)."""
 
@@ -58,7 +64,9 @@ class Score:
                 "bar_gain": self.bar_gain, "bar_normalised": self.bar_normalised,
                 "heldout_rms_um": self.heldout_rms * 1e6,
                 "fit_rms_um": self.fit_rms * 1e6, "p_value": self.p_value,
-                "bic_gain": self.bic_gain, "k_eff": self.k_eff, "significant": self.significant}
+                "bic_gain": self.bic_gain, "k_eff": self.k_eff,
+                "heldout_against": self.heldout_against, "bar_against": self.bar_against,
+                "significant": self.significant}
 
 
 @dataclass
@@ -91,6 +99,10 @@ class Step:
     dropped: list[Dropped] = field(default_factory=list)
     """Terms of the model (this step's or an earlier one's) not significant given the others after
     this step's refit, dropped (:mod:`aacmm_pin.analyses.term_elimination`)."""
+    refit_error_before: float | None = None
+    """k-fold refit error (mean position error, m) of the model before the step, where discovery
+    checks steps by refits (:mod:`aacmm_pin.analyses.refit_check`), else None."""
+    refit_error_after: float | None = None
 
     def selection_summary(self) -> str:
         """Return the terms tried and dropped with their p-values in one line (empty if none dropped)."""
@@ -157,6 +169,9 @@ class Step:
         }
         if forms:
             out["form"] = forms
+        if self.refit_error_after is not None:
+            out["refit_error_before_um"] = _um(self.refit_error_before)
+            out["refit_error_after_um"] = _um(self.refit_error_after)
         if self.bar_rms_before is not None:
             out["bar_rms_before_um"] = self.bar_rms_before * 1e6
             out["bar_rms_after_um"] = _um(self.bar_rms_after)  # None: the bar cannot say
@@ -223,6 +238,22 @@ class Discovery:
     """The family-wise false-alarm rate the discovery ran at, and its split."""
     searched: int = 0
     """Candidates scored over all the steps (each counted once)."""
+    refit_rule: str = ""
+    """Why each step was checked by k-fold refits (:func:`aacmm_pin.analyses.refit_check.refit_rule`),
+    "" where the linearised scores alone decided."""
+    refit_errors: list[float] = field(default_factory=list)
+    """k-fold refit error (mean position error, m) of the start model and after every step, where
+    steps were checked by refits."""
+    refused: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Significant candidates whose step's refit error did not fall: key -> the step's terms and
+    refit errors before and with it (um)."""
+
+    def refits_to_dict(self) -> dict[str, Any] | None:
+        """Return ``discovery.json``'s ``"refits"`` (um), None where steps were not refitted."""
+        if not self.refit_rule:
+            return None
+        return {"rule": self.refit_rule, "error_um": [v * 1e6 for v in self.refit_errors],
+                "refused": self.refused}
 
     def false_alarm_text(self) -> str:
         """Return ``searched 38 candidates at 1 % family-wise (...)``."""
@@ -273,7 +304,7 @@ class Discovery:
             "final": {"extensions": sorted(cal.parameters.extensions),
                       "map_axes": list(cal.unknowns.map_axes),
                       "noise_um": self.noise * 1e6},
-            "unexplained": self.unexplained,
+            "unexplained": self.unexplained, "refits": self.refits_to_dict(),
             "stated_noise_um": None if self.stated_noise is None else self.stated_noise.to_um(),
             "candidates_scored": self.n_candidates,
             "false_alarm": self.false_alarm.to_dict(self.searched), "runtime_s": self.runtime_s,

@@ -12,6 +12,9 @@ it is :func:`aacmm_pin.discover`.
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -62,6 +65,48 @@ def size_factors(cal: Calibration) -> dict[str, float]:
         if n and np.sum(value2[sel] / (size2[sel] + var[sel])) > chi2_ppf(1 - SIZE_ALPHA, n):
             out[group] = float(np.sqrt(max(np.sum(value2[sel] - var[sel]) / np.sum(size2[sel]), 1.0)))
     return out
+
+
+def heldout_against(gains: np.ndarray) -> float:
+    r"""Return how strongly a candidate's held-out gains speak against it: a one-sided p-value.
+
+    ``gains``: the held-out SSR decrease of every held-out group (chi-square units), shape (J,).
+    Student's t of their mean, :math:`t = \bar g \sqrt{J} / s`, against a mean of 0 on J - 1
+    degrees of freedom: the probability of a t this low were the candidate no worse on left-out
+    data than without it. Small: the groups agree that it predicts them worse. 1 with fewer than
+    two groups or gains that do not vary.
+    """
+    n = len(gains)
+    spread = float(np.std(gains, ddof=1)) if n > 1 else 0.0
+    if spread <= 0.0:
+        return 1.0
+    t = float(np.mean(gains)) * np.sqrt(n) / spread
+    tail = 0.5 * f_sf(t * t, 1.0, n - 1.0)  # P(T > |t|)
+    return tail if t < 0 else 1.0 - tail
+
+
+def bar_against(gain: float, change2: float, fit_chi2: float) -> float:
+    r"""Return how strongly the length bar speaks against a candidate: a one-sided p-value.
+
+    The bar's whitened errors a (their covariance the model's prediction's, so a is N(0, I) under
+    the model) change by b with the candidate fitted to the SPATs; the bar's chi-square decrease
+    is :math:`\text{gain} = |a|^2 - |a + b|^2`. Were the bar's errors a shifted by t b
+    (:math:`a = -t b + n`, t = 1: the SPATs' change is the bar's, t = 0: the bar sees none of
+    it), the gain's mean would be :math:`|b|^2 (2t - 1)`: negative where the bar holds less than
+    half the change. Its standard error is :math:`2 |b|` from the bar's noise, times
+    :math:`\sqrt{1 + |b|^2 / \chi^2}` for the SPATs' uncertainty of the change (:math:`\chi^2`
+    the fit's gain); the p-value is :math:`\Phi(z)` of the gain over it: small where the bar is
+    significantly worse with the candidate than without. 1 where the bar does not see the change.
+
+    Args:
+        gain: the bar's chi-square decrease with the candidate.
+        change2: :math:`|b|^2`, the bar's chi-square of the change itself.
+        fit_chi2: the fit's chi-square decrease with the candidate (SPATs).
+    """
+    if change2 <= 1e-12 or fit_chi2 <= 0.0:
+        return 1.0
+    z = gain / (2.0 * np.sqrt(change2) * np.sqrt(1.0 + change2 / fit_chi2))
+    return float(0.5 * math.erfc(-z / math.sqrt(2.0)))
 
 
 def held_out_groups(cal: Calibration, pose: np.ndarray | None = None
@@ -214,11 +259,13 @@ class LinearScorer:
                 out[len(self.r):] = np.nan
         return out
 
-    def evaluate(self, extra: np.ndarray) -> dict[str, float]:
+    def evaluate(self, extra: np.ndarray) -> dict[str, Any]:
         """Fit the residuals with the model's directions plus ``extra`` columns (prior sigma^2).
 
-        Returns fit SSR, held-out SSR, the effective parameter count of ``extra`` and the
-        normalised bar SSR (chi-square, NaN without a bar).
+        Returns fit SSR (``fit_ssr``), held-out SSR (``held_ssr``) and per held-out group
+        (``held_groups``, shape (groups,)), the effective parameter count of ``extra``
+        (``k_eff``), the normalised bar SSR (``bar_chi2``, chi-square, NaN without a bar) and
+        the whitened bar errors (``bar_residual``, shape (bar readouts,), empty without a bar).
         """
         jac, r, k = self.jac, self.r, extra.shape[1]
         p = jac.shape[1]
@@ -246,23 +293,25 @@ class LinearScorer:
 
         d_all = solve(g_all, b_all)
         fit_ssr = float(np.sum(residual(np.arange(self.n_data), d_all) ** 2))
-        held = 0.0
-        for rows, centred, (g, b) in zip(self.groups, self.centred, grams):
+        held = np.zeros(len(self.groups))
+        for i, (rows, centred, (g, b)) in enumerate(zip(self.groups, self.centred, grams)):
             e = residual(rows, solve(g_all - g, b_all - b)).reshape(-1, 3)
-            held += float(np.sum((e - e.mean(axis=0) if centred else e) ** 2))
-        bar_chi2 = float("nan")
+            held[i] = np.sum((e - e.mean(axis=0) if centred else e) ** 2)
+        bar_res = np.full(0 if self.bar is None else self.bar.n, np.nan)
         if self._bar_white is not None:
             _, e_bar, j_bar = self._bar_white
-            bar_chi2 = float(np.sum((e_bar + j_bar @ d_all[:p] + extra[len(r):] @ d_all[p:]) ** 2))
+            bar_res = e_bar + j_bar @ d_all[:p] + extra[len(r):] @ d_all[p:]
         k_eff = 0.0
         if k:
             schur = g_all[p:, p:] - g_all[p:, :p] @ sla.solve(g_all[:p, :p] + self.ridge,
                                                              g_all[:p, p:], assume_a="pos")
             eig = np.clip(np.linalg.eigvalsh(schur), 0.0, None)
             k_eff = float(np.sum(eig / (eig + self.sigma ** 2)))
-        return {"fit_ssr": fit_ssr, "held_ssr": held, "k_eff": k_eff, "bar_chi2": bar_chi2}
+        return {"fit_ssr": fit_ssr, "held_ssr": float(held.sum()), "k_eff": k_eff,
+                "bar_chi2": float(np.sum(bar_res ** 2)) if len(bar_res) else float("nan"),
+                "held_groups": held, "bar_residual": bar_res}
 
-    def score(self, term: Term, given: tuple[np.ndarray, dict[str, float]] | None = None
+    def score(self, term: Term, given: tuple[np.ndarray, dict[str, Any]] | None = None
               ) -> Score:
         """Return the score of ``term`` added to the model.
 
@@ -278,8 +327,12 @@ class LinearScorer:
         f_stat = max(gain, 0.0) / k_eff / var
         n_held = self.n_held
         bar = self.bar is not None and bool(np.isfinite(new["bar_chi2"]))
-        return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff,
-                     bar_gain=float(base["bar_chi2"] - new["bar_chi2"]) if bar else 0.0,
+        bar_gain = float(base["bar_chi2"] - new["bar_chi2"]) if bar else 0.0
+        change2 = float(np.sum((new["bar_residual"] - base["bar_residual"]) ** 2)) if bar else 0.0
+        return Score(term=term, n_parameters=cols.shape[1], k_eff=k_eff, bar_gain=bar_gain,
+                     heldout_against=heldout_against((base["held_groups"]
+                                                      - new["held_groups"]) / var),
+                     bar_against=bar_against(bar_gain, change2, max(gain, 0.0) / var),
                      bar_normalised=float(np.sqrt(new["bar_chi2"] / self.bar.n))
                      if bar and self.bar is not None else None,
                      fit_rms=float(np.sqrt(new["fit_ssr"] / self.n_data)),

@@ -34,7 +34,7 @@ from aacmm_pin.cli.calibration_summary import print_sizes, print_urdf_loss
 from aacmm_pin.data.output_claim import claim_output
 
 if TYPE_CHECKING:
-    from aacmm_pin.analyses.discovery_results import Step
+    from aacmm_pin.analyses.discovery_results import Discovery, Step
     from aacmm_pin.model.arm import Arm
 
 
@@ -83,6 +83,8 @@ def _discover_into(args: argparse.Namespace) -> int:
         print(f"  with the default effects the residual stayed larger than the stated noise, "
               f"following no variable: "
               f"also tried {', '.join(result.widened)} (not offered by default), by the same tests")
+    if result.refit_rule:
+        _print_refits(result)
     if result.scan is not None:
         print(("unexplained: " if result.scan.unexplained else "residual: ") + result.scan.hint())
     sys.stdout.flush()
@@ -98,6 +100,16 @@ def _discover_into(args: argparse.Namespace) -> int:
         print(f"discover: {result.stopped_because}", file=sys.stderr)
         return 1
     return 0
+
+
+def _print_refits(result: Discovery) -> None:
+    """Print why steps were checked by refits, the refit errors and the steps refused."""
+    errors = " -> ".join(f"{v * 1e3:.4f}" for v in result.refit_errors)
+    print(f"refits: {result.refit_rule}; refit error {errors} mm")
+    if result.refused:
+        print("  refused (significant, refit error not lower): " + ", ".join(
+            f"{'+'.join(r['terms']) or key} ({r['refit_error_um'] / 1e3:.4f} mm)"
+            for key, r in result.refused.items()))
 
 
 def _print_discovery_start(start: str, noise: str, heldout_rms: float, fit_rms: float,
@@ -128,6 +140,9 @@ def _print_discovery_step(k: int, step: Step) -> None:
     print(f"step {k}: {step.effect}{axes}: held-out RMS {step.heldout_rms_before * 1e6:.2f} -> "
           f"{step.heldout_rms_after * 1e6:.2f} um, fit RMS {step.fit_rms_before * 1e6:.2f} -> "
           f"{step.fit_rms_after * 1e6:.2f} um")
+    if step.refit_error_before is not None and step.refit_error_after is not None:
+        print(f"  k-fold refits (mean position error): {step.refit_error_before * 1e3:.4f} -> "
+              f"{step.refit_error_after * 1e3:.4f} mm")
     if step.bar_rms_before is not None:
         print(f"  length bar: {step.bar_summary()}")
     for line in (step.bar_disagreement(), step.selection_summary()):
