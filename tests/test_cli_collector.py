@@ -87,3 +87,40 @@ def test_an_import_that_fails_turns_the_collector_on_again():
     with imports_uncollected(), pytest.raises(ModuleNotFoundError):
         import collector_probe_absent  # noqa: F401
     assert gc.isenabled()
+
+
+def test_overlapping_uses_share_one_hook_and_the_last_restores_import():
+    """Commands run by threads overlap: A enters, B enters, A leaves, B leaves; the hook stays
+    while either is in force and ``__import__`` is the original after both."""
+    original = builtins.__import__
+    a, b = imports_uncollected(), imports_uncollected()
+    a.__enter__()
+    b.__enter__()
+    a.__exit__(None, None, None)
+    assert builtins.__import__ is not original  # B still in force
+    b.__exit__(None, None, None)
+    assert builtins.__import__ is original
+    assert gc.get_freeze_count() == 0
+
+
+def test_garbage_waiting_for_a_collection_is_freed_not_frozen(module_file, tmp_path):
+    """A cycle dropped before a module loads mid-command is collected, not frozen with the rest."""
+    import weakref
+
+    class Node:
+        pass
+
+    (tmp_path / "collector_probe_two.py").write_text("X = 1\n")
+    try:
+        with imports_uncollected():
+            import collector_probe  # noqa: F401  (the command has started: objects frozen)
+
+            cycle = Node()
+            cycle.self = cycle  # type: ignore[attr-defined]
+            alive = weakref.ref(cycle)
+            del cycle
+            import collector_probe_two  # noqa: F401
+            gc.collect()
+            assert alive() is None
+    finally:
+        sys.modules.pop("collector_probe_two", None)

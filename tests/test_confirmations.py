@@ -76,3 +76,10 @@ def test_bar_check_keeps_a_real_change_and_rejects_one_the_bar_does_not_hold() -
     assert absent >= 0.8 * DRAWS
     assert bar_against(-5.0, 0.0, 20.0) == 1.0  # the bar does not see the change
     assert bar_against(-5.0, 4.0, 0.0) == 1.0  # no fit gain: nothing to confirm
+
+
+def test_groups_that_lose_exactly_alike_speak_against_the_candidate():
+    """Held-out gains that do not vary: all equal losses are against it, equal gains are not."""
+    assert heldout_against(np.array([-3.0, -3.0, -3.0])) == 0.0
+    assert heldout_against(np.array([2.0, 2.0])) == 1.0
+    assert heldout_against(np.array([-5.0])) == 1.0  # one group: no test

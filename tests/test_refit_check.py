@@ -73,3 +73,19 @@ def test_refit_rule_follows_the_residual_against_the_stated_noise(backlash_campa
                        extensions=(ap.effects.term_from_key("backlash[A1]"),))
     assert dh.fit_rms > REFIT_RATIO * SIGMA and "10x" in refit_rule(campaign, dh, StatedNoise())
     assert refit_rule(campaign, true, StatedNoise()) == ""
+
+
+def test_a_refit_that_cannot_be_done_stops_the_check_not_discover(backlash_campaign, monkeypatch):
+    """Where a fold's fit is refused (e.g. an instrument group left with too few rows), discover
+    goes on with the linearised scores and says that the refit check stopped."""
+    from aacmm_pin.analyses import discovery
+    from aacmm_pin.errors import AacmmError
+
+    def refused(*args, **kwargs):
+        raise AacmmError("the points of group 2 lie on a line")
+
+    monkeypatch.setattr(discovery, "refit_error", refused)
+    arm, campaign = backlash_campaign
+    result = ap.discover(campaign, arm, start="dh", max_steps=1)
+    assert "refits stopped" in result.refit_rule and "group 2" in result.refit_rule
+    assert result.refit_errors == []

@@ -221,6 +221,7 @@ class _Search:
         self.stopped, self.capped, self.failed = "", False, False
         self.widened: list[str] = []
         self.refit_why = ""  # why steps are checked by refits (refit_rule), "" where they are not
+        self.refit_dropped = ""  # why the refit check stopped (a fold's fit refused), "" if it did not
         self.refits: list[float] = []  # k-fold refit error of the start and each step's model, m
         self.refused: dict[str, dict[str, Any]] = {}  # candidate -> its step's refit errors (um)
 
@@ -269,7 +270,8 @@ class _Search:
         self.bars, self.factors = [self.bar_now], [self.lin.size_factors]
         self.refit_why = refit_rule(self.campaign, self.cal, self.noise)
         if self.refit_why:
-            self.refits = [refit_error(self.campaign, self.arm, self.spec, noise=self.noise)]
+            start = self._refit(self.spec)
+            self.refits = [] if start is None else [start]
         on_start(self.lin.heldout_rms, self.cal.fit_rms,
                  None if self.bar_now is None else self.bar_now.rms, self.lin.size_factors)
 
@@ -380,7 +382,14 @@ class _Search:
         """Return the model's k-fold refit error (m) where steps are checked by refits, else None."""
         if not self.refit_why:
             return None
-        return refit_error(self.campaign, self.arm, model, noise=self.noise)
+        try:
+            return refit_error(self.campaign, self.arm, model, noise=self.noise)
+        except AacmmError as exc:  # a fold's fit refused (e.g. a group left with too few rows)
+            self.refit_why = ""  # steps are taken on the linearised scores, as elsewhere
+            why = str(exc).strip().splitlines()
+            self.refit_dropped = (f"refits stopped, not possible on these folds "
+                                  f"({why[0] if why else type(exc).__name__})")
+            return None
 
     def _ended(self, exc: Exception, new_terms: list[Term]) -> None:
         """Record why a step's fit ended the loop: the budget spent, or the fit failed.
@@ -451,8 +460,9 @@ class _Search:
             noise=self.cal.sigma, n_candidates=self.n_candidates, runtime_s=runtime_s,
             size_factors=self.factors, scan=scan, stated_noise=self.noise, capped=self.capped,
             failed=self.failed, widened=tuple(self.widened), left_out=tuple(self.left_out),
-            false_alarm=self.rate, searched=len(self.searched), refit_rule=self.refit_why,
-            refit_errors=self.refits, refused=self.refused)
+            false_alarm=self.rate, searched=len(self.searched),
+            refit_rule=self.refit_why or self.refit_dropped, refit_errors=self.refits,
+            refused=self.refused)
 
 
 def _residual_scan(arm: Arm, cal: Calibration, lin: LinearScorer, samples: Samples,

@@ -74,12 +74,13 @@ def heldout_against(gains: np.ndarray) -> float:
     Student's t of their mean, :math:`t = \bar g \sqrt{J} / s`, against a mean of 0 on J - 1
     degrees of freedom: the probability of a t this low were the candidate no worse on left-out
     data than without it. Small: the groups agree that it predicts them worse. 1 with fewer than
-    two groups or gains that do not vary.
+    two groups; with gains that do not vary, 0 if they are all losses (every group agrees
+    exactly) and 1 otherwise.
     """
     n = len(gains)
     spread = float(np.std(gains, ddof=1)) if n > 1 else 0.0
     if spread <= 0.0:
-        return 1.0
+        return 0.0 if n > 1 and float(np.mean(gains)) < 0.0 else 1.0
     t = float(np.mean(gains)) * np.sqrt(n) / spread
     tail = 0.5 * f_sf(t * t, 1.0, n - 1.0)  # P(T > |t|)
     return tail if t < 0 else 1.0 - tail

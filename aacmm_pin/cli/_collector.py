@@ -25,8 +25,48 @@ import builtins
 import contextlib
 import gc
 import sys
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator
 from typing import Any
+
+_LOCK = threading.Lock()
+
+
+class _Hook:
+    """The shared hook's state: nested or concurrent users (commands run by threads) share one."""
+
+    users = 0
+    """:func:`imports_uncollected` blocks in force."""
+    original: Callable[..., Any] = builtins.__import__
+    """``builtins.__import__`` as the first user found it."""
+    frozen_before = 0
+    """Objects frozen when the first user installed the hook (the caller's own)."""
+    keep = False
+    """Whether a user asked ``keep_frozen``."""
+
+
+def _importing(name: str, globals: Any = None, locals: Any = None, fromlist: Any = (),
+               level: int = 0) -> Any:
+    """``builtins.__import__`` with the collector off while modules load, their objects frozen.
+
+    Before a module that is not loaded yet is imported, where objects are frozen already (the
+    command has started), the collector first runs over what is not frozen: garbage waiting for
+    a collection is freed, not frozen with the rest (the objects made since the last freeze: few
+    at the start, a command's live data later on).
+    """
+    original = _Hook.original
+    if not gc.isenabled():  # an import inside an import, or the caller's own gc.disable()
+        return original(name, globals, locals, fromlist, level)
+    loaded = len(sys.modules)
+    if level == 0 and name not in sys.modules and gc.get_freeze_count():
+        gc.collect()
+    gc.disable()
+    try:
+        return original(name, globals, locals, fromlist, level)
+    finally:
+        if len(sys.modules) != loaded:
+            gc.freeze()
+        gc.enable()
 
 
 @contextlib.contextmanager
@@ -35,31 +75,26 @@ def imports_uncollected(keep_frozen: bool = False) -> Iterator[None]:
 
     Only an import that loads a module freezes (a statement naming loaded modules costs a length
     check); an import inside an import, or one while the collector is off (the caller's own
-    ``gc.disable()``), changes nothing. ``builtins.__import__`` is restored on exit, and the frozen
-    objects are returned to the collector (``gc.unfreeze``: the caller's process goes on), unless
-    ``keep_frozen`` (the program ends: the interpreter's last collection then skips them too) or
-    the caller had frozen objects of its own before (which cannot be told from ours).
+    ``gc.disable()``), changes nothing. Nested or concurrent uses (commands run by threads) share
+    one hook: installed by the first, ``builtins.__import__`` restored by the last. Then the
+    frozen objects are returned to the collector (``gc.unfreeze``: the caller's process goes on),
+    unless a user asked ``keep_frozen`` (the program ends: the interpreter's last collection then
+    skips them too) or the caller had frozen objects of its own before (which cannot be told
+    from ours).
     """
-    original = builtins.__import__
-    frozen_before = gc.get_freeze_count()
-
-    def importing(name: str, globals: Any = None, locals: Any = None, fromlist: Any = (),
-                  level: int = 0) -> Any:
-        if not gc.isenabled():
-            return original(name, globals, locals, fromlist, level)
-        loaded = len(sys.modules)
-        gc.disable()
-        try:
-            return original(name, globals, locals, fromlist, level)
-        finally:
-            if len(sys.modules) != loaded:
-                gc.freeze()
-            gc.enable()
-
-    builtins.__import__ = importing
+    with _LOCK:
+        if not _Hook.users:
+            _Hook.original, _Hook.frozen_before = builtins.__import__, gc.get_freeze_count()
+            _Hook.keep = False
+            builtins.__import__ = _importing
+        _Hook.users += 1
+        _Hook.keep = _Hook.keep or keep_frozen
     try:
         yield
     finally:
-        builtins.__import__ = original
-        if not keep_frozen and not frozen_before:
-            gc.unfreeze()
+        with _LOCK:
+            _Hook.users -= 1
+            if not _Hook.users:
+                builtins.__import__ = _Hook.original
+                if not _Hook.keep and not _Hook.frozen_before:
+                    gc.unfreeze()

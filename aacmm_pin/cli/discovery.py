@@ -105,7 +105,7 @@ def _discover_into(args: argparse.Namespace) -> int:
 def _print_refits(result: Discovery) -> None:
     """Print why steps were checked by refits, the refit errors and the steps refused."""
     errors = " -> ".join(f"{v * 1e3:.4f}" for v in result.refit_errors)
-    print(f"refits: {result.refit_rule}; refit error {errors} mm")
+    print(f"refits: {result.refit_rule}" + (f"; refit error {errors} mm" if errors else ""))
     if result.refused:
         print("  refused (significant, refit error not lower): " + ", ".join(
             f"{'+'.join(r['terms']) or key} ({r['refit_error_um'] / 1e3:.4f} mm)"

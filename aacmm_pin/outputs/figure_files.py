@@ -310,7 +310,9 @@ def figure_batch() -> Iterator[None]:
     sets the objects made before aside for the batch, matplotlib is imported and its modules'
     objects are set aside too, and ``gc.unfreeze()`` returns them all after (0.025 s left);
     the figures' own objects are collected as usual. Does nothing when objects are frozen already
-    (a batch in a batch, or the caller's own freeze).
+    (a batch in a batch, or the caller's own freeze: under ``aacmm-pin``, whose imports are
+    frozen as they load, :mod:`aacmm_pin.cli._collector`, which then sets matplotlib's import and
+    the objects made before it aside in the same way).
     """
     require("figures", FIGURES)
     if gc.get_freeze_count():

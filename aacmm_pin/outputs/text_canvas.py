@@ -27,10 +27,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from matplotlib import rcParams
-from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg, get_hinting_flag
-from matplotlib.ft2font import FT2Font
+from matplotlib.backends.backend_agg import FigureCanvasAgg, RendererAgg
+from matplotlib.font_manager import findfont
 
-WHOLE_LINES = all(hasattr(FT2Font, name) for name in (
+try:  # internals of matplotlib's Agg text: a version without them draws text its own way
+    from matplotlib.backends.backend_agg import get_hinting_flag
+    from matplotlib.ft2font import FT2Font
+except ImportError:  # pragma: no cover - another matplotlib
+    get_hinting_flag = FT2Font = None  # type: ignore[assignment, misc]
+
+WHOLE_LINES = FT2Font is not None and all(hasattr(FT2Font, name) for name in (
     "set_text", "draw_glyphs_to_bitmap", "get_image", "get_descent", "get_bitmap_offset",
     "get_width_height")) and hasattr(RendererAgg, "_prepare_font")
 """Whether this matplotlib's fonts lay out and render a whole line (else matplotlib's own
@@ -73,7 +79,9 @@ class StringRenderer(RendererAgg):
         features = mtext.get_fontfeatures() if mtext is not None else None
         language = mtext.get_language() if mtext is not None else None
         key = (s, prop, self.dpi, flags, antialiased, features,  # a language may be a list
-               language if language is None or isinstance(language, str) else tuple(language))
+               language if language is None or isinstance(language, str) else tuple(language),
+               findfont(prop), rcParams["text.hinting_factor"],  # the font file a family names
+               rcParams["text.kerning_factor"])  # and the rcParams its layout reads, now
         line = LINES.get(key)
         if line is None:
             font = self._prepare_font(prop)  # type: ignore[no-untyped-call]
@@ -140,7 +148,7 @@ class StringCanvas(FigureCanvasAgg):
         """The canvas's renderer, made anew when the figure's pixel size or dpi changed."""
         width, height = self.get_width_height(physical=True)
         key = width, height, self.figure.dpi
-        if self._lastKey != key:
+        if getattr(self, "_lastKey", None) != key:
             self.renderer = StringRenderer(width, height, self.figure.dpi)  # type: ignore[no-untyped-call]
             self._lastKey = key
         return self.renderer  # type: ignore[no-any-return]
